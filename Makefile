@@ -1,0 +1,43 @@
+# physketch: the two commands a newcomer needs are `make demo` and `make test`.
+# Every target installs missing Debian packages first (scripts/install-deps.sh).
+
+BUILD      ?= build
+BUILD_ASAN ?= build-asan
+JOBS       ?= $(shell nproc)
+CMAKE_ARGS ?=
+LAUNCHER   := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+export CCACHE_BASEDIR := $(CURDIR)
+PHYSKETCH  := $(BUILD)/apps/physketch/physketch
+
+.PHONY: all deps build demo test bench sanitize clean
+
+all: build
+
+deps:
+	@bash scripts/install-deps.sh
+
+$(BUILD)/build.ninja: | deps
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release $(LAUNCHER) $(CMAKE_ARGS)
+
+build: deps $(BUILD)/build.ninja
+	cmake --build $(BUILD) -j $(JOBS)
+
+# Main job: the bundled example stroke file -> PNG frames in out/hello/frames.
+demo: build
+	$(PHYSKETCH) run scenes/hello.scene --out out/hello
+	@echo "frames: out/hello/frames/  report: out/hello/report.json"
+
+test: build
+	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
+
+bench: build
+	@bash bench/run_all.sh $(BUILD)
+
+# ASan + UBSan build of the whole test suite.
+sanitize: deps
+	cmake -S . -B $(BUILD_ASAN) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPHYSKETCH_SANITIZE=ON -DPHYSKETCH_BUILD_BENCH=OFF $(LAUNCHER)
+	cmake --build $(BUILD_ASAN) -j $(JOBS)
+	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS)
+
+clean:
+	rm -rf $(BUILD) $(BUILD_ASAN) out

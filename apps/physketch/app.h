@@ -1,0 +1,25 @@
+// The physketch command line: subcommands run and plan (see --help).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace physketch::app {
+
+// Exit codes of the CLI.
+constexpr int kExitOk = 0;
+constexpr int kExitBadInput = 1;
+constexpr int kExitRuntime = 2;
+
+struct RunOptions {
+  std::string scene;
+  std::string outDir = "out";
+  int frames = -1;     // -1: duration * fps + 1
+  int threads = 0;     // 0: all cores
+  bool quiet = false;
+};
+
+int runScene(const RunOptions& options);
+int printPlan(const std::string& scene);
+
+}  // namespace physketch::app

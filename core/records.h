@@ -1,0 +1,68 @@
+// Line-oriented, versioned text records: the common grammar of the stroke file
+// and the scene file (docs/formats.md).
+//
+//   # comment until end of line
+//   <magic> <version>            first record of the file
+//   keyword field field ...      one record per line, fields split on blanks
+//
+// Every check reports file:line:field through InputError. Readers are bounded:
+// a line over kMaxLineBytes or a file over kMaxFileBytes is an error, never an
+// allocation of whatever size the file claims.
+#pragma once
+
+#include <cstdint>
+#include <initializer_list>
+#include <string>
+#include <vector>
+
+namespace physketch {
+
+struct Record {
+  int line = 0;                     // 1-based line number in the file
+  std::vector<std::string> tokens;  // tokens[0] is the keyword
+  const std::string& keyword() const { return tokens.front(); }
+};
+
+struct RecordFile {
+  std::string path;  // as given by the user (used in messages)
+  int version = 0;
+  std::vector<Record> records;  // without the header record
+};
+
+constexpr std::size_t kMaxLineBytes = 4096;
+constexpr std::uint64_t kMaxFileBytes = 256ull << 20;
+
+// Reads and tokenizes `path`. The first record must be `magic version` with
+// 1 <= version <= maxVersion.
+RecordFile readRecordFile(const std::string& path, const std::string& magic, int maxVersion);
+// Same, from text already in memory (tests, fuzzing). `path` is used for messages.
+RecordFile parseRecordText(const std::string& text, const std::string& path, const std::string& magic,
+                           int maxVersion);
+
+// Reads the fields of one record against a schema of field names (the keyword
+// is not a field). Checks the field count up front: too few names the first
+// missing field, too many names the extra one.
+class FieldReader {
+ public:
+  FieldReader(const RecordFile& file, const Record& record, std::initializer_list<const char*> names,
+              std::size_t minFields = SIZE_MAX);
+
+  std::size_t count() const { return record_.tokens.size() - 1; }  // fields present
+  const std::string& word(std::size_t i) const;
+  double number(std::size_t i) const;                    // finite
+  double positive(std::size_t i) const;                  // finite, > 0
+  double nonNegative(std::size_t i) const;               // finite, >= 0
+  double inRange(std::size_t i, double lo, double hi) const;  // finite, lo <= v <= hi
+  long integer(std::size_t i, long lo, long hi) const;
+  [[noreturn]] void fail(std::size_t i, const std::string& what) const;
+  [[noreturn]] void failLine(const std::string& what) const;
+  const std::string& name(std::size_t i) const { return names_.at(i); }
+  int line() const { return record_.line; }
+
+ private:
+  const RecordFile& file_;
+  const Record& record_;
+  std::vector<std::string> names_;
+};
+
+}  // namespace physketch

@@ -1,0 +1,76 @@
+#include "pbd/shape_matching.h"
+
+#include <cmath>
+
+namespace physketch::pbd {
+
+Quat extractRotation(const Mat3& A, Quat q, int maxIterations) {
+  for (int iter = 0; iter < maxIterations; ++iter) {
+    const Mat3 R = q.toRotationMatrix();
+    const Vec3 num = R.col(0).cross(A.col(0)) + R.col(1).cross(A.col(1)) + R.col(2).cross(A.col(2));
+    const double den = std::abs(R.col(0).dot(A.col(0)) + R.col(1).dot(A.col(1)) + R.col(2).dot(A.col(2))) + 1.0e-9;
+    const Vec3 omega = num / den;
+    const double w = omega.norm();
+    if (w < 1.0e-9) break;
+    q = Quat(Eigen::AngleAxisd(w, omega / w)) * q;
+    q.normalize();
+  }
+  return q;
+}
+
+}  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+void matchRigid(const BodyView& b, Quat& q, Vec3& c) {
+  double mass = 0.0;
+  Vec3 mp = Vec3::Zero();
+  for (std::int32_t i = 0; i < b.n; ++i) {
+    const double m = b.mass[i];
+    mass += m;
+    mp += m * Vec3(b.px[i], b.py[i], b.pz[i]);
+  }
+  c = mp / mass;
+  Mat3 A = Mat3::Zero();
+  for (std::int32_t i = 0; i < b.n; ++i) {
+    const double m = b.mass[i];
+    const Vec3 d = Vec3(b.px[i], b.py[i], b.pz[i]) - c;
+    const Vec3 r(b.rx[i], b.ry[i], b.rz[i]);
+    A += m * d * r.transpose();
+  }
+  q = extractRotation(A, q);
+}
+
+}  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+Mat3 restInertia(const BodyView& b, double spacing) {
+  Mat3 I = Mat3::Zero();
+  for (std::int32_t i = 0; i < b.n; ++i) {
+    const double m = b.mass[i];
+    const Vec3 r(b.rx[i], b.ry[i], b.rz[i]);
+    I += m * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+    I += m * spacing * spacing / 6.0 * Mat3::Identity();
+  }
+  return I;
+}
+
+void applyPointCorrection(RigidPose& b, const Vec3& p, const Vec3& dir, double magnitude) {
+  const Mat3 R = b.q.toRotationMatrix();
+  const Mat3 invI = R * b.invInertiaRest * R.transpose();
+  const Vec3 r = p - b.c;
+  const Vec3 rn = r.cross(dir);
+  const double w = b.invMass + rn.dot(invI * rn);
+  if (!(w > 0.0)) return;
+  const double lambda = magnitude / w;  // position impulse (kg m)
+  b.c += (lambda * b.invMass) * dir;
+  const Vec3 dtheta = invI * (lambda * rn);
+  // q <- q + 1/2 [dtheta, 0] q  (Müller 2020 Eq. 9)
+  const Quat dq(0.0, dtheta.x(), dtheta.y(), dtheta.z());
+  Quat qn = b.q;
+  qn.coeffs() += 0.5 * (dq * b.q).coeffs();
+  b.q = qn.normalized();
+}
+
+}  // namespace physketch::pbd

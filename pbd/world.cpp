@@ -1,0 +1,249 @@
+#include "pbd/world.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+#include "pbd/shape_matching.h"
+
+namespace physketch::pbd {
+namespace {
+
+// Per-particle passes split into fixed chunks; below this size they run serially
+// (threads cost more than they save on small scenes). Results do not depend on
+// the split: every particle is written by exactly one task.
+constexpr std::size_t kChunk = 4096;
+
+template <class F>
+void forParticles(std::size_t n, F&& f) {
+  if (n <= kChunk) {
+    f(std::size_t(0), n);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kChunk),
+                    [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); },
+                    tbb::simple_partitioner());
+}
+
+}  // namespace
+
+Mat4f BodyPose::model() const {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  const Mat3 R = rotation.toRotationMatrix();
+  m.topLeftCorner<3, 3>() = R;
+  m.topRightCorner<3, 1>() = centre - R * restCentre;
+  return m.cast<float>();
+}
+
+PbdWorld::PbdWorld(ParticleArrays particles, std::vector<BodyRange> bodies, std::vector<Material> materials,
+                   const PbdParams& params)
+    : params_(params), parts_(std::move(particles)), bodies_(std::move(bodies)), materials_(std::move(materials)) {
+  if (!(params_.dt > 0) || params_.substeps < 1 || params_.iterations < 1 || !(params_.particleRadius > 0))
+    throw RuntimeError("PbdWorld: dt, substeps, iterations and particle radius must be positive");
+  const std::size_t n = parts_.size();
+  px_ = parts_.x;
+  py_ = parts_.y;
+  pz_ = parts_.z;
+  mass_.assign(n, 0.0f);
+  rx_.assign(n, 0.0f);
+  ry_.assign(n, 0.0f);
+  rz_.assign(n, 0.0f);
+  const double spacing = 2.0 * params_.particleRadius;
+  const double volume = spacing * spacing * spacing;  // one voxel per particle
+  for (std::size_t b = 0; b < bodies_.size(); ++b) {
+    const BodyRange& br = bodies_[b];
+    if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
+      throw RuntimeError("PbdWorld: body " + std::to_string(b) + " has an invalid particle range");
+    const Material& mat = materials_.at(static_cast<std::size_t>(br.material));
+    Vec3 c = Vec3::Zero();
+    double m = 0.0;
+    for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
+      const double mi = mat.density * volume;
+      mass_[i] = static_cast<float>(mi);
+      parts_.invMass[i] = static_cast<float>(1.0 / mi);
+      parts_.body[i] = static_cast<std::int32_t>(b);
+      c += mi * Vec3(parts_.x[i], parts_.y[i], parts_.z[i]);
+      m += mi;
+    }
+    c /= m;
+    for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
+      rx_[i] = static_cast<float>(parts_.x[i] - c.x());
+      ry_[i] = static_cast<float>(parts_.y[i] - c.y());
+      rz_[i] = static_cast<float>(parts_.z[i] - c.z());
+    }
+    rot_.push_back(Quat::Identity());
+    centre_.push_back(c);
+    restCentre_.push_back(c);
+    invMass_.push_back(1.0 / m);
+    const std::size_t f = static_cast<std::size_t>(br.first);
+    BodyView v{br.count, &px_[f], &py_[f], &pz_[f], &rx_[f], &ry_[f], &rz_[f], &mass_[f]};
+    invInertia_.push_back(restInertia(v, spacing).inverse());
+    friction_.push_back(mat.friction);
+    if (mat.kind == MaterialKind::kRigid) rigidBodies_.push_back(static_cast<std::int32_t>(b));
+  }
+  passIntegrate_ = profile_.add("integrate");
+  passShape_ = profile_.add("shape_match");
+  passContact_ = profile_.add("rigid_contact");
+  passUpdate_ = profile_.add("update");
+  passGuard_ = profile_.add("guard");
+}
+
+BodyPose PbdWorld::pose(int body) const {
+  BodyPose p;
+  p.rotation = rot_.at(static_cast<std::size_t>(body));
+  p.centre = centre_[static_cast<std::size_t>(body)];
+  p.restCentre = restCentre_[static_cast<std::size_t>(body)];
+  return p;
+}
+
+std::vector<PassInfo> PbdWorld::plan() const {
+  std::vector<PassInfo> out;
+  if (parts_.size() == 0) return out;
+  const long s = params_.substeps, it = params_.iterations;
+  out.push_back({"integrate", "substeps = " + std::to_string(s), s});
+  if (!rigidBodies_.empty()) {
+    out.push_back({"shape_match", "substeps = " + std::to_string(s), s});
+    out.push_back({"rigid_contact", "substeps, up to " + std::to_string(it) + " sweeps each", s});
+  }
+  out.push_back({"update", "substeps = " + std::to_string(s), s});
+  out.push_back({"guard", "once", 1});
+  return out;
+}
+
+void PbdWorld::integrate(float h) {
+  const float gx = static_cast<float>(params_.gravity.x()), gy = static_cast<float>(params_.gravity.y()),
+              gz = static_cast<float>(params_.gravity.z());
+  forParticles(parts_.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      if (parts_.invMass[i] == 0.0f) {
+        px_[i] = parts_.x[i];
+        py_[i] = parts_.y[i];
+        pz_[i] = parts_.z[i];
+        continue;
+      }
+      parts_.vx[i] += gx * h;
+      parts_.vy[i] += gy * h;
+      parts_.vz[i] += gz * h;
+      px_[i] = parts_.x[i] + parts_.vx[i] * h;
+      py_[i] = parts_.y[i] + parts_.vy[i] * h;
+      pz_[i] = parts_.z[i] + parts_.vz[i] * h;
+    }
+  });
+}
+
+void PbdWorld::shapeMatch() {
+  auto solve = [&](std::size_t k) {
+    const std::size_t b = static_cast<std::size_t>(rigidBodies_[k]);
+    const BodyRange& br = bodies_[b];
+    const std::size_t f = static_cast<std::size_t>(br.first);
+    BodyView v{br.count, &px_[f], &py_[f], &pz_[f], &rx_[f], &ry_[f], &rz_[f], &mass_[f]};
+    matchRigid(v, rot_[b], centre_[b]);  // goal positions R q_i + c are written by rigid_contact
+  };
+  if (rigidBodies_.size() == 1) {
+    solve(0);
+  } else {
+    tbb::parallel_for(std::size_t(0), rigidBodies_.size(), solve);
+  }
+}
+
+void PbdWorld::rigidContact() {
+  const double floorY = params_.groundY + params_.particleRadius;
+  const Vec3 up = Vec3::UnitY();
+  auto solve = [&](std::size_t k) {
+    const std::size_t b = static_cast<std::size_t>(rigidBodies_[k]);
+    const BodyRange& br = bodies_[b];
+    RigidPose pose{centre_[b], rot_[b], invMass_[b], invInertia_[b]};
+    const double mu = friction_[b];
+    for (int it = 0; it < params_.iterations; ++it) {
+      // One correction per sweep for the whole contact patch, applied at its
+      // depth-weighted centroid: order-independent (a Gauss-Seidel pass over
+      // single particles tilts the body towards whichever contact comes first
+      // and makes a resting body creep). Exact for one corner and for a flat face.
+      const Mat3 R = pose.q.toRotationMatrix();
+      double wsum = 0.0, d2sum = 0.0;
+      Vec3 psum = Vec3::Zero(), ssum = Vec3::Zero();
+      for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
+        const Vec3 p = R * Vec3(rx_[i], ry_[i], rz_[i]) + pose.c;
+        const double d = floorY - p.y();  // penetration depth (m)
+        if (d <= 0.0) continue;
+        wsum += d;
+        d2sum += d * d;
+        psum += d * p;
+        ssum += d * (p - Vec3(parts_.x[i], parts_.y[i], parts_.z[i]));  // motion over this substep
+      }
+      if (wsum == 0.0) break;
+      const Vec3 pc = psum / wsum;     // contact point
+      const double depth = d2sum / wsum;
+      const Vec3 local = R.transpose() * (pc - pose.c);  // the contact point, fixed in the body
+      applyPointCorrection(pose, pc, up, depth);
+      // The normal correction rotates the body, which moves the contact point sideways too.
+      const Vec3 pcAfter = pose.q.toRotationMatrix() * local + pose.c;
+      // Static/kinetic friction at position level (Müller 2020 §3.5): undo the
+      // tangential motion of the contact over this substep, fully inside the
+      // friction cone mu*depth, else by mu*depth. mu_s = mu_k = material friction.
+      Vec3 slide = ssum / wsum + (pcAfter - pc);
+      slide.y() = 0.0;
+      const double len = slide.norm();
+      if (len > 0.0 && mu > 0.0) applyPointCorrection(pose, pcAfter, -slide / len, std::min(len, mu * depth));
+    }
+    centre_[b] = pose.c;
+    rot_[b] = pose.q;
+    const Mat3 R = pose.q.toRotationMatrix();
+    for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
+      const Vec3 g = R * Vec3(rx_[i], ry_[i], rz_[i]) + pose.c;
+      px_[i] = static_cast<float>(g.x());
+      py_[i] = static_cast<float>(g.y());
+      pz_[i] = static_cast<float>(g.z());
+    }
+  };
+  if (rigidBodies_.size() == 1) {
+    solve(0);
+  } else {
+    tbb::parallel_for(std::size_t(0), rigidBodies_.size(), solve);
+  }
+}
+
+void PbdWorld::update(float h) {
+  const float invH = 1.0f / h;
+  forParticles(parts_.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      if (parts_.invMass[i] == 0.0f) continue;
+      parts_.vx[i] = (px_[i] - parts_.x[i]) * invH;
+      parts_.vy[i] = (py_[i] - parts_.y[i]) * invH;
+      parts_.vz[i] = (pz_[i] - parts_.z[i]) * invH;
+      parts_.x[i] = px_[i];
+      parts_.y[i] = py_[i];
+      parts_.z[i] = pz_[i];
+    }
+  });
+}
+
+bool PbdWorld::step() {
+  if (guard_.tripped()) return false;
+  const float h = static_cast<float>(params_.dt / params_.substeps);
+  const bool rigid = !rigidBodies_.empty();
+  for (int s = 0; s < params_.substeps; ++s) {
+    { ScopedPass t(profile_, passIntegrate_); integrate(h); }
+    if (rigid) {
+      { ScopedPass t(profile_, passShape_); shapeMatch(); }
+      { ScopedPass t(profile_, passContact_); rigidContact(); }
+    }
+    { ScopedPass t(profile_, passUpdate_); update(h); }
+  }
+  {
+    ScopedPass t(profile_, passGuard_);
+    GuardLimits lim;
+    lim.maxSpeed = params_.maxSpeed;
+    lim.groundY = params_.groundY;
+    lim.particleRadius = params_.particleRadius;
+    lim.maxPenetration = params_.particleRadius;  // a centre below the ground plane
+    guard_ = checkParticles(parts_, lim, "update", steps_);
+  }
+  ++steps_;
+  return !guard_.tripped();
+}
+
+}  // namespace physketch::pbd

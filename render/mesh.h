@@ -1,0 +1,25 @@
+// Plain triangle mesh: the only geometry type that crosses the render module's
+// boundary (OpenVDB stays inside vdb_bridge.cpp).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/math.h"
+
+namespace physketch::render {
+
+struct TriangleMesh {
+  std::vector<Vec3f> positions;       // vertex positions (m)
+  std::vector<Vec3f> normals;         // unit vertex normals, pointing out of the solid
+  std::vector<std::uint32_t> indices; // 3 per triangle, counter-clockwise seen from outside
+
+  std::size_t triangleCount() const { return indices.size() / 3; }
+  bool empty() const { return indices.empty(); }
+};
+
+// Writes a mesh as Wavefront OBJ (positions, normals, faces). Throws RuntimeError.
+void writeObj(const std::string& path, const TriangleMesh& mesh);
+
+}  // namespace physketch::render

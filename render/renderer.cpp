@@ -1,0 +1,609 @@
+// Off-screen renderer: EGL (no window system) + OpenGL 3.3 core into an FBO, read back to RAM.
+// Facts this relies on were measured on the project's machines (docs: stack.md §3): Mesa's
+// surfaceless and device platforms both work without environment variables, llvmpipe images
+// are bit-identical across platforms and thread counts, and EGL_SURFACE_TYPE must be given
+// or eglChooseConfig matches no config.
+#define GL_GLEXT_PROTOTYPES 1
+#include <EGL/egl.h>
+#include <EGL/eglext.h>
+#include <GL/gl.h>
+#include <GL/glext.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <string>
+
+#include "core/error.h"
+#include "render/renderer.h"
+
+namespace physketch::render {
+namespace {
+
+// ---- camera matrices (double internally: projectToPixel must agree with the GPU to far below a pixel)
+
+Eigen::Matrix4d viewMatrixD(const Camera& camera) {
+  const Vec3 forward = camera.target - camera.eye;
+  if (!camera.eye.allFinite() || !camera.target.allFinite() || !camera.up.allFinite()) {
+    throw RuntimeError("camera: eye, target and up must be finite");
+  }
+  if (forward.norm() <= 0.0) throw RuntimeError("camera: eye and target coincide");
+  const Vec3 f = forward.normalized();
+  const Vec3 side = f.cross(camera.up);
+  if (side.norm() <= 1e-12 * camera.up.norm() || camera.up.norm() <= 0.0) {
+    throw RuntimeError("camera: up vector is zero or parallel to the viewing direction");
+  }
+  const Vec3 s = side.normalized();
+  const Vec3 u = s.cross(f);
+  // gluLookAt: rows are the camera axes (x right, y up, z backwards), then translate by -eye.
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  m.block<1, 3>(0, 0) = s.transpose();
+  m.block<1, 3>(1, 0) = u.transpose();
+  m.block<1, 3>(2, 0) = -f.transpose();
+  m(0, 3) = -s.dot(camera.eye);
+  m(1, 3) = -u.dot(camera.eye);
+  m(2, 3) = f.dot(camera.eye);
+  return m;
+}
+
+Eigen::Matrix4d projectionMatrixD(const Camera& camera, double aspect, double zNear, double zFar) {
+  if (!(camera.fovYDeg > 0.0 && camera.fovYDeg < 180.0)) throw RuntimeError("camera: fovYDeg must be in (0, 180)");
+  if (!(aspect > 0.0) || !std::isfinite(aspect)) throw RuntimeError("camera: aspect must be finite and > 0");
+  if (!(zNear > 0.0 && zFar > zNear) || !std::isfinite(zFar)) throw RuntimeError("camera: need 0 < zNear < zFar");
+  // gluPerspective: maps the view frustum to the clip cube [-1, 1]^3, w = -z_eye.
+  const double halfFov = 0.5 * camera.fovYDeg * (3.14159265358979323846 / 180.0);
+  const double f = 1.0 / std::tan(halfFov);
+  Eigen::Matrix4d p = Eigen::Matrix4d::Zero();
+  p(0, 0) = f / aspect;
+  p(1, 1) = f;
+  p(2, 2) = (zFar + zNear) / (zNear - zFar);
+  p(2, 3) = 2.0 * zFar * zNear / (zNear - zFar);
+  p(3, 2) = -1.0;
+  return p;
+}
+
+// Linear -> display encoding for 8-bit output (a plain power law, not the piecewise sRGB curve).
+constexpr float kGamma = 2.2f;
+
+// ---- EGL display sharing
+//
+// EGL displays are process-global: eglGetPlatformDisplay returns the same handle each time and
+// one eglTerminate ends it for every context on it. So renderers that overlap in time count
+// their references and the last one terminates the display. This counter mirrors EGL's own
+// global; it holds no other state.
+std::mutex& displayMutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<EGLDisplay, int>& displayRefs() {
+  static std::map<EGLDisplay, int> refs;
+  return refs;
+}
+
+std::string hex(EGLint code) {
+  char buf[16];
+  std::snprintf(buf, sizeof(buf), "0x%04X", static_cast<unsigned>(code));
+  return buf;
+}
+
+bool hasExtension(const char* list, const char* name) {
+  if (!list) return false;
+  const std::size_t n = std::strlen(name);
+  for (const char* p = std::strstr(list, name); p; p = std::strstr(p + 1, name)) {
+    const bool startOk = p == list || p[-1] == ' ';
+    const bool endOk = p[n] == '\0' || p[n] == ' ';
+    if (startOk && endOk) return true;
+  }
+  return false;
+}
+
+// Initialises one candidate display; on failure appends why to `log` and returns EGL_NO_DISPLAY.
+EGLDisplay tryInitialize(EGLDisplay d, const std::string& label, std::string& log) {
+  if (d == EGL_NO_DISPLAY) {
+    log += "; " + label + ": no display (" + hex(eglGetError()) + ")";
+    return EGL_NO_DISPLAY;
+  }
+  std::lock_guard<std::mutex> lock(displayMutex());
+  int& refs = displayRefs()[d];
+  if (refs == 0) {
+    EGLint major = 0, minor = 0;
+    if (!eglInitialize(d, &major, &minor)) {
+      log += "; " + label + ": eglInitialize failed (" + hex(eglGetError()) + ")";
+      displayRefs().erase(d);
+      return EGL_NO_DISPLAY;
+    }
+  }
+  ++refs;
+  return d;
+}
+
+void releaseDisplay(EGLDisplay d) {
+  std::lock_guard<std::mutex> lock(displayMutex());
+  auto it = displayRefs().find(d);
+  if (it == displayRefs().end()) return;
+  if (--it->second == 0) {
+    eglTerminate(d);
+    displayRefs().erase(it);
+  }
+}
+
+// Order of preference:
+//  1. an EGL device advertising EGL_MESA_device_software (llvmpipe). On a machine with a GPU the
+//     surfaceless platform may pick the GPU, whose rasteriser gives different pixels; the
+//     software device keeps images identical on every machine with the same Mesa.
+//  2. Mesa's surfaceless platform (on the project's machines this is the same llvmpipe).
+//  3. any other EGL device.
+// Plain eglGetDisplay(EGL_DEFAULT_DISPLAY) is not tried: without a display server it fails
+// unless EGL_PLATFORM=surfaceless is set in the environment.
+EGLDisplay acquireDisplay() {
+  std::string log;
+  const char* clientExt = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
+  auto getPlatformDisplay =
+      reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  if (!getPlatformDisplay || !hasExtension(clientExt, "EGL_EXT_platform_base")) {
+    throw RuntimeError("EGL: eglGetPlatformDisplayEXT is unavailable (client extensions: " +
+                       std::string(clientExt ? clientExt : "none") + "); install Mesa's libegl-mesa0");
+  }
+
+  std::vector<EGLDeviceEXT> software, others;
+  auto queryDevices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+  auto queryDeviceString =
+      reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
+  if (queryDevices && queryDeviceString && hasExtension(clientExt, "EGL_EXT_platform_device")) {
+    EGLDeviceEXT devices[16];
+    EGLint count = 0;
+    if (queryDevices(16, devices, &count)) {
+      for (EGLint i = 0; i < count; ++i) {
+        const char* ext = queryDeviceString(devices[i], EGL_EXTENSIONS);
+        (hasExtension(ext, "EGL_MESA_device_software") ? software : others).push_back(devices[i]);
+      }
+    } else {
+      log += "; eglQueryDevicesEXT failed (" + hex(eglGetError()) + ")";
+    }
+  } else {
+    log += "; no EGL device enumeration";
+  }
+
+  for (std::size_t i = 0; i < software.size(); ++i) {
+    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, software[i], nullptr),
+                                 "software device " + std::to_string(i), log);
+    if (d != EGL_NO_DISPLAY) return d;
+  }
+  if (hasExtension(clientExt, "EGL_MESA_platform_surfaceless")) {
+    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr),
+                                 "surfaceless platform", log);
+    if (d != EGL_NO_DISPLAY) return d;
+  } else {
+    log += "; no EGL_MESA_platform_surfaceless";
+  }
+  for (std::size_t i = 0; i < others.size(); ++i) {
+    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, others[i], nullptr),
+                                 "device " + std::to_string(i), log);
+    if (d != EGL_NO_DISPLAY) return d;
+  }
+  throw RuntimeError("EGL: no usable display" + log);
+}
+
+// ---- shaders
+
+const char* const kVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 aPosition;  // model space (m)
+layout(location = 1) in vec3 aNormal;    // model space, unit
+uniform mat4 uModel;
+uniform mat3 uNormalMatrix;              // inverse transpose of uModel's 3x3 block
+uniform mat4 uView;
+uniform mat4 uProj;
+out vec3 vWorldPos;
+out vec3 vNormal;
+void main() {
+  vec4 world = uModel * vec4(aPosition, 1.0);
+  vWorldPos = world.xyz;
+  vNormal = uNormalMatrix * aNormal;
+  gl_Position = uProj * (uView * world);
+}
+)";
+
+// Blinn-Phong, one directional light plus ambient, in linear RGB; gamma-encoded on output.
+const char* const kFragmentShader = R"(#version 330 core
+in vec3 vWorldPos;
+in vec3 vNormal;
+uniform vec3 uColor;          // linear RGB
+uniform vec3 uEye;            // camera position (m)
+uniform vec3 uLightDir;       // unit, pointing from the surface towards the light
+uniform float uCheckerCell;   // > 0: checkerboard in x/z with this cell size (m)
+uniform float uInvGamma;
+out vec4 fragColor;
+void main() {
+  vec3 n = normalize(vNormal);
+  // Back faces (visible only through open meshes or from under the ground) are lit as the
+  // front face seen from this side.
+  if (!gl_FrontFacing) n = -n;
+  vec3 base = uColor;
+  if (uCheckerCell > 0.0) {
+    vec2 cell = floor(vWorldPos.xz / uCheckerCell);
+    if (mod(cell.x + cell.y, 2.0) >= 1.0) base *= 0.8;
+  }
+  vec3 v = normalize(uEye - vWorldPos);
+  float diffuse = max(dot(n, uLightDir), 0.0);
+  vec3 h = normalize(uLightDir + v);
+  float specular = diffuse > 0.0 ? pow(max(dot(n, h), 0.0), 32.0) : 0.0;
+  vec3 linear = base * (0.25 + 0.75 * diffuse) + vec3(0.15 * specular);
+  fragColor = vec4(pow(clamp(linear, 0.0, 1.0), vec3(uInvGamma)), 1.0);
+}
+)";
+
+GLuint compileShader(GLenum type, const char* source) {
+  GLuint s = glCreateShader(type);
+  glShaderSource(s, 1, &source, nullptr);
+  glCompileShader(s);
+  GLint ok = GL_FALSE;
+  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char info[2048] = {0};
+    glGetShaderInfoLog(s, sizeof(info), nullptr, info);
+    glDeleteShader(s);
+    throw RuntimeError(std::string("GL: ") + (type == GL_VERTEX_SHADER ? "vertex" : "fragment") +
+                       " shader failed to compile: " + info);
+  }
+  return s;
+}
+
+struct GpuMesh {
+  GLuint vao = 0, vbo = 0, ebo = 0;
+  GLsizei indexCount = 0;
+};
+
+}  // namespace
+
+Mat4f viewMatrix(const Camera& camera) { return viewMatrixD(camera).cast<float>(); }
+
+Mat4f projectionMatrix(const Camera& camera, double aspect, double zNear, double zFar) {
+  return projectionMatrixD(camera, aspect, zNear, zFar).cast<float>();
+}
+
+bool projectToPixel(const Camera& camera, int width, int height, const Vec3& world, Eigen::Vector2d& pixel) {
+  if (width <= 0 || height <= 0) throw RuntimeError("projectToPixel: image size must be positive");
+  // Near and far only change clip z, never x, y or w, so any valid pair gives the same pixel.
+  const Eigen::Vector4d clip = projectionMatrixD(camera, double(width) / double(height), kNearPlane, kFarPlane) *
+                               (viewMatrixD(camera) * world.homogeneous());
+  if (!(clip.w() > 0.0)) return false;  // on or behind the camera plane
+  const double ndcX = clip.x() / clip.w(), ndcY = clip.y() / clip.w();
+  pixel.x() = (ndcX * 0.5 + 0.5) * width;
+  pixel.y() = (1.0 - (ndcY * 0.5 + 0.5)) * height;  // row 0 is the top of the image
+  return true;
+}
+
+struct OffscreenRenderer::Impl {
+  int width = 0, height = 0;
+  EGLDisplay display = EGL_NO_DISPLAY;
+  EGLContext context = EGL_NO_CONTEXT;
+  GLuint fbo = 0, colorRb = 0, depthRb = 0, program = 0;
+  GLint uModel = -1, uNormalMatrix = -1, uView = -1, uProj = -1, uColor = -1, uEye = -1, uLightDir = -1,
+        uCheckerCell = -1, uInvGamma = -1;
+  std::vector<GpuMesh> meshes;
+  GpuMesh ground;  // unit square [-1, 1]^2 in x/z at y = 0, normal +y
+  bool inFrame = false;
+
+  Impl(int w, int h) : width(w), height(h) {}
+  ~Impl() { destroy(); }
+
+  void createContext();
+  void createFramebuffer();
+  void createProgram();
+  void makeCurrent() const;
+  GpuMesh upload(const TriangleMesh& mesh) const;
+  void draw(const GpuMesh& m, const Mat4f& model, const Color& color, float checkerCell) const;
+  void destroy();
+  void checkGl(const char* where) const {
+    const GLenum e = glGetError();
+    if (e != GL_NO_ERROR) throw RuntimeError(std::string("GL error ") + hex(static_cast<EGLint>(e)) + " in " + where);
+  }
+};
+
+void OffscreenRenderer::Impl::createContext() {
+  display = acquireDisplay();
+  if (!eglBindAPI(EGL_OPENGL_API)) throw RuntimeError("EGL: desktop OpenGL API unavailable (" + hex(eglGetError()) + ")");
+
+  // Only an FBO is rendered to, so the config's surface type is irrelevant, but the default
+  // (EGL_WINDOW_BIT) matches nothing on these displays.
+  const EGLint configAttribs[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT,
+                                  EGL_RED_SIZE, 8, EGL_GREEN_SIZE, 8, EGL_BLUE_SIZE, 8, EGL_ALPHA_SIZE, 8,
+                                  EGL_DEPTH_SIZE, 24, EGL_NONE};
+  EGLConfig configs[64];
+  EGLint count = 0;
+  if (!eglChooseConfig(display, configAttribs, configs, 64, &count) || count == 0) {
+    throw RuntimeError("EGL: no RGBA8/depth24 OpenGL config (" + hex(eglGetError()) + ")");
+  }
+  // EGL sorts deeper colour first (Mesa lists 10/10/10/2 before 8/8/8/8): take an exact match.
+  EGLConfig config = configs[0];
+  for (EGLint i = 0; i < count; ++i) {
+    EGLint r = 0, g = 0, b = 0, a = 0;
+    eglGetConfigAttrib(display, configs[i], EGL_RED_SIZE, &r);
+    eglGetConfigAttrib(display, configs[i], EGL_GREEN_SIZE, &g);
+    eglGetConfigAttrib(display, configs[i], EGL_BLUE_SIZE, &b);
+    eglGetConfigAttrib(display, configs[i], EGL_ALPHA_SIZE, &a);
+    if (r == 8 && g == 8 && b == 8 && a == 8) {
+      config = configs[i];
+      break;
+    }
+  }
+  const EGLint contextAttribs[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 3,
+                                   EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+  context = eglCreateContext(display, config, EGL_NO_CONTEXT, contextAttribs);
+  if (context == EGL_NO_CONTEXT) {
+    throw RuntimeError("EGL: cannot create an OpenGL 3.3 core context (" + hex(eglGetError()) + ")");
+  }
+  // No surface at all (EGL_KHR_surfaceless_context): everything is drawn into our FBO.
+  if (!eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
+    throw RuntimeError("EGL: eglMakeCurrent without a surface failed (" + hex(eglGetError()) + ")");
+  }
+}
+
+void OffscreenRenderer::Impl::makeCurrent() const {
+  // The bound API is per thread, and eglGetCurrentContext answers for the bound API only.
+  eglBindAPI(EGL_OPENGL_API);
+  if (eglGetCurrentContext() == context) return;
+  if (!eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
+    throw RuntimeError("EGL: eglMakeCurrent failed (" + hex(eglGetError()) + ")");
+  }
+}
+
+void OffscreenRenderer::Impl::createFramebuffer() {
+  GLint maxSize = 0;
+  glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &maxSize);
+  if (width > maxSize || height > maxSize) {
+    throw RuntimeError("GL: image " + std::to_string(width) + "x" + std::to_string(height) +
+                       " exceeds the renderbuffer limit " + std::to_string(maxSize));
+  }
+  glGenFramebuffers(1, &fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+  glGenRenderbuffers(1, &colorRb);
+  glBindRenderbuffer(GL_RENDERBUFFER, colorRb);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colorRb);
+  glGenRenderbuffers(1, &depthRb);
+  glBindRenderbuffer(GL_RENDERBUFFER, depthRb);
+  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
+  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depthRb);
+  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  if (status != GL_FRAMEBUFFER_COMPLETE) {
+    throw RuntimeError("GL: framebuffer incomplete (status " + hex(static_cast<EGLint>(status)) + ")");
+  }
+  checkGl("framebuffer setup");
+}
+
+void OffscreenRenderer::Impl::createProgram() {
+  const GLuint vs = compileShader(GL_VERTEX_SHADER, kVertexShader);
+  GLuint fs = 0;
+  try {
+    fs = compileShader(GL_FRAGMENT_SHADER, kFragmentShader);
+  } catch (...) {
+    glDeleteShader(vs);
+    throw;
+  }
+  program = glCreateProgram();
+  glAttachShader(program, vs);
+  glAttachShader(program, fs);
+  glLinkProgram(program);
+  glDeleteShader(vs);  // flagged; freed with the program
+  glDeleteShader(fs);
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char info[2048] = {0};
+    glGetProgramInfoLog(program, sizeof(info), nullptr, info);
+    throw RuntimeError(std::string("GL: shader program failed to link: ") + info);
+  }
+  uModel = glGetUniformLocation(program, "uModel");
+  uNormalMatrix = glGetUniformLocation(program, "uNormalMatrix");
+  uView = glGetUniformLocation(program, "uView");
+  uProj = glGetUniformLocation(program, "uProj");
+  uColor = glGetUniformLocation(program, "uColor");
+  uEye = glGetUniformLocation(program, "uEye");
+  uLightDir = glGetUniformLocation(program, "uLightDir");
+  uCheckerCell = glGetUniformLocation(program, "uCheckerCell");
+  uInvGamma = glGetUniformLocation(program, "uInvGamma");
+  checkGl("shader program setup");
+}
+
+GpuMesh OffscreenRenderer::Impl::upload(const TriangleMesh& mesh) const {
+  const std::size_t n = mesh.positions.size();
+  if (mesh.normals.size() != n) {
+    throw RuntimeError("uploadMesh: " + std::to_string(mesh.normals.size()) + " normals for " + std::to_string(n) +
+                       " positions");
+  }
+  if (mesh.indices.size() % 3 != 0) throw RuntimeError("uploadMesh: index count is not a multiple of 3");
+  for (std::uint32_t i : mesh.indices) {
+    if (i >= n) throw RuntimeError("uploadMesh: index " + std::to_string(i) + " out of range");
+  }
+  // Interleaved position + normal, 6 floats per vertex.
+  std::vector<float> vertices(6 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      vertices[6 * i + c] = mesh.positions[i][c];
+      vertices[6 * i + 3 + c] = mesh.normals[i][c];
+    }
+  }
+  GpuMesh g;
+  g.indexCount = static_cast<GLsizei>(mesh.indices.size());
+  glGenVertexArrays(1, &g.vao);
+  glBindVertexArray(g.vao);
+  glGenBuffers(1, &g.vbo);
+  glBindBuffer(GL_ARRAY_BUFFER, g.vbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(float)), vertices.data(),
+               GL_STATIC_DRAW);
+  glGenBuffers(1, &g.ebo);
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.ebo);
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.indices.size() * sizeof(std::uint32_t)),
+               mesh.indices.data(), GL_STATIC_DRAW);
+  const GLsizei stride = 6 * sizeof(float);
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, nullptr);
+  glEnableVertexAttribArray(1);
+  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<const void*>(3 * sizeof(float)));
+  glBindVertexArray(0);
+  checkGl("uploadMesh");
+  return g;
+}
+
+void OffscreenRenderer::Impl::draw(const GpuMesh& m, const Mat4f& model, const Color& color,
+                                   float checkerCell) const {
+  if (!model.allFinite()) throw RuntimeError("draw: model matrix is not finite");
+  const Eigen::Matrix3f linear = model.topLeftCorner<3, 3>();
+  if (!(std::abs(linear.determinant()) > 0.0f)) throw RuntimeError("draw: model matrix is singular");
+  const Eigen::Matrix3f normalMatrix = linear.inverse().transpose();
+  glUniformMatrix4fv(uModel, 1, GL_FALSE, model.data());  // Eigen is column-major, like GL
+  glUniformMatrix3fv(uNormalMatrix, 1, GL_FALSE, normalMatrix.data());
+  glUniform3f(uColor, color[0], color[1], color[2]);
+  glUniform1f(uCheckerCell, checkerCell);
+  if (m.indexCount == 0) return;
+  glBindVertexArray(m.vao);
+  glDrawElements(GL_TRIANGLES, m.indexCount, GL_UNSIGNED_INT, nullptr);
+  glBindVertexArray(0);
+}
+
+void OffscreenRenderer::Impl::destroy() {
+  if (display == EGL_NO_DISPLAY) return;
+  if (context != EGL_NO_CONTEXT) {
+    eglBindAPI(EGL_OPENGL_API);
+    if (eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
+      auto freeMesh = [](GpuMesh& m) {
+        glDeleteBuffers(1, &m.vbo);  // zero names are ignored by GL
+        glDeleteBuffers(1, &m.ebo);
+        glDeleteVertexArrays(1, &m.vao);
+      };
+      for (GpuMesh& m : meshes) freeMesh(m);
+      freeMesh(ground);
+      glDeleteProgram(program);
+      glDeleteRenderbuffers(1, &colorRb);
+      glDeleteRenderbuffers(1, &depthRb);
+      glDeleteFramebuffers(1, &fbo);
+      eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+    }
+    eglDestroyContext(display, context);
+    context = EGL_NO_CONTEXT;
+  }
+  releaseDisplay(display);
+  display = EGL_NO_DISPLAY;
+}
+
+OffscreenRenderer::OffscreenRenderer(int width, int height) {
+  if (width <= 0 || height <= 0) {
+    throw RuntimeError("renderer: image size " + std::to_string(width) + "x" + std::to_string(height) +
+                       " must be positive");
+  }
+  // Built step by step inside impl_, so a throw part-way frees what was already created.
+  impl_ = std::make_unique<Impl>(width, height);
+  impl_->createContext();
+  impl_->createFramebuffer();
+  impl_->createProgram();
+
+  TriangleMesh quad;
+  quad.positions = {Vec3f(-1, 0, -1), Vec3f(1, 0, -1), Vec3f(1, 0, 1), Vec3f(-1, 0, 1)};
+  quad.normals.assign(4, Vec3f(0, 1, 0));
+  quad.indices = {0, 2, 1, 0, 3, 2};  // counter-clockwise seen from +y
+  impl_->ground = impl_->upload(quad);
+}
+
+OffscreenRenderer::~OffscreenRenderer() = default;
+
+int OffscreenRenderer::width() const { return impl_->width; }
+int OffscreenRenderer::height() const { return impl_->height; }
+
+int OffscreenRenderer::uploadMesh(const TriangleMesh& mesh) {
+  impl_->makeCurrent();
+  impl_->meshes.push_back(impl_->upload(mesh));
+  return static_cast<int>(impl_->meshes.size()) - 1;
+}
+
+void OffscreenRenderer::beginFrame(const Camera& camera, const Color& background) {
+  Impl& r = *impl_;
+  r.makeCurrent();
+  const Mat4f view = viewMatrix(camera);
+  const Mat4f proj = projectionMatrix(camera, double(r.width) / double(r.height), kNearPlane, kFarPlane);
+  glBindFramebuffer(GL_FRAMEBUFFER, r.fbo);
+  glViewport(0, 0, r.width, r.height);
+  // The background is linear like every other colour: encode it as the shader encodes fragments.
+  glClearColor(std::pow(background[0], 1.0f / kGamma), std::pow(background[1], 1.0f / kGamma),
+               std::pow(background[2], 1.0f / kGamma), 1.0f);
+  glClearDepth(1.0);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  // No culling: meshes are closed so hidden faces fail the depth test anyway, and an open or
+  // inside-out mesh still shows up instead of vanishing.
+  glDisable(GL_CULL_FACE);
+  glDisable(GL_BLEND);
+  glUseProgram(r.program);
+  glUniformMatrix4fv(r.uView, 1, GL_FALSE, view.data());
+  glUniformMatrix4fv(r.uProj, 1, GL_FALSE, proj.data());
+  const Vec3f eye = camera.eye.cast<float>();
+  glUniform3f(r.uEye, eye.x(), eye.y(), eye.z());
+  // Fixed world-space sun: from above, a little towards +x/+z (the side the default camera is on).
+  const Vec3f light = Vec3f(0.35f, 1.0f, 0.6f).normalized();
+  glUniform3f(r.uLightDir, light.x(), light.y(), light.z());
+  glUniform1f(r.uInvGamma, 1.0f / kGamma);
+  r.checkGl("beginFrame");
+  r.inFrame = true;
+}
+
+void OffscreenRenderer::drawGround(double y, double cx, double cz, double halfExtent, const Color& color) {
+  Impl& r = *impl_;
+  if (!r.inFrame) throw RuntimeError("drawGround called outside beginFrame/endFrame");
+  if (!(halfExtent > 0.0) || !std::isfinite(halfExtent) || !std::isfinite(y) || !std::isfinite(cx) ||
+      !std::isfinite(cz)) {
+    throw RuntimeError("drawGround: position must be finite and halfExtent > 0 m");
+  }
+  r.makeCurrent();
+  Mat4f model = Mat4f::Identity();
+  model(0, 0) = static_cast<float>(halfExtent);
+  model(2, 2) = static_cast<float>(halfExtent);
+  model(0, 3) = static_cast<float>(cx);
+  model(1, 3) = static_cast<float>(y);
+  model(2, 3) = static_cast<float>(cz);
+  // Push the ground back in depth so faces of bodies resting on it (same height) win the depth
+  // test instead of z-fighting.
+  glEnable(GL_POLYGON_OFFSET_FILL);
+  glPolygonOffset(1.0f, 1.0f);
+  r.draw(r.ground, model, color, static_cast<float>(halfExtent / 8.0));  // 16 x 16 checker cells
+  glDisable(GL_POLYGON_OFFSET_FILL);
+}
+
+void OffscreenRenderer::drawMesh(int handle, const Mat4f& model, const Color& color) {
+  Impl& r = *impl_;
+  if (!r.inFrame) throw RuntimeError("drawMesh called outside beginFrame/endFrame");
+  if (handle < 0 || handle >= static_cast<int>(r.meshes.size())) {
+    throw RuntimeError("drawMesh: invalid mesh handle " + std::to_string(handle));
+  }
+  r.makeCurrent();
+  r.draw(r.meshes[static_cast<std::size_t>(handle)], model, color, 0.0f);
+}
+
+Image OffscreenRenderer::endFrame() {
+  Impl& r = *impl_;
+  if (!r.inFrame) throw RuntimeError("endFrame called without beginFrame");
+  r.makeCurrent();
+  r.inFrame = false;
+  glFinish();
+  Image image;
+  image.width = r.width;
+  image.height = r.height;
+  const std::size_t stride = static_cast<std::size_t>(r.width) * 4;
+  std::vector<std::uint8_t> bottomUp(stride * static_cast<std::size_t>(r.height));
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, r.fbo);
+  glReadBuffer(GL_COLOR_ATTACHMENT0);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, r.width, r.height, GL_RGBA, GL_UNSIGNED_BYTE, bottomUp.data());
+  r.checkGl("endFrame (glReadPixels)");
+  // GL's row 0 is the bottom row; images are stored top row first.
+  image.rgba.resize(bottomUp.size());
+  for (int y = 0; y < r.height; ++y) {
+    std::memcpy(image.rgba.data() + static_cast<std::size_t>(y) * stride,
+                bottomUp.data() + static_cast<std::size_t>(r.height - 1 - y) * stride, stride);
+  }
+  return image;
+}
+
+}  // namespace physketch::render

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages physketch needs to build, test and run.
+# Idempotent and quiet when everything is present: it asks dpkg first and
+# only calls apt-get (as root, or through sudo) for what is missing.
+set -euo pipefail
+
+PACKAGES=(
+  cmake ninja-build g++ make pkg-config ccache time
+  libeigen3-dev
+  libopenvdb-dev libboost-iostreams-dev   # FindOpenVDB needs Boost.Iostreams but the package does not pull it in
+  libtbb-dev
+  libcgal-dev libbullet-dev
+  libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libgl-dev   # EGL surfaceless + Mesa llvmpipe
+  libpng-dev
+  libgtest-dev
+  nlohmann-json3-dev libcli11-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  status=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
+  [[ "$status" == "install ok installed" ]] || missing+=("$p")
+done
+
+if ((${#missing[@]} == 0)); then
+  exit 0
+fi
+
+echo "install-deps: installing ${#missing[@]} missing package(s): ${missing[*]}" >&2
+SUDO=()
+if [[ $(id -u) -ne 0 ]]; then
+  if command -v sudo >/dev/null 2>&1; then SUDO=(sudo); else
+    echo "install-deps: not root and no sudo; install these packages as root: ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+export DEBIAN_FRONTEND=noninteractive
+"${SUDO[@]}" apt-get update -qq
+"${SUDO[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install-deps: done" >&2

@@ -1,0 +1,232 @@
+// Voxelizer: Phys-Sketch Eq. 4-5 mapping, Alg. 1 stamping, Eq. 6-7 interpolation.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <queue>
+#include <random>
+#include <set>
+
+#include "core/error.h"
+#include "sketch/voxelize.h"
+
+using namespace physketch;
+using namespace physketch::sketch;
+
+namespace {
+
+std::vector<Material> oneMaterial() {
+  Material m;
+  m.name = "wood";
+  return {m};
+}
+
+Stroke makeStroke(BrushShape shape, double size, std::vector<Vec3> points) {
+  Stroke s;
+  s.brush = shape;
+  s.size = size;
+  s.material = "wood";
+  s.line = 2;
+  double t = 0.0;
+  int line = 3;
+  for (const auto& p : points) s.samples.push_back(Sample{t += 0.01, p, line++});
+  return s;
+}
+
+// Number of 26-connected components of a set of cells.
+int components(const std::vector<Vec3i>& cells) {
+  auto key = [](const Vec3i& c) { return GridMapping::linear(c); };
+  std::set<std::int64_t> all, seen;
+  for (const auto& c : cells) all.insert(key(c));
+  int n = 0;
+  for (const auto& start : cells) {
+    if (seen.count(key(start))) continue;
+    ++n;
+    std::queue<Vec3i> q;
+    q.push(start);
+    seen.insert(key(start));
+    while (!q.empty()) {
+      const Vec3i c = q.front();
+      q.pop();
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const Vec3i nb = c + Vec3i(dx, dy, dz);
+            const auto k = key(nb);
+            if (all.count(k) && !seen.count(k)) {
+              seen.insert(k);
+              q.push(nb);
+            }
+          }
+    }
+  }
+  return n;
+}
+
+}  // namespace
+
+TEST(GridMapping, Eq4And5MapCentreAndCorners) {
+  const GridMapping m(Vec3(1.0, 2.0, -3.0), 1.51);
+  EXPECT_DOUBLE_EQ(m.voxelSize(), 0.01);  // |W| / |w|
+  EXPECT_EQ(m.discretize(Vec3(1.0, 2.0, -3.0)), Vec3i(75, 75, 75));  // C -> c
+  EXPECT_EQ(m.discretize(Vec3(1.0 - 0.755 + 1e-9, 2.0, -3.0)).x(), 0);
+  EXPECT_EQ(m.discretize(Vec3(1.0 + 0.755 - 1e-9, 2.0, -3.0)).x(), 150);
+  EXPECT_TRUE(m.contains(Vec3(1.0 + 0.7549, 2.0, -3.0)));
+  EXPECT_FALSE(m.contains(Vec3(1.0 + 0.7551, 2.0, -3.0)));
+  EXPECT_FALSE(m.contains(Vec3(1.0, 2.0 - 0.7551, -3.0)));
+  const Vec3 q = m.toWorld(Vec3i(0, 75, 150));
+  EXPECT_NEAR(q.x(), 1.0 - 0.75, 1e-12);
+  EXPECT_NEAR(q.y(), 2.0, 1e-12);
+  EXPECT_NEAR(q.z(), -3.0 + 0.75, 1e-12);
+}
+
+TEST(GridMapping, RoundTripWithinHalfAVoxel) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  const double h = m.voxelSize();
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> u(-0.4999, 0.4999);
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 q(u(rng), 0.5 + u(rng), u(rng));
+    ASSERT_TRUE(m.contains(q));
+    const Vec3i c = m.discretize(q);
+    ASSERT_TRUE(GridMapping::inGrid(c));
+    const Vec3 back = m.toWorld(c);
+    ASSERT_LE((back - q).cwiseAbs().maxCoeff(), 0.5 * h + 1e-12);
+    // And grid -> world -> grid is exact.
+    ASSERT_EQ(m.discretize(back), c);
+  }
+}
+
+TEST(Interpolation, Eq6CountAndEq7Spacing) {
+  std::vector<Vec3> pts;
+  const double d = 0.01;
+  interpolateSegment(Vec3(0, 0, 0), Vec3(0.104, 0, 0), d, pts);
+  ASSERT_EQ(pts.size(), 11u);  // i_max = Round(0.104 / 0.01) = 10, i in [0, 10]
+  EXPECT_DOUBLE_EQ(pts[0].x(), 0.104);  // P'(0) = P, the current sample
+  for (std::size_t i = 1; i < pts.size(); ++i) EXPECT_NEAR(pts[i - 1].x() - pts[i].x(), d, 1e-12);
+  interpolateSegment(Vec3(1, 1, 1), Vec3(1, 1, 1), d, pts);
+  EXPECT_EQ(pts.size(), 1u);
+}
+
+TEST(Voxelize, FastTwoSampleStrokeIsAConnectedRunOfEq6Length) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  const double h = m.voxelSize();
+  // Brush smaller than a voxel: each stamp marks exactly one cell. The two
+  // samples are 40 voxels apart, a jump of 40 cells in one frame.
+  StrokeFile f;
+  f.path = "fast.strokes";
+  const Vec3 a = m.toWorld(Vec3i(50, 75, 75)), b = m.toWorld(Vec3i(90, 75, 75));
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.4 * h, {a, b}));
+  const Sketch sk = voxelize(f, m, oneMaterial());
+  const long iMax = std::lround((b - a).norm() / h);
+  EXPECT_EQ(iMax, 40);
+  ASSERT_EQ(sk.particles.size(), static_cast<std::size_t>(iMax + 1));  // Eq. 6: i in [0, i_max]; P_0 is P'(i_max)
+  std::set<int> xs;
+  for (const auto& c : sk.cells) {
+    EXPECT_EQ(c.y(), 75);
+    EXPECT_EQ(c.z(), 75);
+    xs.insert(c.x());
+  }
+  EXPECT_EQ(*xs.begin(), 50);
+  EXPECT_EQ(*xs.rbegin(), 90);
+  EXPECT_EQ(xs.size(), 41u);  // contiguous 50..90: no gaps
+}
+
+TEST(Voxelize, FastDiagonalStrokeWithoutInterpolationWouldHaveHoles) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  const double h = m.voxelSize();
+  StrokeFile f;
+  f.path = "diag.strokes";
+  // Five samples, 0.2 m apart in 3D: far more than a brush of 3 voxels.
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 5; ++i) pts.push_back(Vec3(-0.4 + 0.12 * i, 0.2 + 0.1 * i, -0.3 + 0.11 * i));
+  f.strokes.push_back(makeStroke(BrushShape::kCube, 3 * h, pts));
+  const Sketch sk = voxelize(f, m, oneMaterial());
+  EXPECT_EQ(components(sk.cells), 1);
+  EXPECT_GT(sk.particles.size(), 9u * 5u);  // more than the five stamps alone
+}
+
+TEST(Voxelize, OneParticlePerVoxelAtTheVoxelCentre) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  StrokeFile f;
+  f.path = "overlap.strokes";
+  // Three overlapping strokes over the same region.
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.1, {Vec3(0, 0.5, 0), Vec3(0.1, 0.5, 0)}));
+  f.strokes.push_back(makeStroke(BrushShape::kCube, 0.08, {Vec3(0.05, 0.5, 0), Vec3(0.05, 0.6, 0)}));
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.1, {Vec3(0, 0.5, 0)}));
+  for (int i = 0; i < 3; ++i) f.strokes[i].id = i;
+  const Sketch sk = voxelize(f, m, oneMaterial());
+  EXPECT_EQ(sk.strokes[2].count, 0);  // fully inside the first stroke: nothing new
+  std::set<std::int64_t> cells;
+  for (std::size_t i = 0; i < sk.particles.size(); ++i) {
+    ASSERT_TRUE(cells.insert(GridMapping::linear(sk.cells[i])).second) << "two particles in one voxel";
+    ASSERT_EQ(sk.grid.at(sk.cells[i]), static_cast<std::int32_t>(i));
+    const Vec3 q = m.toWorld(sk.cells[i]);
+    ASSERT_NEAR(sk.particles.x[i], q.x(), 1e-6);
+    ASSERT_NEAR(sk.particles.y[i], q.y(), 1e-6);
+    ASSERT_EQ(sk.particles.invMass[i], 0.0f);  // static while sketched
+  }
+  std::size_t occupied = 0;
+  for (auto v : sk.grid.cells()) occupied += v >= 0;
+  EXPECT_EQ(occupied, sk.particles.size());
+}
+
+TEST(Voxelize, SphereBrushVolumeMatchesAnalytic) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  const double h = m.voxelSize();
+  StrokeFile f;
+  f.path = "ball.strokes";
+  const double diameter = 31 * h;
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, diameter, {m.toWorld(Vec3i(75, 75, 75))}));
+  const Sketch sk = voxelize(f, m, oneMaterial());
+  const double exact = M_PI / 6.0 * std::pow(diameter / h, 3);  // in voxels: 15,599
+  // Lattice points in a ball of radius 15.5: error is O(r^2) surface voxels, < 2 % here.
+  EXPECT_NEAR(double(sk.particles.size()), exact, 0.02 * exact);
+}
+
+TEST(Voxelize, SampleOutsideWorkspaceNamesLineAndAxis) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  StrokeFile f;
+  f.path = "out.strokes";
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.05, {Vec3(0, 0.5, 0), Vec3(0, 0.5, 0.6)}));
+  try {
+    voxelize(f, m, oneMaterial());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "out.strokes");
+    EXPECT_EQ(e.line(), 4);
+    EXPECT_EQ(e.field(), "z");
+  }
+}
+
+TEST(Voxelize, UnknownMaterialNamesStrokeLine) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  StrokeFile f;
+  f.path = "mat.strokes";
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.05, {Vec3(0, 0.5, 0)}));
+  f.strokes[0].material = "jelly";
+  try {
+    voxelize(f, m, oneMaterial());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 2);
+    EXPECT_EQ(e.field(), "material");
+    EXPECT_NE(std::string(e.what()).find("wood"), std::string::npos);  // lists what is defined
+  }
+}
+
+TEST(Voxelize, OverCapNamesTheStrokeThatCrossedIt) {
+  const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
+  StrokeFile f;
+  f.path = "cap.strokes";
+  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.3, {Vec3(0, 0.5, 0)}));  // ~52k particles
+  f.strokes.push_back(makeStroke(BrushShape::kCube, 0.9, {Vec3(0, 0.5, 0)}));    // ~2.5M: over the cap
+  f.strokes[1].id = 1;
+  f.strokes[1].line = 9;
+  try {
+    voxelize(f, m, oneMaterial());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 9);
+    EXPECT_NE(std::string(e.what()).find("688590"), std::string::npos);
+  }
+}
