@@ -82,6 +82,10 @@ PbdWorld::PbdWorld(ParticleArrays particles, std::vector<BodyRange> bodies, std:
     BodyView v{br.count, &px_[f], &py_[f], &pz_[f], &rx_[f], &ry_[f], &rz_[f], &mass_[f]};
     invInertia_.push_back(restInertia(v, spacing).inverse());
     friction_.push_back(mat.friction);
+    double reach = 0.0;
+    for (std::int32_t i = br.first; i < br.first + br.count; ++i)
+      reach = std::max(reach, Vec3(rx_[i], ry_[i], rz_[i]).norm());
+    reach_.push_back(reach + params_.particleRadius);
     if (mat.kind == MaterialKind::kRigid) rigidBodies_.push_back(static_cast<std::int32_t>(b));
   }
   passIntegrate_ = profile_.add("integrate");
@@ -157,7 +161,10 @@ void PbdWorld::rigidContact() {
     const BodyRange& br = bodies_[b];
     RigidPose pose{centre_[b], rot_[b], invMass_[b], invInertia_[b]};
     const double mu = friction_[b];
-    for (int it = 0; it < params_.iterations; ++it) {
+    // Bounding-sphere test: a body whose lowest possible particle is above the
+    // ground skips the sweeps (falling bodies cost one shape match per substep).
+    const int sweeps = pose.c.y() - reach_[b] > params_.groundY ? 0 : params_.iterations;
+    for (int it = 0; it < sweeps; ++it) {
       // One correction per sweep for the whole contact patch, applied at its
       // depth-weighted centroid: order-independent (a Gauss-Seidel pass over
       // single particles tilts the body towards whichever contact comes first

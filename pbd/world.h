@@ -98,6 +98,7 @@ class PbdWorld {
   std::vector<double> invMass_;      // 1/kg, whole body
   std::vector<Mat3> invInertia_;     // rest-frame inverse inertia
   std::vector<double> friction_;     // Coulomb coefficient against the ground
+  std::vector<double> reach_;        // m, max |rest offset| + particle radius: no contact while c.y - reach > ground
   std::vector<std::int32_t> rigidBodies_;  // bodies solved by shape matching
   std::int64_t steps_ = 0;
   Profile profile_;

@@ -168,6 +168,12 @@ int runScene(const RunOptions& opt) {
     std::error_code ec;
     fs::create_directories(sc.writeFrames ? framesDir : out, ec);
     if (ec) throw RuntimeError("cannot create output folder " + out.string() + ": " + ec.message());
+    // Frames of an earlier, longer run in the same folder would look like part of this one.
+    if (sc.writeFrames)
+      for (const auto& entry : fs::directory_iterator(framesDir)) {
+        const std::string name = entry.path().filename().string();
+        if (name.rfind("frame_", 0) == 0 && entry.path().extension() == ".png") fs::remove(entry.path());
+      }
 
     const double groundHalf = std::max(sc.workspaceSize, 1e-3);
     auto renderFrame = [&](int f) {

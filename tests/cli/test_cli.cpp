@@ -69,6 +69,10 @@ TEST(Cli, HelloSceneWritesFramesAndReport) {
   EXPECT_NE(rep.find("\"per_stroke\""), std::string::npos);
   EXPECT_NE(rep.find("\"shape_match\""), std::string::npos);
   EXPECT_NE(rep.find("\"written\": 4"), std::string::npos);
+  // A shorter run into the same folder leaves no stale frames behind.
+  ASSERT_EQ(runCli("run '" + scene + "' --out '" + out.string() + "' --frames 2 -q", dir).code, 0);
+  EXPECT_TRUE(fs::exists(out / "frames" / "frame_0001.png"));
+  EXPECT_FALSE(fs::exists(out / "frames" / "frame_0002.png"));
   fs::remove_all(dir);
 }
 
