@@ -66,9 +66,7 @@ int main(int argc, char** argv) {
   const std::size_t n = sk->particles.size();
   row("pipeline", "hello", n, threads, "voxelize_ms", 1e3 * median(tv), "ms");
 
-  std::vector<BodyRange> bodies;
-  for (const auto& s : sk->strokes)
-    if (s.count > 0) bodies.push_back(BodyRange{s.first, s.count, s.material, s.id});
+  const std::vector<BodyRange>& bodies = sk->bodies;
   pbd::PbdParams pp;
   pp.dt = sc.dt;
   pp.substeps = sc.substeps;

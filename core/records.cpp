@@ -141,9 +141,70 @@ RecordFile parseRecordText(const std::string& text, const std::string& path, con
   return parseLines(lines, path, magic, maxVersion);
 }
 
+std::vector<RecordOption> splitOptions(const RecordFile& file, const Record& record, Record& positional,
+                                       std::initializer_list<const char*> allowed) {
+  std::vector<RecordOption> options;
+  positional.line = record.line;
+  positional.tokens.clear();
+  for (const std::string& tok : record.tokens) {
+    const auto eq = tok.find('=');
+    if (eq == std::string::npos || positional.tokens.empty()) {
+      if (!options.empty())
+        throw InputError(file.path, record.line, options.back().key,
+                         "positional field '" + tok + "' after option '" + options.back().key + "='");
+      positional.tokens.push_back(tok);
+      continue;
+    }
+    RecordOption o{tok.substr(0, eq), tok.substr(eq + 1)};
+    bool known = false;
+    std::string list;
+    for (const char* a : allowed) {
+      known = known || o.key == a;
+      list += (list.empty() ? "" : ", ") + std::string(a);
+    }
+    if (!known)
+      throw InputError(file.path, record.line, o.key,
+                       "unknown option '" + o.key + "' (" + record.keyword() + " takes: " +
+                           (list.empty() ? std::string("none") : list) + ")");
+    for (const auto& prev : options)
+      if (prev.key == o.key) throw InputError(file.path, record.line, o.key, "option given twice");
+    if (o.value.empty()) throw InputError(file.path, record.line, o.key, "option has no value");
+    options.push_back(std::move(o));
+  }
+  return options;
+}
+
+std::vector<double> parseNumberList(const RecordFile& file, int line, const std::string& field, const std::string& text,
+                                    std::size_t n) {
+  std::vector<double> out;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = text.find(',', start);
+    const std::string part = text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(part.c_str(), &end);
+    if (part.empty() || end == part.c_str() || *end != '\0')
+      throw InputError(file.path, line, field, "'" + part + "' is not a number (expected " + std::to_string(n) +
+                                                   " comma-separated numbers)");
+    if (!std::isfinite(v) || errno == ERANGE) throw InputError(file.path, line, field, "'" + part + "' is not finite");
+    out.push_back(v);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  if (out.size() != n)
+    throw InputError(file.path, line, field,
+                     "expected " + std::to_string(n) + " comma-separated numbers, got " + std::to_string(out.size()));
+  return out;
+}
+
 FieldReader::FieldReader(const RecordFile& file, const Record& record, std::initializer_list<const char*> names,
                          std::size_t minFields)
-    : file_(file), record_(record), names_(names.begin(), names.end()) {
+    : FieldReader(file, record, std::vector<std::string>(names.begin(), names.end()), minFields) {}
+
+FieldReader::FieldReader(const RecordFile& file, const Record& record, std::vector<std::string> names,
+                         std::size_t minFields)
+    : file_(file), record_(record), names_(std::move(names)) {
   const std::size_t have = record.tokens.size() - 1;
   const std::size_t need = minFields == SIZE_MAX ? names_.size() : minFields;
   if (have < need) fail(have, "missing (" + record.keyword() + " needs " + std::to_string(need) + " fields)");

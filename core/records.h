@@ -39,12 +39,30 @@ RecordFile readRecordFile(const std::string& path, const std::string& magic, int
 RecordFile parseRecordText(const std::string& text, const std::string& path, const std::string& magic,
                            int maxVersion);
 
+// An option field `key=value` of a record (after its positional fields).
+struct RecordOption {
+  std::string key, value;
+};
+
+// Splits a record into its positional tokens (kept in `positional`) and its
+// `key=value` options. Options must come after all positional fields and each
+// key must be one of `allowed` and appear once; otherwise InputError names it.
+std::vector<RecordOption> splitOptions(const RecordFile& file, const Record& record, Record& positional,
+                                       std::initializer_list<const char*> allowed);
+
+// Parses a comma-separated list of exactly `n` finite numbers (an option value such
+// as `axis=0,1,0`). Throws InputError naming `field`.
+std::vector<double> parseNumberList(const RecordFile& file, int line, const std::string& field,
+                                    const std::string& text, std::size_t n);
+
 // Reads the fields of one record against a schema of field names (the keyword
 // is not a field). Checks the field count up front: too few names the first
 // missing field, too many names the extra one.
 class FieldReader {
  public:
   FieldReader(const RecordFile& file, const Record& record, std::initializer_list<const char*> names,
+              std::size_t minFields = SIZE_MAX);
+  FieldReader(const RecordFile& file, const Record& record, std::vector<std::string> names,
               std::size_t minFields = SIZE_MAX);
 
   std::size_t count() const { return record_.tokens.size() - 1; }  // fields present

@@ -57,16 +57,20 @@ PbdWorld::PbdWorld(ParticleArrays particles, std::vector<BodyRange> bodies, std:
     const BodyRange& br = bodies_[b];
     if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
       throw RuntimeError("PbdWorld: body " + std::to_string(b) + " has an invalid particle range");
-    const Material& mat = materials_.at(static_cast<std::size_t>(br.material));
     Vec3 c = Vec3::Zero();
-    double m = 0.0;
+    double m = 0.0, friction = 0.0;
+    bool rigid = true;
     for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
+      // Per-particle material: one body may mix materials (a solid object with a soft part).
+      const Material& mat = materials_.at(static_cast<std::size_t>(parts_.material[i]));
       const double mi = mat.density * volume;
       mass_[i] = static_cast<float>(mi);
       parts_.invMass[i] = static_cast<float>(1.0 / mi);
       parts_.body[i] = static_cast<std::int32_t>(b);
       c += mi * Vec3(parts_.x[i], parts_.y[i], parts_.z[i]);
       m += mi;
+      friction += mi * mat.friction;
+      rigid = rigid && mat.kind == MaterialKind::kRigid;
     }
     c /= m;
     for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
@@ -81,12 +85,12 @@ PbdWorld::PbdWorld(ParticleArrays particles, std::vector<BodyRange> bodies, std:
     const std::size_t f = static_cast<std::size_t>(br.first);
     BodyView v{br.count, &px_[f], &py_[f], &pz_[f], &rx_[f], &ry_[f], &rz_[f], &mass_[f]};
     invInertia_.push_back(restInertia(v, spacing).inverse());
-    friction_.push_back(mat.friction);
+    friction_.push_back(friction / m);  // mass-weighted mean over the body's materials
     double reach = 0.0;
     for (std::int32_t i = br.first; i < br.first + br.count; ++i)
       reach = std::max(reach, Vec3(rx_[i], ry_[i], rz_[i]).norm());
     reach_.push_back(reach + params_.particleRadius);
-    if (mat.kind == MaterialKind::kRigid) rigidBodies_.push_back(static_cast<std::int32_t>(b));
+    if (rigid) rigidBodies_.push_back(static_cast<std::int32_t>(b));
   }
   passIntegrate_ = profile_.add("integrate");
   passShape_ = profile_.add("shape_match");

@@ -2,15 +2,446 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <queue>
+#include <unordered_set>
 
 #include "core/error.h"
 
 namespace physketch::sketch {
 namespace {
 
-// Thrown inside stampBrush when the cap is reached; voxelize() turns it into an
-// InputError that names the stroke.
+// Thrown when the particle cap is reached; voxelize() turns it into an InputError naming the operation.
 struct CapReached {};
+
+const char* kAxisNames[] = {"x", "y", "z"};
+
+class Builder {
+ public:
+  Builder(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
+          const StampVoxelizer& stamps)
+      : file_(file), materials_(materials), stamps_(stamps), sk_(mapping), h_(mapping.voxelSize()) {}
+
+  Sketch run() {
+    const double play = file_.playTime();
+    std::vector<bool> isActive(file_.operations.size(), false);
+    for (int id : file_.active) isActive[static_cast<std::size_t>(id)] = true;
+    for (const Operation& op : file_.operations) {
+      OperationSummary sum;
+      sum.id = op.id;
+      sum.line = op.line;
+      sum.what = describe(op);
+      sum.active = isActive[static_cast<std::size_t>(op.id)];
+      sk_.operations.push_back(sum);
+    }
+    for (const Operation& op : file_.operations) {
+      if (!isActive[static_cast<std::size_t>(op.id)]) continue;
+      if (op.startTime() > play)
+        throw InputError(file_.path, op.line, "",
+                         "operation starts at t = " + std::to_string(op.startTime()) + " s, after 'play' at t = " +
+                             std::to_string(play) + " s (line " + std::to_string(file_.playLine) +
+                             "); sketching while the simulation runs is not supported yet");
+      cur_ = &sk_.operations[static_cast<std::size_t>(op.id)];
+      try {
+        apply(op);
+      } catch (const CapReached&) {
+        throw InputError(file_.path, op.line, "",
+                         "operation " + std::to_string(op.id) + " (" + cur_->what + ") crosses the particle cap of " +
+                             std::to_string(kMaxParticles) + " (20 % of the 151^3 grid); use a smaller brush or fewer strokes");
+      }
+    }
+    finalize();
+    return std::move(sk_);
+  }
+
+ private:
+  static std::string describe(const Operation& op) {
+    switch (op.kind) {
+      case Operation::Kind::kStroke:
+        return std::string("stroke ") + toString(op.stroke.op) + " " + toString(op.stroke.brush);
+      case Operation::Kind::kPrimitive: return std::string("primitive ") + toString(op.primitive.kind);
+      case Operation::Kind::kStamp: return "stamp " + op.stamp.path;
+    }
+    return "?";
+  }
+
+  std::int16_t resolveMaterial(const Operation& op) {
+    const int mat = findMaterial(materials_, op.material);
+    if (mat < 0) {
+      std::string known;
+      for (const auto& m : materials_) known += (known.empty() ? "" : ", ") + m.name;
+      throw InputError(file_.path, op.line, "material",
+                       "unknown material '" + op.material + "' (the scene defines: " +
+                           (known.empty() ? std::string("none") : known) + ")");
+    }
+    return static_cast<std::int16_t>(mat);
+  }
+
+  void checkInside(const Vec3& p, int line, const char* what) {
+    if (sk_.mapping.contains(p)) return;
+    const Vec3 g = sk_.mapping.toGrid(p);
+    int axis = 0;
+    for (int a = 0; a < 3; ++a)
+      if (g[a] < -0.5 || g[a] >= kGridSize - 0.5) {
+        axis = a;
+        break;
+      }
+    const double lo = sk_.mapping.center()[axis] - 0.5 * sk_.mapping.size();
+    throw InputError(file_.path, line, kAxisNames[axis],
+                     std::string(what) + " outside the workspace (" + kAxisNames[axis] + " must be in [" +
+                         std::to_string(lo) + ", " + std::to_string(lo + sk_.mapping.size()) + "))");
+  }
+
+  // --- Alg. 1 and Alg. 2 on single cells ------------------------------------
+  void take(const Vec3i& c, std::int16_t material) {
+    std::int32_t& cell = sk_.grid.at(c);
+    if (cell >= 0) return;  // one particle per voxel, never two at one place
+    if (live_ >= kMaxParticles) throw CapReached{};
+    const Vec3 q = sk_.mapping.toWorld(c);  // Eq. 5
+    cell = sk_.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
+                              cur_->id, material);
+    sk_.cells.push_back(c);
+    alive_.push_back(1);
+    ++live_;
+    ++cur_->created;
+  }
+
+  void drop(const Vec3i& c) {
+    std::int32_t& cell = sk_.grid.at(c);
+    if (cell < 0) return;
+    alive_[static_cast<std::size_t>(cell)] = 0;
+    cell = -1;
+    --live_;
+    ++cur_->removed;
+  }
+
+  // Applies create (material >= 0) or remove (material < 0) to cells and their mirror image.
+  void applyCells(const std::vector<Vec3i>& cells, const Mirror& mirror, std::int16_t material) {
+    for (int pass = 0; pass < (mirror.axis >= 0 ? 2 : 1); ++pass)
+      for (const Vec3i& c0 : cells) {
+        const Vec3i c = pass == 0 ? c0 : mirrorCell(c0, mirror, sk_.mapping);
+        if (!GridMapping::inGrid(c)) continue;
+        if (material >= 0) take(c, material);
+        else drop(c);
+      }
+  }
+
+  // Brush positions of a stroke (Eq. 6-7), with pressure and travel direction per stamp.
+  struct Stamp {
+    Vec3 position, direction;
+    double pressure;
+  };
+  std::vector<Stamp> stampsOf(const Stroke& s) {
+    std::vector<Stamp> out;
+    std::vector<Vec3> pts;
+    const auto& sm = s.samples;
+    Vec3 firstDir = s.axis;
+    for (std::size_t k = 1; k < sm.size(); ++k) {
+      const Vec3 d = sm[k].position - sm[k - 1].position;
+      if (d.norm() > 0) {
+        firstDir = d.normalized();
+        break;
+      }
+    }
+    Vec3 dir = firstDir;
+    for (std::size_t k = 0; k < sm.size(); ++k) {
+      if (k == 0) {
+        out.push_back({sm[0].position, dir, sm[0].pressure});
+        continue;
+      }
+      const Vec3 seg = sm[k].position - sm[k - 1].position;
+      const double len = seg.norm();
+      if (len > 0) dir = seg / len;
+      interpolateSegment(sm[k - 1].position, sm[k].position, h_, pts);
+      for (std::size_t i = 0; i < pts.size(); ++i) {
+        // Pressure varies linearly along the segment, like the position.
+        const double a = len > 0 ? std::min(1.0, double(i) * h_ / len) : 0.0;
+        out.push_back({pts[i], dir, sm[k].pressure + a * (sm[k - 1].pressure - sm[k].pressure)});
+      }
+    }
+    return out;
+  }
+
+  void apply(const Operation& op) {
+    std::vector<Vec3i> cells;
+    switch (op.kind) {
+      case Operation::Kind::kStroke: {
+        const Stroke& s = op.stroke;
+        for (const Sample& smp : s.samples) checkInside(smp.position, smp.line, "sample");
+        cur_->minFeature = s.size * std::min_element(s.samples.begin(), s.samples.end(), [](auto& a, auto& b) {
+                                      return a.pressure < b.pressure;
+                                    })->pressure;
+        if (s.brush == BrushShape::kDisc || s.brush == BrushShape::kCylinder || s.brush == BrushShape::kCapsule)
+          cur_->minFeature = std::min(cur_->minFeature, s.length > 0 ? s.length : (s.brush == BrushShape::kDisc ? h_ : s.size));
+        if (s.op == StrokeOp::kMove) {
+          move(op);
+          return;
+        }
+        const std::int16_t mat = s.op == StrokeOp::kCreate ? resolveMaterial(op) : std::int16_t(-1);
+        cur_->material = mat;
+        for (const Stamp& st : stampsOf(s)) {
+          rasterize(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping, cells);
+          applyCells(cells, op.mirror, mat);
+          cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
+        }
+        return;
+      }
+      case Operation::Kind::kPrimitive: {
+        const Primitive& p = op.primitive;
+        checkInside(p.centre, op.line, "primitive centre");
+        const std::int16_t mat = resolveMaterial(op);
+        cur_->material = mat;
+        Solid solid;
+        solid.centre = p.centre;
+        solid.rotation = p.rotation;
+        switch (p.kind) {
+          case PrimitiveKind::kBox:
+            solid.shape = SolidShape::kBox;
+            solid.a = 0.5 * p.dims.x(), solid.b = 0.5 * p.dims.y(), solid.c = 0.5 * p.dims.z();
+            cur_->minFeature = p.dims.minCoeff();
+            break;
+          case PrimitiveKind::kSphere:
+            solid.shape = SolidShape::kSphere, solid.a = p.dims.x();
+            cur_->minFeature = 2 * p.dims.x();
+            break;
+          case PrimitiveKind::kEllipsoid:
+            solid.shape = SolidShape::kEllipsoid;
+            solid.a = p.dims.x(), solid.b = p.dims.y(), solid.c = p.dims.z();
+            cur_->minFeature = 2 * p.dims.minCoeff();
+            break;
+          case PrimitiveKind::kCylinder:
+            solid.shape = SolidShape::kCylinder, solid.a = p.dims.x(), solid.b = 0.5 * p.dims.y();
+            cur_->minFeature = std::min(2 * p.dims.x(), p.dims.y());
+            break;
+          case PrimitiveKind::kCapsule:
+            solid.shape = SolidShape::kCapsule, solid.a = p.dims.x(), solid.b = 0.5 * p.dims.y();
+            cur_->minFeature = 2 * p.dims.x();
+            break;
+          case PrimitiveKind::kTorus:
+            solid.shape = SolidShape::kTorus, solid.a = p.dims.x(), solid.b = p.dims.y();
+            cur_->minFeature = 2 * p.dims.y();
+            break;
+        }
+        rasterize(solid, sk_.mapping, cells);
+        applyCells(cells, op.mirror, mat);
+        cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
+        return;
+      }
+      case Operation::Kind::kStamp: {
+        const std::int16_t mat = resolveMaterial(op);
+        cur_->material = mat;
+        if (!stamps_)
+          throw InputError(file_.path, op.line, "path", "mesh stamps are not available in this tool");
+        try {
+          stamps_(op.stamp, sk_.mapping, cells);
+        } catch (const InputError& e) {
+          // The mesh file's own error, reported against the stamp record that named it.
+          throw InputError(file_.path, op.line, "path", e.what());
+        }
+        cur_->minFeature = 1e300;
+        applyCells(cells, op.mirror, mat);
+        cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
+        return;
+      }
+    }
+  }
+
+  // Move (before play): grab the particles under the brush at the first sample
+  // and carry them by the brush's travel, rounded to whole cells so the voxel
+  // set is translated exactly. Particles they land on are replaced.
+  void move(const Operation& op) {
+    const Stroke& s = op.stroke;
+    const Sample& first = s.samples.front();
+    const Sample& last = s.samples.back();
+    const Vec3 travel = last.position - first.position;
+    const Vec3 dg = travel / h_;
+    const Vec3i shift(static_cast<int>(std::lround(dg.x())), static_cast<int>(std::lround(dg.y())),
+                      static_cast<int>(std::lround(dg.z())));
+    Vec3 firstDir = s.axis;
+    if (s.samples.size() > 1 && travel.norm() > 0) firstDir = travel.normalized();
+    std::vector<Vec3i> under;
+    rasterize(brushSolid(s, first.position, first.pressure, firstDir, h_), sk_.mapping, under);
+    struct Grab {
+      std::int32_t particle;
+      Vec3i to;
+    };
+    std::vector<Grab> grabbed;
+    std::unordered_set<std::int32_t> seen;
+    for (int pass = 0; pass < (op.mirror.axis >= 0 ? 2 : 1); ++pass) {
+      Vec3i sh = shift;
+      if (pass == 1) sh[op.mirror.axis] = -sh[op.mirror.axis];  // the mirrored brush moves mirrored
+      for (const Vec3i& c0 : under) {
+        const Vec3i c = pass == 0 ? c0 : mirrorCell(c0, op.mirror, sk_.mapping);
+        if (!GridMapping::inGrid(c)) continue;
+        const std::int32_t p = sk_.grid.at(c);
+        if (p < 0 || !seen.insert(p).second) continue;
+        const Vec3i to = c + sh;
+        if (!GridMapping::inGrid(to))
+          throw InputError(file_.path, last.line, "", "move carries particle " + std::to_string(p) +
+                                                          " outside the workspace");
+        grabbed.push_back({p, to});
+      }
+    }
+    cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
+    for (const Grab& g : grabbed) sk_.grid.at(sk_.cells[static_cast<std::size_t>(g.particle)]) = -1;
+    for (const Grab& g : grabbed) {
+      drop(g.to);  // a particle in the way is replaced (counted as removed by this move)
+      sk_.grid.at(g.to) = g.particle;
+      sk_.cells[static_cast<std::size_t>(g.particle)] = g.to;
+      const Vec3 q = sk_.mapping.toWorld(g.to);
+      sk_.particles.x[static_cast<std::size_t>(g.particle)] = static_cast<float>(q.x());
+      sk_.particles.y[static_cast<std::size_t>(g.particle)] = static_cast<float>(q.y());
+      sk_.particles.z[static_cast<std::size_t>(g.particle)] = static_cast<float>(q.z());
+      ++cur_->moved;
+    }
+  }
+
+  // Compacts away removed particles and groups the rest by body (stable), so
+  // every body is a contiguous range; rebuilds M with the final indices.
+  void finalize() {
+    // Body of each operation: named bodies share one index, unnamed creates get their own.
+    std::vector<int> bodyOfOp(file_.operations.size(), -1);
+    std::map<std::string, int> named;
+    std::vector<std::string> names;
+    for (const Operation& op : file_.operations) {
+      const bool creates = op.kind != Operation::Kind::kStroke || op.stroke.op == StrokeOp::kCreate;
+      if (!creates) continue;
+      if (op.body.empty()) {
+        bodyOfOp[static_cast<std::size_t>(op.id)] = static_cast<int>(names.size());
+        names.push_back("stroke " + std::to_string(op.id));
+      } else {
+        auto [it, fresh] = named.emplace(op.body, static_cast<int>(names.size()));
+        if (fresh) names.push_back(op.body);
+        bodyOfOp[static_cast<std::size_t>(op.id)] = it->second;
+      }
+    }
+    const std::size_t n = sk_.particles.size();
+    std::vector<std::int64_t> count(names.size() + 1, 0);
+    std::vector<int> bodyOf(n, -1);
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!alive_[i]) continue;
+      bodyOf[i] = bodyOfOp[static_cast<std::size_t>(sk_.particles.stroke[i])];
+      ++count[static_cast<std::size_t>(bodyOf[i]) + 1];
+    }
+    // Counting sort by body: stable, so particles keep creation order within a body.
+    std::vector<int> newBody(names.size(), -1);
+    std::vector<std::int64_t> start(names.size(), 0);
+    std::int64_t total = 0;
+    for (std::size_t b = 0; b < names.size(); ++b) {
+      start[b] = total;
+      total += count[b + 1];
+    }
+    ParticleArrays out;
+    out.resize(static_cast<std::size_t>(total));
+    std::vector<Vec3i> cells(static_cast<std::size_t>(total));
+    std::vector<std::int64_t> next = start;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (bodyOf[i] < 0) continue;
+      const auto j = static_cast<std::size_t>(next[static_cast<std::size_t>(bodyOf[i])]++);
+      out.x[j] = sk_.particles.x[i];
+      out.y[j] = sk_.particles.y[i];
+      out.z[j] = sk_.particles.z[i];
+      out.invMass[j] = 0.0f;  // static while sketched (Phys-Sketch §4)
+      out.stroke[j] = sk_.particles.stroke[i];
+      out.material[j] = sk_.particles.material[i];
+      cells[j] = sk_.cells[i];
+    }
+    for (std::size_t b = 0; b < names.size(); ++b) {
+      const std::int64_t c = count[b + 1];
+      if (c == 0) continue;
+      newBody[b] = static_cast<int>(sk_.bodies.size());
+      BodyRange r;
+      r.first = static_cast<std::int32_t>(start[b]);
+      r.count = static_cast<std::int32_t>(c);
+      r.material = out.material[static_cast<std::size_t>(start[b])];
+      r.stroke = out.stroke[static_cast<std::size_t>(start[b])];
+      sk_.bodies.push_back(r);
+      sk_.bodyNames.push_back(names[b]);
+    }
+    for (std::size_t j = 0; j < static_cast<std::size_t>(total); ++j) {
+      auto& sum = sk_.operations[static_cast<std::size_t>(out.stroke[j])];
+      ++sum.remaining;
+    }
+    for (auto& sum : sk_.operations) {
+      const int b = bodyOfOp[static_cast<std::size_t>(sum.id)];
+      sum.body = b >= 0 ? newBody[static_cast<std::size_t>(b)] : -1;
+    }
+    // Rebuild M with the final indices.
+    for (std::size_t i = 0; i < n; ++i)
+      if (alive_[i]) sk_.grid.at(sk_.cells[i]) = -1;
+    for (std::size_t j = 0; j < cells.size(); ++j) sk_.grid.at(cells[j]) = static_cast<std::int32_t>(j);
+    sk_.particles = std::move(out);
+    sk_.cells = std::move(cells);
+    lint(named);
+  }
+
+  void lint(const std::map<std::string, int>& named) {
+    auto warn = [&](int line, const std::string& text) {
+      sk_.warnings.push_back(file_.path + ":" + std::to_string(line) + ": " + text);
+    };
+    for (const auto& s : sk_.operations) {
+      if (!s.active) continue;
+      if (s.minFeature > 0 && s.minFeature < 2 * h_)
+        warn(s.line, s.what + ": feature of " + std::to_string(s.minFeature) +
+                         " m is thinner than two particle spacings (" + std::to_string(2 * h_) + " m)");
+      if (s.created > 0 && s.remaining == 0) warn(s.line, s.what + ": every particle it created is removed later");
+      if (s.material >= 0 && s.created == 0 && s.moved == 0)
+        warn(s.line, s.what + ": creates no particle (all its voxels were already taken)");
+    }
+    std::vector<bool> used(materials_.size(), false);
+    for (auto m : sk_.particles.material) used[static_cast<std::size_t>(m)] = true;
+    for (std::size_t m = 0; m < materials_.size(); ++m)
+      if (!used[m]) sk_.warnings.push_back("material '" + materials_[m].name + "' is never used");
+    // A named body whose strokes do not touch is one rigid body held together by nothing.
+    for (const auto& [name, unused] : named) {
+      (void)unused;
+      for (std::size_t b = 0; b < sk_.bodies.size(); ++b) {
+        if (sk_.bodyNames[b] != name) continue;
+        const int parts = components(sk_.bodies[b]);
+        if (parts > 1)
+          sk_.warnings.push_back("body '" + name + "' is made of " + std::to_string(parts) +
+                                 " pieces that do not touch; it still moves as one rigid body");
+      }
+    }
+  }
+
+  // 26-connected components of a body's cells.
+  int components(const BodyRange& b) const {
+    std::vector<char> seen(static_cast<std::size_t>(b.count), 0);
+    int parts = 0;
+    for (std::int32_t s = 0; s < b.count; ++s) {
+      if (seen[static_cast<std::size_t>(s)]) continue;
+      ++parts;
+      std::queue<std::int32_t> q;
+      q.push(s);
+      seen[static_cast<std::size_t>(s)] = 1;
+      while (!q.empty()) {
+        const Vec3i c = sk_.cells[static_cast<std::size_t>(b.first + q.front())];
+        q.pop();
+        for (int dz = -1; dz <= 1; ++dz)
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+              const Vec3i nb = c + Vec3i(dx, dy, dz);
+              if (!GridMapping::inGrid(nb)) continue;
+              const std::int32_t p = sk_.grid.at(nb) - b.first;
+              if (p < 0 || p >= b.count || seen[static_cast<std::size_t>(p)]) continue;
+              seen[static_cast<std::size_t>(p)] = 1;
+              q.push(p);
+            }
+      }
+    }
+    return parts;
+  }
+
+  const StrokeFile& file_;
+  const std::vector<Material>& materials_;
+  const StampVoxelizer& stamps_;
+  Sketch sk_;
+  double h_;
+  std::vector<std::uint8_t> alive_;
+  std::int64_t live_ = 0;
+  OperationSummary* cur_ = nullptr;
+};
 
 }  // namespace
 
@@ -28,97 +459,70 @@ void interpolateSegment(const Vec3& prev, const Vec3& cur, double particleDiamet
   for (long i = 0; i <= iMax; ++i) out.push_back(cur - double(i) * particleDiameter * dir);  // Eq. 7
 }
 
-std::int32_t stampBrush(Sketch& sk, BrushShape shape, double size, const Vec3& position, std::int32_t strokeId,
-                        std::int16_t materialId) {
-  const GridMapping& m = sk.mapping;
+void rasterize(const Solid& solid, const GridMapping& m, std::vector<Vec3i>& out) {
+  out.clear();
   const double h = m.voxelSize();
-  const double half = 0.5 * size;                 // m
-  const Vec3 g = m.toGrid(position);              // continuous grid coords of the brush centre
-  const double halfCells = half / h;
-  const Vec3i lo(static_cast<int>(std::ceil(g.x() - halfCells)), static_cast<int>(std::ceil(g.y() - halfCells)),
-                 static_cast<int>(std::ceil(g.z() - halfCells)));
-  const Vec3i hi(static_cast<int>(std::floor(g.x() + halfCells)), static_cast<int>(std::floor(g.y() + halfCells)),
-                 static_cast<int>(std::floor(g.z() + halfCells)));
-  std::int32_t created = 0;
-  auto take = [&](const Vec3i& c) {
-    if (!GridMapping::inGrid(c)) return;  // Alg. 1: only cells of M
-    std::int32_t& cell = sk.grid.at(c);
-    if (cell >= 0) return;                // one particle per voxel, never two at one place
-    if (static_cast<std::int64_t>(sk.particles.size()) >= kMaxParticles) throw CapReached{};
-    const Vec3 q = m.toWorld(c);          // Eq. 5
-    cell = sk.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
-                             strokeId, materialId);
-    sk.cells.push_back(c);
-    ++created;
-  };
-  bool any = false;
-  const double r2 = halfCells * halfCells;
+  const Vec3 g = m.toGrid(solid.centre);
+  const double r = solid.boundingRadius() / h;
+  const Vec3i lo(std::max(0, static_cast<int>(std::ceil(g.x() - r))), std::max(0, static_cast<int>(std::ceil(g.y() - r))),
+                 std::max(0, static_cast<int>(std::ceil(g.z() - r))));
+  const Vec3i hi(std::min(kGridSize - 1, static_cast<int>(std::floor(g.x() + r))),
+                 std::min(kGridSize - 1, static_cast<int>(std::floor(g.y() + r))),
+                 std::min(kGridSize - 1, static_cast<int>(std::floor(g.z() + r))));
+  const Mat3 Rt = solid.rotation.transpose();
   for (int k = lo.z(); k <= hi.z(); ++k)
     for (int j = lo.y(); j <= hi.y(); ++j)
       for (int i = lo.x(); i <= hi.x(); ++i) {
-        const Vec3 d(i - g.x(), j - g.y(), k - g.z());  // cell centre relative to the brush, in cells
-        const bool inside = shape == BrushShape::kSphere ? d.squaredNorm() <= r2
-                                                         : d.cwiseAbs().maxCoeff() <= halfCells;
-        if (!inside) continue;
-        any = true;
-        take(Vec3i(i, j, k));
+        const Vec3 local = Rt * (Vec3(i - g.x(), j - g.y(), k - g.z()) * h);
+        if (solid.containsLocal(local)) out.emplace_back(i, j, k);
       }
-  // A brush smaller than a cell covers no cell centre: it still marks the cell it is in.
-  if (!any) take(m.discretize(position));
-  return created;
+  if (out.empty()) {
+    // A solid smaller than a cell covers no cell centre: it still marks the cell it is in.
+    const Vec3i c = m.discretize(solid.centre);
+    if (GridMapping::inGrid(c)) out.push_back(c);
+  }
 }
 
-Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials) {
-  Sketch sk(mapping);
-  std::vector<Vec3> points;
-  const double d = mapping.voxelSize();  // d_particle: one particle per voxel
-  for (const Stroke& s : file.strokes) {
-    const int mat = findMaterial(materials, s.material);
-    if (mat < 0) {
-      std::string known;
-      for (const auto& mm : materials) known += (known.empty() ? "" : ", ") + mm.name;
-      throw InputError(file.path, s.line, "material",
-                       "unknown material '" + s.material + "' (the scene defines: " +
-                           (known.empty() ? std::string("none") : known) + ")");
-    }
-    for (const Sample& smp : s.samples) {
-      if (!mapping.contains(smp.position)) {
-        const Vec3 g = mapping.toGrid(smp.position);
-        int axis = 0;
-        for (int a = 0; a < 3; ++a)
-          if (g[a] < -0.5 || g[a] >= kGridSize - 0.5) { axis = a; break; }
-        const char* names[] = {"x", "y", "z"};
-        const double lo = mapping.center()[axis] - 0.5 * mapping.size();
-        throw InputError(file.path, smp.line, names[axis],
-                         "sample outside the workspace (" + std::string(names[axis]) + " must be in [" +
-                             std::to_string(lo) + ", " + std::to_string(lo + mapping.size()) + "))");
-      }
-    }
-    StrokeSummary sum;
-    sum.id = s.id;
-    sum.line = s.line;
-    sum.material = static_cast<std::int16_t>(mat);
-    sum.first = static_cast<std::int32_t>(sk.particles.size());
-    try {
-      for (std::size_t k = 0; k < s.samples.size(); ++k) {
-        if (k == 0) {
-          points.assign(1, s.samples[0].position);
-        } else {
-          interpolateSegment(s.samples[k - 1].position, s.samples[k].position, d, points);
-        }
-        for (const Vec3& p : points) {
-          sum.count += stampBrush(sk, s.brush, s.size, p, s.id, static_cast<std::int16_t>(mat));
-          ++sum.stamps;
-        }
-      }
-    } catch (const CapReached&) {
-      throw InputError(file.path, s.line, "", "stroke " + std::to_string(s.id) + " crosses the particle cap of " +
-                                                  std::to_string(kMaxParticles) +
-                                                  " (20 % of the 151^3 grid); use a smaller brush or fewer strokes");
-    }
-    sk.strokes.push_back(sum);
+Solid brushSolid(const Stroke& s, const Vec3& position, double pressure, const Vec3& direction, double voxelSize) {
+  Solid b;
+  b.centre = position;
+  const double size = s.size * pressure;
+  const Vec3 axis = s.orient == Orientation::kFollow ? direction : s.axis;
+  b.rotation = frameFromAxis(axis);
+  switch (s.brush) {
+    case BrushShape::kSphere:
+      b.shape = SolidShape::kSphere, b.a = 0.5 * size;
+      break;
+    case BrushShape::kCube:
+      b.shape = SolidShape::kCube, b.a = 0.5 * size;  // with the default axis (y) the frame is an axis permutation
+      break;
+    case BrushShape::kCylinder:
+      b.shape = SolidShape::kCylinder, b.a = 0.5 * size, b.b = 0.5 * (s.length > 0 ? s.length : size);
+      break;
+    case BrushShape::kDisc:
+      // A disc is a cylinder one cell thick unless given a thickness: the "extrusion plane" of §4.2.
+      b.shape = SolidShape::kCylinder, b.a = 0.5 * size, b.b = 0.5 * (s.length > 0 ? s.length : voxelSize);
+      break;
+    case BrushShape::kCapsule:
+      b.shape = SolidShape::kCapsule, b.a = 0.5 * size, b.b = 0.5 * (s.length > 0 ? s.length : size);
+      break;
   }
-  return sk;
+  return b;
+}
+
+Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& m) {
+  if (mirror.axis < 0) return cell;
+  Vec3 p = m.center();
+  p[mirror.axis] = mirror.offset;
+  const long twice = std::lround(2.0 * m.toGrid(p)[mirror.axis]);  // plane at a cell centre or face
+  Vec3i out = cell;
+  out[mirror.axis] = static_cast<int>(twice - cell[mirror.axis]);
+  return out;
+}
+
+Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
+                const StampVoxelizer& stamps) {
+  return Builder(file, mapping, materials, stamps).run();
 }
 
 }  // namespace physketch::sketch

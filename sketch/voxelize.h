@@ -1,32 +1,45 @@
-// The sketching stage: strokes -> occupancy grid M and static particles
-// (Phys-Sketch Alg. 1 with the interpolation of Eq. 6-7).
+// The sketching stage: operations -> occupancy grid M and static particles
+// (Phys-Sketch Alg. 1 and 2 with the interpolation of Eq. 6-7).
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <string>
 #include <vector>
 
 #include "core/material.h"
 #include "core/particles.h"
 #include "sketch/grid.h"
+#include "sketch/solids.h"
 #include "sketch/strokes.h"
 
 namespace physketch::sketch {
 
-struct StrokeSummary {
+// What one operation did, for reports and lint.
+struct OperationSummary {
   int id = 0;
   int line = 0;
-  std::int16_t material = 0;  // index into the scene's materials
-  std::int32_t first = 0;     // first particle created by the stroke
-  std::int32_t count = 0;     // particles created (voxels already taken are not counted)
-  std::int64_t stamps = 0;    // brush positions stamped (samples + interpolated points)
+  std::string what;            // "stroke create sphere", "primitive box", "stamp cube.obj"
+  std::int16_t material = -1;  // index into the scene's materials; -1 for remove/move
+  bool active = true;          // false when undone
+  std::int32_t created = 0;    // particles created
+  std::int32_t removed = 0;    // particles it removed (remove strokes; cells a move landed on)
+  std::int32_t moved = 0;      // particles it carried (move strokes)
+  std::int32_t remaining = 0;  // of the particles it created, how many are in the final sketch
+  std::int64_t stamps = 0;     // brush positions stamped (samples + interpolated points, mirror copies included)
+  double minFeature = 0.0;     // m: smallest brush/primitive dimension, for the thin-feature warning
+  int body = -1;               // body of its particles in the final sketch (-1 if none)
 };
 
 struct Sketch {
   GridMapping mapping;
-  OccupancyGrid grid;               // M
-  ParticleArrays particles;         // one per occupied voxel, at the voxel centre (Eq. 5), at rest
-  std::vector<Vec3i> cells;         // grid cell of each particle
-  std::vector<StrokeSummary> strokes;
+  OccupancyGrid grid;                 // M (final, particle indices after compaction)
+  ParticleArrays particles;           // final particles at voxel centres (Eq. 5), at rest, grouped by body
+  std::vector<Vec3i> cells;           // grid cell of each particle
+  std::vector<OperationSummary> operations;  // one per operation in the file (undone ones too)
+  std::vector<BodyRange> bodies;      // contiguous particle ranges; material = the first particle's
+  std::vector<std::string> bodyNames; // "chair" for body=chair, else "stroke N"
+  std::vector<std::string> warnings;  // lint warnings (file:line: text)
 
   explicit Sketch(const GridMapping& m) : mapping(m) {}
 };
@@ -36,16 +49,28 @@ struct Sketch {
 // |V| dt is the distance travelled. `out` is cleared first; a zero-length segment gives {cur}.
 void interpolateSegment(const Vec3& prev, const Vec3& cur, double particleDiameter, std::vector<Vec3>& out);
 
-// Stamps one brush position into the sketch (Alg. 1): every empty cell whose
-// centre lies inside the brush gets a new particle; a brush smaller than a cell
-// stamps the cell containing the position. Cells outside the grid are skipped
-// (Alg. 1: "if p in M"). Returns the number of particles created.
-std::int32_t stampBrush(Sketch& sketch, BrushShape shape, double size, const Vec3& position, std::int32_t strokeId,
-                        std::int16_t materialId);
+// The cells whose centres lie inside `solid`, in z, y, x order; when none does
+// (a solid smaller than a cell), the cell containing its centre. Cells outside
+// the grid are skipped (Alg. 1: "if p in M").
+void rasterize(const Solid& solid, const GridMapping& mapping, std::vector<Vec3i>& out);
 
-// Voxelizes every stroke in file order. Throws InputError (stroke file:line:field)
-// for an unknown material, a sample outside the workspace, or a sketch that
-// crosses the particle cap (naming the stroke that crossed it).
-Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials);
+// The brush of a stroke at one stamp: size scaled by pressure, axis fixed or along `direction`.
+Solid brushSolid(const Stroke& stroke, const Vec3& position, double pressure, const Vec3& direction, double voxelSize);
+
+// Reflects a cell across a mirror plane snapped to the nearest cell centre or
+// face (so the mirrored set is exact): i' = 2m - i on the mirror axis.
+Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& mapping);
+
+// Voxelizes a mesh stamp into cells (sketch/mesh_stamp.cpp, CGAL). Injected so
+// sketch tests and tools can run without it; nullptr means stamps are an error.
+using StampVoxelizer = std::function<void(const MeshStamp&, const GridMapping&, std::vector<Vec3i>&)>;
+
+// Replays the active operations that start before the play time, in file order.
+// Throws InputError (stroke file:line:field) for an unknown material, a sample
+// outside the workspace, a move that carries particles out of the workspace,
+// an unreadable stamp mesh, or a sketch that crosses the particle cap (naming
+// the operation that crossed it).
+Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
+                const StampVoxelizer& stamps = nullptr);
 
 }  // namespace physketch::sketch

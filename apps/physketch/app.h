@@ -21,5 +21,7 @@ struct RunOptions {
 
 int runScene(const RunOptions& options);
 int printPlan(const std::string& scene);
+// Parse and voxelize only: particles per operation, material and body, memory estimate, warnings.
+int lintScene(const std::string& scene);
 
 }  // namespace physketch::app

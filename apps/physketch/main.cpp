@@ -15,7 +15,8 @@ int main(int argc, char** argv) {
       "Examples:\n"
       "  physketch run scenes/hello.scene --out out/hello      # frames in out/hello/frames, report.json\n"
       "  physketch run scenes/hello.scene --frames 10 --threads 1\n"
-      "  physketch plan scenes/hello.scene                     # the passes a step runs\n\n"
+      "  physketch plan scenes/hello.scene                     # the passes a step runs\n"
+      "  physketch lint scenes/hello.scene                     # check a sketch without simulating it\n\n"
       "Exit codes: 0 success, 1 bad input (the message names file:line:field), 2 runtime failure."};
   cli.set_version_flag("--version", std::string("physketch ") + PHYSKETCH_VERSION);
   cli.require_subcommand(1);
@@ -34,6 +35,10 @@ int main(int argc, char** argv) {
   auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, and how often");
   planCmd->add_option("scene", planScene, "Scene file")->required();
 
+  std::string lintPath;
+  auto* lintCmd = cli.add_subcommand("lint", "Parse and voxelize only: particles per stroke and material, memory estimate, warnings; exit 1 on any error");
+  lintCmd->add_option("scene", lintPath, "Scene file")->required();
+
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -42,5 +47,6 @@ int main(int argc, char** argv) {
   }
   if (*runCmd) return runScene(run);
   if (*planCmd) return printPlan(planScene);
+  if (*lintCmd) return lintScene(lintPath);
   return kExitBadInput;
 }

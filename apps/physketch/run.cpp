@@ -48,11 +48,7 @@ Prepared prepare(const std::string& scenePath) {
   }
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
   p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials));
-  // v1: each stroke that created particles is one rigid body.
-  for (const auto& s : p.sketch->strokes) {
-    if (s.count == 0) continue;
-    p.bodies.push_back(BodyRange{s.first, s.count, s.material, s.id});
-  }
+  p.bodies = p.sketch->bodies;
   return p;
 }
 
@@ -88,6 +84,44 @@ std::string frameName(int i) {
   return buf;
 }
 
+// Provenance of the sketch: particles per operation, per material and per body, and lint warnings.
+json sketchJson(const Prepared& p) {
+  const SceneDesc& sc = p.scene;
+  const sketch::Sketch& sk = *p.sketch;
+  json ops = json::array();
+  for (const auto& o : sk.operations) {
+    json j = {{"id", o.id},           {"line", o.line},       {"what", o.what},   {"active", o.active},
+              {"created", o.created}, {"removed", o.removed}, {"moved", o.moved}, {"particles", o.remaining},
+              {"stamps", o.stamps}};
+    j["material"] = o.material >= 0 ? json(sc.materials[static_cast<std::size_t>(o.material)].name) : json(nullptr);
+    j["body"] = o.body >= 0 ? json(sk.bodyNames[static_cast<std::size_t>(o.body)]) : json(nullptr);
+    ops.push_back(j);
+  }
+  std::map<std::string, std::int64_t> perMaterial;
+  for (const auto& m : sc.materials) perMaterial[m.name] = 0;
+  for (auto m : sk.particles.material) ++perMaterial[sc.materials[static_cast<std::size_t>(m)].name];
+  json bodies = json::array();
+  for (std::size_t b = 0; b < sk.bodies.size(); ++b)
+    bodies.push_back({{"name", sk.bodyNames[b]}, {"particles", sk.bodies[b].count}, {"first", sk.bodies[b].first}});
+  return {{"particles", sk.particles.size()},
+          {"cap", sketch::kMaxParticles},
+          {"play_time_s", p.strokes.playTime()},
+          {"per_operation", ops},
+          {"per_material", perMaterial},
+          {"bodies", bodies},
+          {"warnings", sk.warnings}};
+}
+
+// Bytes the run will hold per particle in the PBD solver and the sketch (SoA float arrays,
+// cells, provenance), plus the 151^3 grid: the estimate `lint` prints.
+double memoryEstimateMiB(std::size_t particles) {
+  const double perParticle = 4.0 * (3 + 3 + 1 + 1)      // ParticleArrays hot: x, v, invMass, body
+                             + 4.0 + 2.0                 // stroke, material
+                             + 4.0 * (3 + 1 + 3)         // solver: predicted, mass, rest offsets
+                             + 12.0;                     // grid cell per particle
+  return (perParticle * double(particles) + 4.0 * double(sketch::kGridCells)) / (1024.0 * 1024.0);
+}
+
 json planJson(const pbd::PbdWorld& world) {
   json a = json::array();
   for (const auto& p : world.plan()) a.push_back({{"pass", p.name}, {"runs", p.runs}, {"per_step", p.perStep}});
@@ -95,6 +129,42 @@ json planJson(const pbd::PbdWorld& world) {
 }
 
 }  // namespace
+
+int lintScene(const std::string& scenePath) {
+  try {
+    const Prepared p = prepare(scenePath);
+    const SceneDesc& sc = p.scene;
+    const sketch::Sketch& sk = *p.sketch;
+    std::printf("scene   %s\nstrokes %s\n", sc.path.c_str(), sc.strokesPath.c_str());
+    std::printf("grid    151^3 cells of %.6g m over a %.6g m workspace\n", sk.mapping.voxelSize(), sc.workspaceSize);
+    std::printf("particles %zu of the %d cap (%.1f %%), %zu bodies, play at t = %.6g s\n", sk.particles.size(),
+                sketch::kMaxParticles, 100.0 * double(sk.particles.size()) / sketch::kMaxParticles, sk.bodies.size(),
+                p.strokes.playTime());
+    std::printf("memory estimate %.1f MiB (solver arrays + sketch grid)\n", memoryEstimateMiB(sk.particles.size()));
+    std::printf("operations:\n");
+    for (const auto& o : sk.operations) {
+      const std::string mat = o.material >= 0 ? sc.materials[static_cast<std::size_t>(o.material)].name : "-";
+      const std::string body = o.body >= 0 ? sk.bodyNames[static_cast<std::size_t>(o.body)] : "-";
+      std::printf("  line %-5d %-26s %-10s %s created %-7d removed %-7d moved %-7d remaining %-7d body %s\n", o.line,
+                  o.what.c_str(), mat.c_str(), o.active ? "" : "(undone)", o.created, o.removed, o.moved, o.remaining,
+                  body.c_str());
+    }
+    std::printf("materials:\n");
+    std::map<std::string, std::int64_t> perMaterial;
+    for (auto m : sk.particles.material) ++perMaterial[sc.materials[static_cast<std::size_t>(m)].name];
+    for (const auto& m : sc.materials)
+      std::printf("  %-12s %lld particles\n", m.name.c_str(), static_cast<long long>(perMaterial[m.name]));
+    for (const auto& w : sk.warnings) std::printf("warning: %s\n", w.c_str());
+    std::printf("%zu warning(s), no errors\n", sk.warnings.size());
+    return kExitOk;
+  } catch (const InputError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitRuntime;
+  }
+}
 
 int printPlan(const std::string& scenePath) {
   try {
@@ -146,7 +216,12 @@ int runScene(const RunOptions& opt) {
     const int passDraw = renderProfile.add("draw");
     const int passPng = renderProfile.add("png");
     std::unique_ptr<render::OffscreenRenderer> renderer;
-    std::vector<int> meshHandles;
+    struct MeshPart {
+      int body;
+      std::int16_t material;
+      int handle;
+    };
+    std::vector<MeshPart> meshParts;
     std::size_t triangles = 0;
     if (sc.writeFrames) {
       renderer = std::make_unique<render::OffscreenRenderer>(sc.width, sc.height);
@@ -155,11 +230,17 @@ int runScene(const RunOptions& opt) {
       // (particles are voxel centres, so the voxel set is exact) and move the mesh
       // with the body's pose every frame.
       const Vec3 origin = sk.mapping.toWorld(Vec3i(0, 0, 0));
-      for (const auto& b : p.bodies) {
-        std::vector<Vec3i> cells(sk.cells.begin() + b.first, sk.cells.begin() + b.first + b.count);
-        render::TriangleMesh mesh = render::meshVoxels(cells, sk.mapping.voxelSize(), origin);
-        triangles += mesh.triangleCount();
-        meshHandles.push_back(renderer->uploadMesh(mesh));
+      for (std::size_t b = 0; b < p.bodies.size(); ++b) {
+        // One mesh per material of the body (mixed-material bodies), all moving with the body.
+        const BodyRange& br = p.bodies[b];
+        std::map<std::int16_t, std::vector<Vec3i>> parts;
+        for (std::int32_t i = br.first; i < br.first + br.count; ++i)
+          parts[sk.particles.material[static_cast<std::size_t>(i)]].push_back(sk.cells[static_cast<std::size_t>(i)]);
+        for (const auto& [material, cells] : parts) {
+          render::TriangleMesh mesh = render::meshVoxels(cells, sk.mapping.voxelSize(), origin);
+          triangles += mesh.triangleCount();
+          meshParts.push_back({static_cast<int>(b), material, renderer->uploadMesh(mesh)});
+        }
       }
     }
 
@@ -183,10 +264,9 @@ int runScene(const RunOptions& opt) {
         renderer->beginFrame(sc.camera, {0.92f, 0.94f, 0.97f});
         renderer->drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), groundHalf,
                              {0.55f, 0.57f, 0.55f});
-        for (std::size_t b = 0; b < p.bodies.size(); ++b) {
-          const auto& m = sc.materials[static_cast<std::size_t>(p.bodies[b].material)];
-          renderer->drawMesh(meshHandles[b], world.pose(static_cast<int>(b)).model(), m.color);
-        }
+        for (const MeshPart& part : meshParts)
+          renderer->drawMesh(part.handle, world.pose(part.body).model(),
+                             sc.materials[static_cast<std::size_t>(part.material)].color);
       }
       render::Image img;
       {
@@ -230,17 +310,7 @@ int runScene(const RunOptions& opt) {
                    {"voxel_size_m", sk.mapping.voxelSize()},
                    {"workspace_center", {sc.workspaceCenter.x(), sc.workspaceCenter.y(), sc.workspaceCenter.z()}},
                    {"workspace_size_m", sc.workspaceSize}};
-    json perStroke = json::array();
-    std::map<std::string, std::int64_t> perMaterial;
-    for (const auto& m : sc.materials) perMaterial[m.name] = 0;
-    for (const auto& s : sk.strokes) {
-      const std::string& mat = sc.materials[static_cast<std::size_t>(s.material)].name;
-      perStroke.push_back({{"stroke", s.id}, {"line", s.line}, {"material", mat}, {"particles", s.count},
-                           {"stamps", s.stamps}});
-      perMaterial[mat] += s.count;
-    }
-    rep["particles"] = {{"total", sk.particles.size()}, {"per_stroke", perStroke}, {"per_material", perMaterial}};
-    rep["bodies"] = p.bodies.size();
+    rep["sketch"] = sketchJson(p);
     rep["solver"] = {{"name", "pbd"},          {"dt", sc.dt},     {"substeps", sc.substeps},
                      {"iterations", sc.iterations}, {"steps", world.stepCount()}, {"simulated_s", world.time()},
                      {"plan", planJson(world)}};

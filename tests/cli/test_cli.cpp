@@ -66,7 +66,7 @@ TEST(Cli, HelloSceneWritesFramesAndReport) {
   EXPECT_FALSE(fs::exists(out / "frames" / "frame_0004.png"));
   const std::string rep = slurp(out / "report.json");
   EXPECT_NE(rep.find("\"status\": \"ok\""), std::string::npos) << rep;
-  EXPECT_NE(rep.find("\"per_stroke\""), std::string::npos);
+  EXPECT_NE(rep.find("\"per_operation\""), std::string::npos);
   EXPECT_NE(rep.find("\"shape_match\""), std::string::npos);
   EXPECT_NE(rep.find("\"written\": 4"), std::string::npos);
   // A shorter run into the same folder leaves no stale frames behind.

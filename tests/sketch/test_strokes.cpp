@@ -1,5 +1,8 @@
-// Stroke file parser: each error class gives its file:line:field message.
+// Stroke file parser: every record, and each error class with its file:line:field message.
 #include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
 
 #include "core/error.h"
 #include "sketch/strokes.h"
@@ -20,73 +23,174 @@ InputError strokeError(const std::string& text) {
   return InputError("", 0, "", "");
 }
 
+const std::string kHead = "physketch-strokes 1\n";
+
 }  // namespace
 
-TEST(StrokeFile, ParsesStrokesAndSamples) {
-  const StrokeFile f = parseStrokes(
-      "physketch-strokes 1\n"
-      "stroke create sphere 0.05 wood\n"
-      "sample 0 0 0.5 0\n"
-      "sample 0.1 0.1 0.5 0 # comment\n"
-      "stroke create cube 0.02 stone\n"
-      "sample 0.1 0 0.2 0\n",
-      "ok.strokes");
-  ASSERT_EQ(f.strokes.size(), 2u);
-  EXPECT_EQ(f.strokes[0].brush, BrushShape::kSphere);
-  EXPECT_DOUBLE_EQ(f.strokes[0].size, 0.05);
-  EXPECT_EQ(f.strokes[0].samples.size(), 2u);
-  EXPECT_EQ(f.strokes[0].samples[1].line, 4);
-  EXPECT_EQ(f.strokes[1].brush, BrushShape::kCube);
-  EXPECT_EQ(f.strokes[1].material, "stone");
-  EXPECT_EQ(f.strokes[1].id, 1);
+TEST(StrokeFile, ParsesEveryRecord) {
+  const StrokeFile f = parseStrokes(kHead +
+                                        "snap 0.01\n"                                              // 2
+                                        "mirror x 0.1\n"                                           // 3
+                                        "stroke create capsule 0.05 wood orient=follow length=0.1 body=chair\n"  // 4
+                                        "sample 0 0.004 0.5 0\n"                                   // 5
+                                        "sample 0.1 0.1 0.5 0 0.5 # half pressure\n"               // 6
+                                        "mirror off\n"                                             // 7
+                                        "stroke remove cube 0.02 axis=1,0,0\n"                     // 8
+                                        "sample 0.1 0 0.2 0\n"                                     // 9
+                                        "primitive torus stone 0.2  0 0.5 0  0.1 0.03 rot=1,0,0,90\n"  // 10
+                                        "stamp meshes/cube.obj stone 0.3 scale=0.1 at=0,0.5,0\n"   // 11
+                                        "undo 2\n"                                                 // 12
+                                        "redo\n"                                                   // 13
+                                        "play 1.5\n",                                              // 14
+                                    "dir/ok.strokes");
+  ASSERT_EQ(f.operations.size(), 4u);
+  const Operation& a = f.operations[0];
+  EXPECT_EQ(a.line, 4);
+  EXPECT_EQ(a.stroke.brush, BrushShape::kCapsule);
+  EXPECT_EQ(a.stroke.orient, Orientation::kFollow);
+  EXPECT_DOUBLE_EQ(a.stroke.length, 0.1);
+  EXPECT_EQ(a.body, "chair");
+  EXPECT_EQ(a.mirror.axis, 0);
+  EXPECT_DOUBLE_EQ(a.mirror.offset, 0.1);
+  EXPECT_DOUBLE_EQ(a.stroke.samples[0].position.x(), 0.0);  // snapped to 1 cm
+  EXPECT_DOUBLE_EQ(a.stroke.samples[1].pressure, 0.5);
+  const Operation& b = f.operations[1];
+  EXPECT_EQ(b.stroke.op, StrokeOp::kRemove);
+  EXPECT_TRUE(b.material.empty());
+  EXPECT_EQ(b.mirror.axis, -1);
+  EXPECT_TRUE(b.stroke.axis.isApprox(Vec3::UnitX()));
+  const Operation& c = f.operations[2];
+  EXPECT_EQ(c.kind, Operation::Kind::kPrimitive);
+  EXPECT_EQ(c.primitive.kind, PrimitiveKind::kTorus);
+  EXPECT_DOUBLE_EQ(c.primitive.dims.y(), 0.03);
+  EXPECT_TRUE((c.primitive.rotation * Vec3::UnitZ()).isApprox(-Vec3::UnitY(), 1e-12));
+  const Operation& d = f.operations[3];
+  EXPECT_EQ(d.kind, Operation::Kind::kStamp);
+  EXPECT_EQ(d.stamp.path, "dir/meshes/cube.obj");
+  EXPECT_DOUBLE_EQ(d.stamp.scale, 0.1);
+  // undo 2 removed the stamp and the torus; redo brought the torus back.
+  EXPECT_EQ(f.active, (std::vector<int>{0, 1, 2}));
+  ASSERT_TRUE(f.play.has_value());
+  EXPECT_DOUBLE_EQ(f.playTime(), 1.5);
 }
 
-TEST(StrokeFile, UnknownKeyword) {
-  auto e = strokeError("physketch-strokes 1\nstroke create sphere 0.05 wood\nsampel 0 0 0 0\n");
+TEST(StrokeFile, PlayDefaultsToTheEndOfTheLastActiveOperation) {
+  const StrokeFile f = parseStrokes(kHead + "stroke create sphere 0.1 w\nsample 0 0 0 0\nsample 2.5 0 0 0\n", "p");
+  EXPECT_DOUBLE_EQ(f.playTime(), 2.5);
+}
+
+TEST(StrokeFile, UnknownRecord) {
+  auto e = strokeError(kHead + "stroke create sphere 0.05 wood\nsampel 0 0 0 0\n");
   EXPECT_EQ(e.line(), 3);
   EXPECT_NE(std::string(e.what()).find("unknown record 'sampel'"), std::string::npos);
 }
 
 TEST(StrokeFile, MissingAndExtraField) {
-  auto e = strokeError("physketch-strokes 1\nstroke create sphere 0.05\n");
+  auto e = strokeError(kHead + "stroke create sphere 0.05\n");
   EXPECT_EQ(e.line(), 2);
   EXPECT_EQ(e.field(), "material");
-  e = strokeError("physketch-strokes 1\nstroke create sphere 0.05 wood\nsample 0 1 2\n");
+  e = strokeError(kHead + "stroke create sphere 0.05 wood\nsample 0 1 2\n");
   EXPECT_EQ(e.field(), "z");
-  e = strokeError("physketch-strokes 1\nstroke create sphere 0.05 wood\nsample 0 1 2 3 4\n");
+  e = strokeError(kHead + "stroke create sphere 0.05 wood\nsample 0 1 2 3 1 4\n");
   EXPECT_NE(std::string(e.what()).find("extra field '4'"), std::string::npos);
+  e = strokeError(kHead + "stroke remove sphere 0.05 wood\nsample 0 0 0 0\n");
+  EXPECT_EQ(e.field(), "material");  // remove takes no material
+  e = strokeError(kHead + "primitive box wood 0 0 0 0 1 1\n");
+  EXPECT_EQ(e.field(), "sz");
 }
 
-TEST(StrokeFile, NaNNegativeAndZeroSize) {
-  for (const char* size : {"nan", "-0.1", "0", "inf", "1e999", "abc"}) {
-    auto e = strokeError(std::string("physketch-strokes 1\nstroke create sphere ") + size + " wood\nsample 0 0 0 0\n");
+TEST(StrokeFile, NaNInfNegativeAndZeroSize) {
+  for (const char* size : {"nan", "-0.1", "0", "inf", "1e999", "abc", "2000"}) {
+    auto e = strokeError(kHead + "stroke create sphere " + size + " wood\nsample 0 0 0 0\n");
     EXPECT_EQ(e.line(), 2) << size;
     EXPECT_EQ(e.field(), "size") << size;
   }
-  auto e = strokeError("physketch-strokes 1\nstroke create sphere 0.1 wood\nsample 0 nan 0 0\n");
-  EXPECT_EQ(e.field(), "x");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0 nan 0 0\n").field(), "x");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0 0 0 0 1.5\n").field(), "pressure");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0 0 0 0 0\n").field(), "pressure");
+  EXPECT_EQ(strokeError(kHead + "primitive sphere w 0 0 0 0 -1\n").field(), "radius");
+  EXPECT_EQ(strokeError(kHead + "primitive torus w 0 0 0 0 0.1 0.2\n").field(), "minor_radius");
+  EXPECT_EQ(strokeError(kHead + "stamp m.obj w 0 scale=-2\n").field(), "scale");
+  EXPECT_EQ(strokeError(kHead + "snap 0\n").field(), "step");
 }
 
 TEST(StrokeFile, NonMonotonicTime) {
-  auto e = strokeError(
-      "physketch-strokes 1\nstroke create sphere 0.1 wood\nsample 0.5 0 0 0\nsample 0.5 0 0 0.1\n");
+  auto e = strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0.5 0 0 0\nsample 0.5 0 0 0.1\n");
   EXPECT_EQ(e.line(), 4);
   EXPECT_EQ(e.field(), "t");
-  e = strokeError(
-      "physketch-strokes 1\nstroke create sphere 0.1 wood\nsample 0.5 0 0 0\n"
-      "stroke create sphere 0.1 wood\nsample 0.4 0 0 0\n");
+  e = strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0.5 0 0 0\nstroke create sphere 0.1 wood\nsample 0.4 0 0 0\n");
   EXPECT_EQ(e.line(), 5);
-  e = strokeError("physketch-strokes 1\nstroke create sphere 0.1 wood\nsample -1 0 0 0\n");
+  e = strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0.5 0 0 0\nprimitive sphere w 0.2 0 0 0 1\n");
+  EXPECT_EQ(e.line(), 4);
   EXPECT_EQ(e.field(), "t");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood\nsample -1 0 0 0\n").field(), "t");
 }
 
-TEST(StrokeFile, UnknownOperationAndBrushAndEmptyStroke) {
-  EXPECT_EQ(strokeError("physketch-strokes 1\nstroke paint sphere 0.1 wood\nsample 0 0 0 0\n").field(), "op");
-  EXPECT_EQ(strokeError("physketch-strokes 1\nstroke create cone 0.1 wood\nsample 0 0 0 0\n").field(), "brush");
-  auto e = strokeError("physketch-strokes 1\nstroke create sphere 0.1 wood\nstroke create sphere 0.1 wood\n"
-                       "sample 0 0 0 0\n");
+TEST(StrokeFile, UnknownOperationBrushPrimitiveAndOption) {
+  EXPECT_EQ(strokeError(kHead + "stroke paint sphere 0.1 wood\nsample 0 0 0 0\n").field(), "op");
+  EXPECT_EQ(strokeError(kHead + "stroke create cone 0.1 wood\nsample 0 0 0 0\n").field(), "brush");
+  EXPECT_EQ(strokeError(kHead + "primitive pyramid w 0 0 0 0 1\n").field(), "kind");
+  auto e = strokeError(kHead + "stroke create sphere 0.1 wood colour=red\nsample 0 0 0 0\n");
+  EXPECT_EQ(e.field(), "colour");
+  EXPECT_NE(std::string(e.what()).find("unknown option"), std::string::npos);
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood orient=sideways\nsample 0 0 0 0\n").field(), "orient");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood axis=0,0\nsample 0 0 0 0\n").field(), "axis");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood axis=0,0,0\nsample 0 0 0 0\n").field(), "axis");
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 w body=a body=b\nsample 0 0 0 0\n").field(), "body");
+  EXPECT_EQ(strokeError(kHead + "primitive box w 0 0 0 0 1 1 1 rot=1,0,0\n").field(), "rot");
+  EXPECT_EQ(strokeError(kHead + "mirror w 0\n").field(), "axis");
+}
+
+TEST(StrokeFile, EmptyStrokeAndSampleOutsideStroke) {
+  auto e = strokeError(kHead + "stroke create sphere 0.1 wood\nstroke create sphere 0.1 wood\nsample 0 0 0 0\n");
   EXPECT_EQ(e.line(), 2);
   EXPECT_NE(std::string(e.what()).find("no samples"), std::string::npos);
-  e = strokeError("physketch-strokes 1\nsample 0 0 0 0\n");
-  EXPECT_NE(std::string(e.what()).find("before any"), std::string::npos);
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.1 wood\n").line(), 2);  // at end of file
+  e = strokeError(kHead + "sample 0 0 0 0\n");
+  EXPECT_NE(std::string(e.what()).find("outside a stroke"), std::string::npos);
+  e = strokeError(kHead + "primitive sphere w 0 0 0 0 1\nsample 0 0 0 0\n");
+  EXPECT_EQ(e.line(), 3);
+}
+
+TEST(StrokeFile, UndoPastTheBeginningAndRedoWithNothingUndone) {
+  auto e = strokeError(kHead + "primitive sphere w 0 0 0 0 1\nundo 2\n");
+  EXPECT_EQ(e.line(), 3);
+  EXPECT_EQ(e.field(), "count");
+  EXPECT_NE(std::string(e.what()).find("past the beginning"), std::string::npos);
+  e = strokeError(kHead + "primitive sphere w 0 0 0 0 1\nundo\nprimitive sphere w 0 0 0 0 1\nredo\n");
+  EXPECT_EQ(e.line(), 5);  // a new operation after undo clears the redo history
+  EXPECT_EQ(strokeError(kHead + "undo 0\n").field(), "count");
+  EXPECT_EQ(strokeError(kHead + "play 1\nplay 2\n").line(), 3);
+}
+
+TEST(StrokeFile, NotUtf8AndHugeFilesAreRejectedWithoutReadingThem) {
+  auto e = strokeError(kHead + "stroke create sphere 0.1 w\xff\xfe\n");
+  EXPECT_EQ(e.line(), 2);
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("physketch_strokes_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  // A 1 GB file (sparse: no disk used) is refused by size before any line is read.
+  const fs::path huge = dir / "huge.strokes";
+  { std::ofstream(huge) << kHead; }
+  fs::resize_file(huge, 1ull << 30);
+  try {
+    loadStrokes(huge.string());
+    ADD_FAILURE() << "1 GB file accepted";
+  } catch (const InputError& e2) {
+    EXPECT_NE(std::string(e2.what()).find("limit"), std::string::npos) << e2.what();
+  }
+  // A 20 MB single line is refused at its 4097th byte.
+  const fs::path longLine = dir / "long.strokes";
+  {
+    std::ofstream out(longLine);
+    out << kHead << "stroke " << std::string(20u << 20, 'x') << "\n";
+  }
+  try {
+    loadStrokes(longLine.string());
+    ADD_FAILURE() << "20 MB line accepted";
+  } catch (const InputError& e2) {
+    EXPECT_EQ(e2.line(), 2);
+    EXPECT_NE(std::string(e2.what()).find("longer than 4096"), std::string::npos);
+  }
+  fs::remove_all(dir);
 }

@@ -20,16 +20,24 @@ std::vector<Material> oneMaterial() {
   return {m};
 }
 
-Stroke makeStroke(BrushShape shape, double size, std::vector<Vec3> points) {
-  Stroke s;
-  s.brush = shape;
-  s.size = size;
-  s.material = "wood";
-  s.line = 2;
+// A stroke operation with one sample per point, 0.01 s apart, lines 3, 4, ...
+Operation makeStroke(BrushShape shape, double size, std::vector<Vec3> points) {
+  Operation op;
+  op.kind = Operation::Kind::kStroke;
+  op.stroke.brush = shape;
+  op.stroke.size = size;
+  op.material = "wood";
+  op.line = 2;
   double t = 0.0;
   int line = 3;
-  for (const auto& p : points) s.samples.push_back(Sample{t += 0.01, p, line++});
-  return s;
+  for (const auto& p : points) op.stroke.samples.push_back(Sample{t += 0.01, p, 1.0, line++});
+  return op;
+}
+
+void add(StrokeFile& f, Operation op) {
+  op.id = static_cast<int>(f.operations.size());
+  f.active.push_back(op.id);
+  f.operations.push_back(std::move(op));
 }
 
 // Number of 26-connected components of a set of cells.
@@ -115,7 +123,7 @@ TEST(Voxelize, FastTwoSampleStrokeIsAConnectedRunOfEq6Length) {
   StrokeFile f;
   f.path = "fast.strokes";
   const Vec3 a = m.toWorld(Vec3i(50, 75, 75)), b = m.toWorld(Vec3i(90, 75, 75));
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.4 * h, {a, b}));
+  add(f, makeStroke(BrushShape::kSphere, 0.4 * h, {a, b}));
   const Sketch sk = voxelize(f, m, oneMaterial());
   const long iMax = std::lround((b - a).norm() / h);
   EXPECT_EQ(iMax, 40);
@@ -139,7 +147,7 @@ TEST(Voxelize, FastDiagonalStrokeWithoutInterpolationWouldHaveHoles) {
   // Five samples, 0.2 m apart in 3D: far more than a brush of 3 voxels.
   std::vector<Vec3> pts;
   for (int i = 0; i < 5; ++i) pts.push_back(Vec3(-0.4 + 0.12 * i, 0.2 + 0.1 * i, -0.3 + 0.11 * i));
-  f.strokes.push_back(makeStroke(BrushShape::kCube, 3 * h, pts));
+  add(f, makeStroke(BrushShape::kCube, 3 * h, pts));
   const Sketch sk = voxelize(f, m, oneMaterial());
   EXPECT_EQ(components(sk.cells), 1);
   EXPECT_GT(sk.particles.size(), 9u * 5u);  // more than the five stamps alone
@@ -150,12 +158,11 @@ TEST(Voxelize, OneParticlePerVoxelAtTheVoxelCentre) {
   StrokeFile f;
   f.path = "overlap.strokes";
   // Three overlapping strokes over the same region.
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.1, {Vec3(0, 0.5, 0), Vec3(0.1, 0.5, 0)}));
-  f.strokes.push_back(makeStroke(BrushShape::kCube, 0.08, {Vec3(0.05, 0.5, 0), Vec3(0.05, 0.6, 0)}));
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.1, {Vec3(0, 0.5, 0)}));
-  for (int i = 0; i < 3; ++i) f.strokes[i].id = i;
+  add(f, makeStroke(BrushShape::kSphere, 0.1, {Vec3(0, 0.5, 0), Vec3(0.1, 0.5, 0)}));
+  add(f, makeStroke(BrushShape::kCube, 0.08, {Vec3(0.05, 0.5, 0), Vec3(0.05, 0.6, 0)}));
+  add(f, makeStroke(BrushShape::kSphere, 0.1, {Vec3(0, 0.5, 0)}));
   const Sketch sk = voxelize(f, m, oneMaterial());
-  EXPECT_EQ(sk.strokes[2].count, 0);  // fully inside the first stroke: nothing new
+  EXPECT_EQ(sk.operations[2].created, 0);  // fully inside the first stroke: nothing new
   std::set<std::int64_t> cells;
   for (std::size_t i = 0; i < sk.particles.size(); ++i) {
     ASSERT_TRUE(cells.insert(GridMapping::linear(sk.cells[i])).second) << "two particles in one voxel";
@@ -176,7 +183,7 @@ TEST(Voxelize, SphereBrushVolumeMatchesAnalytic) {
   StrokeFile f;
   f.path = "ball.strokes";
   const double diameter = 31 * h;
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, diameter, {m.toWorld(Vec3i(75, 75, 75))}));
+  add(f, makeStroke(BrushShape::kSphere, diameter, {m.toWorld(Vec3i(75, 75, 75))}));
   const Sketch sk = voxelize(f, m, oneMaterial());
   const double exact = M_PI / 6.0 * std::pow(diameter / h, 3);  // in voxels: 15,599
   // Lattice points in a ball of radius 15.5: error is O(r^2) surface voxels, < 2 % here.
@@ -187,7 +194,7 @@ TEST(Voxelize, SampleOutsideWorkspaceNamesLineAndAxis) {
   const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
   StrokeFile f;
   f.path = "out.strokes";
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.05, {Vec3(0, 0.5, 0), Vec3(0, 0.5, 0.6)}));
+  add(f, makeStroke(BrushShape::kSphere, 0.05, {Vec3(0, 0.5, 0), Vec3(0, 0.5, 0.6)}));
   try {
     voxelize(f, m, oneMaterial());
     FAIL();
@@ -202,8 +209,8 @@ TEST(Voxelize, UnknownMaterialNamesStrokeLine) {
   const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
   StrokeFile f;
   f.path = "mat.strokes";
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.05, {Vec3(0, 0.5, 0)}));
-  f.strokes[0].material = "jelly";
+  add(f, makeStroke(BrushShape::kSphere, 0.05, {Vec3(0, 0.5, 0)}));
+  f.operations[0].material = "jelly";
   try {
     voxelize(f, m, oneMaterial());
     FAIL();
@@ -218,10 +225,9 @@ TEST(Voxelize, OverCapNamesTheStrokeThatCrossedIt) {
   const GridMapping m(Vec3(0.0, 0.5, 0.0), 1.0);
   StrokeFile f;
   f.path = "cap.strokes";
-  f.strokes.push_back(makeStroke(BrushShape::kSphere, 0.3, {Vec3(0, 0.5, 0)}));  // ~52k particles
-  f.strokes.push_back(makeStroke(BrushShape::kCube, 0.9, {Vec3(0, 0.5, 0)}));    // ~2.5M: over the cap
-  f.strokes[1].id = 1;
-  f.strokes[1].line = 9;
+  add(f, makeStroke(BrushShape::kSphere, 0.3, {Vec3(0, 0.5, 0)}));  // ~52k particles
+  add(f, makeStroke(BrushShape::kCube, 0.9, {Vec3(0, 0.5, 0)}));    // ~2.5M: over the cap
+  f.operations[1].line = 9;
   try {
     voxelize(f, m, oneMaterial());
     FAIL();
