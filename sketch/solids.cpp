@@ -53,6 +53,87 @@ double Solid::volume() const {
   return 0.0;
 }
 
+namespace {
+
+// Interval of t where |o + t d|^2 <= r^2 (restricted to the first `dims` coordinates).
+bool quadraticInterval(const Vec3& o, const Vec3& d, double r, int dims, double& t0, double& t1) {
+  double A = 0, B = 0, C = -r * r;
+  for (int i = 0; i < dims; ++i) {
+    A += d[i] * d[i];
+    B += 2 * o[i] * d[i];
+    C += o[i] * o[i];
+  }
+  if (A < 1e-300) {  // the line is parallel to the axis: inside everywhere or nowhere
+    if (C > 0) return false;
+    t0 = -1e300, t1 = 1e300;
+    return true;
+  }
+  const double disc = B * B - 4 * A * C;
+  if (disc < 0) return false;
+  const double s = std::sqrt(disc);
+  t0 = (-B - s) / (2 * A);
+  t1 = (-B + s) / (2 * A);
+  return true;
+}
+
+// Interval where |o_i + t d_i| <= half on one axis.
+bool slabInterval(double o, double d, double half, double& t0, double& t1) {
+  if (std::abs(d) < 1e-300) {
+    if (std::abs(o) > half) return false;
+    t0 = -1e300, t1 = 1e300;
+    return true;
+  }
+  const double a = (-half - o) / d, b = (half - o) / d;
+  t0 = std::min(a, b), t1 = std::max(a, b);
+  return true;
+}
+
+bool intersect(double& t0, double& t1, double a0, double a1) {
+  t0 = std::max(t0, a0);
+  t1 = std::min(t1, a1);
+  return t0 <= t1;
+}
+
+}  // namespace
+
+bool Solid::lineIntervalLocal(const Vec3& o, const Vec3& d, double& t0, double& t1) const {
+  t0 = -1e300, t1 = 1e300;
+  double a0, a1;
+  switch (shape) {
+    case SolidShape::kSphere: return quadraticInterval(o, d, a, 3, t0, t1);
+    case SolidShape::kCube:
+    case SolidShape::kBox: {
+      const Vec3 half = shape == SolidShape::kCube ? Vec3(a, a, a) : Vec3(a, b, c);
+      for (int i = 0; i < 3; ++i)
+        if (!slabInterval(o[i], d[i], half[i], a0, a1) || !intersect(t0, t1, a0, a1)) return false;
+      return true;
+    }
+    case SolidShape::kEllipsoid: {
+      const Vec3 inv(1 / a, 1 / b, 1 / c);
+      return quadraticInterval(o.cwiseProduct(inv), d.cwiseProduct(inv), 1.0, 3, t0, t1);
+    }
+    case SolidShape::kCylinder:
+      return quadraticInterval(o, d, a, 2, t0, t1) && slabInterval(o.z(), d.z(), b, a0, a1) &&
+             intersect(t0, t1, a0, a1);
+    case SolidShape::kCapsule: {
+      // Convex hull of the parts: the union of the side cylinder and the two end caps is one interval.
+      bool any = false;
+      double lo = 1e300, hi = -1e300;
+      double c0, c1;
+      if (quadraticInterval(o, d, a, 2, c0, c1) && slabInterval(o.z(), d.z(), b, a0, a1) && intersect(c0, c1, a0, a1)) {
+        any = true, lo = std::min(lo, c0), hi = std::max(hi, c1);
+      }
+      for (double zc : {-b, b}) {
+        if (quadraticInterval(o - Vec3(0, 0, zc), d, a, 3, c0, c1)) any = true, lo = std::min(lo, c0), hi = std::max(hi, c1);
+      }
+      t0 = lo, t1 = hi;
+      return any;
+    }
+    case SolidShape::kTorus: return false;  // not convex: callers test cells one by one
+  }
+  return false;
+}
+
 Mat3 frameFromAxis(const Vec3& axis) {
   const Vec3 z = axis.normalized();
   // Pick the world axis least aligned with z as the seed for x: deterministic and well conditioned.

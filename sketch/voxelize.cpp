@@ -11,6 +11,8 @@
 namespace physketch::sketch {
 namespace {
 
+void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, std::vector<Vec3i>& out);
+
 // Thrown when the particle cap is reached; voxelize() turns it into an InputError naming the operation.
 struct CapReached {};
 
@@ -179,10 +181,17 @@ class Builder {
         }
         const std::int16_t mat = s.op == StrokeOp::kCreate ? resolveMaterial(op) : std::int16_t(-1);
         cur_->material = mat;
+        Solid prev;
+        bool havePrev = false;
         for (const Stamp& st : stampsOf(s)) {
-          rasterize(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping, cells);
+          const Solid brush = brushSolid(s, st.position, st.pressure, st.direction, h_);
+          // Consecutive stamps overlap almost entirely; cells inside the previous stamp
+          // were already created (or removed) by this stroke, so only the new part is visited.
+          rasterizeRows(brush, havePrev ? &prev : nullptr, sk_.mapping, cells);
           applyCells(cells, op.mirror, mat);
           cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
+          prev = brush;
+          havePrev = true;
         }
         return;
       }
@@ -459,28 +468,104 @@ void interpolateSegment(const Vec3& prev, const Vec3& cur, double particleDiamet
   for (long i = 0; i <= iMax; ++i) out.push_back(cur - double(i) * particleDiameter * dir);  // Eq. 7
 }
 
-void rasterize(const Solid& solid, const GridMapping& m, std::vector<Vec3i>& out) {
+namespace {
+
+// Cells of a solid row by row (z, then y, then x ascending). For a convex solid each
+// row (j, k) is one interval of x found analytically from the line through the cell
+// centres, so the cost is one small solve per row instead of one test per cell.
+// `prev`, when given, is the previous stamp of the same stroke: cells inside it were
+// already handled, so only the part of each row outside it is emitted.
+void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, std::vector<Vec3i>& out) {
   out.clear();
   const double h = m.voxelSize();
   const Vec3 g = m.toGrid(solid.centre);
   const double r = solid.boundingRadius() / h;
-  const Vec3i lo(std::max(0, static_cast<int>(std::ceil(g.x() - r))), std::max(0, static_cast<int>(std::ceil(g.y() - r))),
-                 std::max(0, static_cast<int>(std::ceil(g.z() - r))));
-  const Vec3i hi(std::min(kGridSize - 1, static_cast<int>(std::floor(g.x() + r))),
-                 std::min(kGridSize - 1, static_cast<int>(std::floor(g.y() + r))),
-                 std::min(kGridSize - 1, static_cast<int>(std::floor(g.z() + r))));
-  const Mat3 Rt = solid.rotation.transpose();
-  for (int k = lo.z(); k <= hi.z(); ++k)
-    for (int j = lo.y(); j <= hi.y(); ++j)
-      for (int i = lo.x(); i <= hi.x(); ++i) {
-        const Vec3 local = Rt * (Vec3(i - g.x(), j - g.y(), k - g.z()) * h);
-        if (solid.containsLocal(local)) out.emplace_back(i, j, k);
+  const int lo[3] = {std::max(0, static_cast<int>(std::ceil(g.x() - r))), std::max(0, static_cast<int>(std::ceil(g.y() - r))),
+                     std::max(0, static_cast<int>(std::ceil(g.z() - r)))};
+  const int hi[3] = {std::min(kGridSize - 1, static_cast<int>(std::floor(g.x() + r))),
+                     std::min(kGridSize - 1, static_cast<int>(std::floor(g.y() + r))),
+                     std::min(kGridSize - 1, static_cast<int>(std::floor(g.z() + r)))};
+  bool any = false;
+  if (solid.convex() && (!prev || prev->convex())) {
+    // Row (j, k) is the line origin(j, k) + t * (h, 0, 0): t is the cell index i. In a
+    // solid's local frame the origin is affine in (j, k), so it is built from three vectors.
+    struct LocalRows {
+      Vec3 o00, dj, dk, d;
+      LocalRows(const Solid& s, const GridMapping& map, double hh) {
+        const Mat3 Rt = s.rotation.transpose();
+        o00 = Rt * (map.toWorld(Vec3i(0, 0, 0)) - s.centre);
+        dj = Rt * Vec3(0, hh, 0);
+        dk = Rt * Vec3(0, 0, hh);
+        d = Rt * Vec3(hh, 0, 0);
       }
-  if (out.empty()) {
+    };
+    const LocalRows cur(solid, m, h);
+    const LocalRows before = prev ? LocalRows(*prev, m, h) : cur;
+    const double r2 = r * r;
+    const bool sphereFast = solid.shape == SolidShape::kSphere && (!prev || prev->shape == SolidShape::kSphere);
+    const double ra2 = (solid.a / h) * (solid.a / h);
+    const Vec3 gp = prev ? m.toGrid(prev->centre) : g;
+    const double rp2 = prev ? (prev->a / h) * (prev->a / h) : 0.0;
+    for (int k = lo[2]; k <= hi[2]; ++k)
+      for (int j = lo[1]; j <= hi[1]; ++j) {
+        const double ej = j - g.y(), ek = k - g.z();
+        if (ej * ej + ek * ek > r2) continue;  // the row misses the bounding sphere
+        double t0, t1;
+        if (sphereFast) {  // the common brush: the row's chord in closed form, in cells
+          const double w2 = ra2 - ej * ej - ek * ek;
+          if (w2 < 0) continue;
+          const double w = std::sqrt(w2);
+          t0 = g.x() - w, t1 = g.x() + w;
+        } else if (!solid.lineIntervalLocal(cur.o00 + double(j) * cur.dj + double(k) * cur.dk, cur.d, t0, t1)) {
+          continue;
+        }
+        const int i0 = std::max(lo[0], static_cast<int>(std::ceil(t0)));
+        const int i1 = std::min(hi[0], static_cast<int>(std::floor(t1)));
+        if (i0 > i1) continue;
+        any = true;
+        int p0 = 1, p1 = 0;  // previous stamp's cells on this row (empty by default)
+        double q0, q1;
+        if (sphereFast && prev) {
+          const double pj = j - gp.y(), pk = k - gp.z();
+          const double w2 = rp2 - pj * pj - pk * pk;
+          if (w2 >= 0) {
+            const double w = std::sqrt(w2);
+            p0 = static_cast<int>(std::ceil(gp.x() - w));
+            p1 = static_cast<int>(std::floor(gp.x() + w));
+          }
+        } else if (prev && prev->lineIntervalLocal(before.o00 + double(j) * before.dj + double(k) * before.dk, before.d, q0, q1)) {
+          p0 = static_cast<int>(std::ceil(q0));
+          p1 = static_cast<int>(std::floor(q1));
+        }
+        for (int i = i0; i <= i1; ++i) {
+          if (i >= p0 && i <= p1) {
+            i = p1;  // skip the run already stamped
+            continue;
+          }
+          out.emplace_back(i, j, k);
+        }
+      }
+  } else {
+    const Mat3 Rt = solid.rotation.transpose();
+    for (int k = lo[2]; k <= hi[2]; ++k)
+      for (int j = lo[1]; j <= hi[1]; ++j)
+        for (int i = lo[0]; i <= hi[0]; ++i) {
+          const Vec3 local = Rt * (Vec3(i - g.x(), j - g.y(), k - g.z()) * h);
+          if (solid.containsLocal(local)) out.emplace_back(i, j, k);
+        }
+    any = !out.empty();
+  }
+  if (!any) {
     // A solid smaller than a cell covers no cell centre: it still marks the cell it is in.
     const Vec3i c = m.discretize(solid.centre);
     if (GridMapping::inGrid(c)) out.push_back(c);
   }
+}
+
+}  // namespace
+
+void rasterize(const Solid& solid, const GridMapping& m, std::vector<Vec3i>& out) {
+  rasterizeRows(solid, nullptr, m, out);
 }
 
 Solid brushSolid(const Stroke& s, const Vec3& position, double pressure, const Vec3& direction, double voxelSize) {

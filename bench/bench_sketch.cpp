@@ -1,0 +1,80 @@
+// Sketch speed: voxelizing a 10,000-sample stroke for several brush sizes and shapes,
+// and the primitives. Prints CSV rows `bench,case,particles,threads,metric,value,unit`
+// with the median of --repeats runs.
+//
+//   bench_sketch [--threads N] [--repeats R]
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "core/profile.h"
+#include "sketch/voxelize.h"
+
+using namespace physketch;
+using namespace physketch::sketch;
+
+namespace {
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// A 10,000-sample helix through the workspace, sampled at 90 Hz: about 0.7 voxel per sample.
+std::string helixStroke(const std::string& brush, int samples) {
+  std::string s = "physketch-strokes 1\nstroke create " + brush + "\n";
+  char line[128];
+  for (int i = 0; i < samples; ++i) {
+    const double u = double(i) / samples;
+    const double a = 12.0 * M_PI * u;
+    std::snprintf(line, sizeof line, "sample %.6f %.6f %.6f %.6f\n", i / 90.0, 0.3 * std::cos(a), 0.15 + 0.7 * u,
+                  0.3 * std::sin(a));
+    s += line;
+  }
+  return s;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int repeats = 5, threads = 1;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else {
+      std::fprintf(stderr, "usage: bench_sketch [--threads N] [--repeats R]\n");
+      return 1;
+    }
+  }
+  // The voxelizer is serial (a stroke is a sequence of stamps into one grid); --threads is recorded only.
+  const GridMapping map(Vec3(0, 0.5, 0), 1.0);
+  Material wood;
+  wood.name = "wood";
+  const std::vector<Material> mats{wood};
+  const char* brushes[] = {"sphere 0.02 wood", "sphere 0.05 wood", "sphere 0.1 wood", "cube 0.1 wood",
+                           "capsule 0.05 wood orient=follow", "disc 0.1 wood orient=follow"};
+  for (const char* brush : brushes) {
+    const StrokeFile f = parseStrokes(helixStroke(brush, 10000), "bench.strokes");
+    std::vector<double> t;
+    std::size_t n = 0;
+    long stamps = 0;
+    for (int r = 0; r < repeats; ++r) {
+      const double t0 = nowSeconds();
+      const Sketch sk = voxelize(f, map, mats);
+      t.push_back(nowSeconds() - t0);
+      n = sk.particles.size();
+      stamps = sk.operations[0].stamps;
+    }
+    std::string kase = std::string("stroke10k_") + brush;
+    std::replace(kase.begin(), kase.end(), ' ', '_');
+    std::replace(kase.begin(), kase.end(), ',', ';');
+    std::printf("sketch,%s,%zu,%d,voxelize_ms,%.3f,ms\n", kase.c_str(), n, threads, 1e3 * median(t));
+    std::printf("sketch,%s,%zu,%d,stamps,%ld,count\n", kase.c_str(), n, threads, stamps);
+  }
+  return 0;
+}
