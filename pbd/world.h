@@ -4,6 +4,7 @@
 //
 //   for each substep (h = dt / substeps):
 //     integrate      v += g h;  p = x + v h                          (predict)
+//     kinematic      bodies held or carried by a move stroke follow their path
 //     shape_match    per rigid body: (R, c) = best rigid fit of p     (Müller 2005)
 //     rigid_contact  per rigid body, `iterations` Gauss-Seidel sweeps over its
 //                    particles: each particle below ground + r gets an exact
@@ -50,6 +51,10 @@ struct BodyPose {
   Mat4f model() const;  // the 4x4 rest->world matrix, for rendering
 };
 
+// How a body moves: by the solver, along a prescribed path (grabbed by a move
+// stroke, or held while it is being drawn), or not at all (all particles removed).
+enum class BodyMode { kDynamic, kKinematic, kEmpty };
+
 struct PassInfo {
   std::string name;
   std::string runs;  // how often per step, e.g. "substeps x iterations = 16"
@@ -66,6 +71,21 @@ class PbdWorld {
   // Advances one step of dt. Returns false (and does nothing) once the guard has tripped.
   bool step();
 
+  // --- changes while the simulation runs (sketching after play) -------------
+  // Appends a body made of `particles` (positions at rest, stroke and material set);
+  // returns its index. A kinematic body stays where it is until released.
+  int addBody(const ParticleArrays& particles, bool kinematic);
+  // Switches a body between dynamic and kinematic. A released body keeps the
+  // velocity of its prescribed motion.
+  void setMode(int body, BodyMode mode);
+  BodyMode mode(int body) const { return mode_.at(static_cast<std::size_t>(body)); }
+  // Where a kinematic body's centre of mass must be at the end of the next step.
+  void setKinematicTarget(int body, const Vec3& centre);
+  // Removes particles from the simulation; their bodies are rebuilt from the rest.
+  // Returns the bodies that changed, in ascending order.
+  std::vector<int> removeParticles(const std::vector<std::int32_t>& ids);
+  bool alive(std::int32_t particle) const { return alive_[static_cast<std::size_t>(particle)] != 0; }
+
   const ParticleArrays& particles() const { return parts_; }
   const std::vector<BodyRange>& bodies() const { return bodies_; }
   BodyPose pose(int body) const;
@@ -80,8 +100,11 @@ class PbdWorld {
 
  private:
   void integrate(float h);
+  void kinematic(int substep);
   void shapeMatch();
   void rigidContact();
+  void appendBodyState(BodyMode mode);
+  void refreshMassProperties(std::size_t body);
   void update(float h);
 
   PbdParams params_;
@@ -92,6 +115,7 @@ class PbdWorld {
   std::vector<float> px_, py_, pz_;  // predicted positions (m); written by integrate/contact/shape_match
   std::vector<float> mass_;          // kg
   std::vector<float> rx_, ry_, rz_;  // rest offsets from the body's rest centre of mass (m)
+  std::vector<std::uint8_t> alive_;  // 0 once removed by a remove stroke after play
   // Per body.
   std::vector<Quat> rot_;
   std::vector<Vec3> centre_, restCentre_;
@@ -99,10 +123,13 @@ class PbdWorld {
   std::vector<Mat3> invInertia_;     // rest-frame inverse inertia
   std::vector<double> friction_;     // Coulomb coefficient against the ground
   std::vector<double> reach_;        // m, max |rest offset| + particle radius: no contact while c.y - reach > ground
-  std::vector<std::int32_t> rigidBodies_;  // bodies solved by shape matching
+  std::vector<BodyMode> mode_;
+  std::vector<std::uint8_t> rigid_;   // all of the body's materials are rigid
+  std::vector<Vec3> kinStart_, kinTarget_;  // kinematic centre at the start / end of the step
+  std::vector<std::int32_t> active_;  // dynamic rigid bodies this step (shape_match, rigid_contact)
   std::int64_t steps_ = 0;
   Profile profile_;
-  int passIntegrate_, passShape_, passContact_, passUpdate_, passGuard_;
+  int passIntegrate_, passKinematic_, passShape_, passContact_, passUpdate_, passGuard_;
   GuardRecord guard_;
 };
 

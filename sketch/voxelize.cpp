@@ -20,8 +20,8 @@ const char* kAxisNames[] = {"x", "y", "z"};
 
 class Builder {
  public:
-  Builder(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
-          const StampVoxelizer& stamps)
+  Builder(const StrokeFile& file, const std::vector<Material>& materials, const StampVoxelizer& stamps,
+          const GridMapping& mapping)
       : file_(file), materials_(materials), stamps_(stamps), sk_(mapping), h_(mapping.voxelSize()) {}
 
   Sketch run() {
@@ -36,14 +36,16 @@ class Builder {
       sum.active = isActive[static_cast<std::size_t>(op.id)];
       sk_.operations.push_back(sum);
     }
+    std::vector<int> runtimeCreates;
     for (const Operation& op : file_.operations) {
       if (!isActive[static_cast<std::size_t>(op.id)]) continue;
-      if (op.startTime() > play)
-        throw InputError(file_.path, op.line, "",
-                         "operation starts at t = " + std::to_string(op.startTime()) + " s, after 'play' at t = " +
-                             std::to_string(play) + " s (line " + std::to_string(file_.playLine) +
-                             "); sketching while the simulation runs is not supported yet");
       cur_ = &sk_.operations[static_cast<std::size_t>(op.id)];
+      if (op.startTime() > play) {
+        const bool creates = op.kind != Operation::Kind::kStroke || op.stroke.op == StrokeOp::kCreate;
+        if (creates) runtimeCreates.push_back(op.id);
+        else runtimeStroke(op, play);
+        continue;
+      }
       try {
         apply(op);
       } catch (const CapReached&) {
@@ -53,7 +55,90 @@ class Builder {
       }
     }
     finalize();
+    if (!runtimeCreates.empty()) runtimeCreate(runtimeCreates, play);
+    std::stable_sort(sk_.runtime.begin(), sk_.runtime.end(),
+                     [](const RuntimeOp& a, const RuntimeOp& b) { return a.start < b.start; });
     return std::move(sk_);
+  }
+
+  // Creates after play: voxelized in file order into a grid of their own (the sketch's
+  // bodies have moved by then), each one a new body.
+  void runtimeCreate(const std::vector<int>& ids, double play) {
+    StrokeFile rt;
+    rt.path = file_.path;
+    rt.operations = file_.operations;
+    rt.active = ids;
+    rt.play = 1e300;
+    for (int id : ids) rt.operations[static_cast<std::size_t>(id)].body.clear();  // one body per operation
+    Sketch made = Builder(rt, materials_, stamps_, sk_.mapping).run();
+    for (std::size_t b = 0; b < made.bodies.size(); ++b) {
+      const BodyRange& br = made.bodies[b];
+      const Operation& op = file_.operations[static_cast<std::size_t>(br.stroke)];
+      RuntimeOp r;
+      r.kind = RuntimeOp::Kind::kCreate;
+      r.op = op.id;
+      r.line = op.line;
+      r.start = op.startTime() - play;
+      r.end = op.endTime() - play;
+      r.bodyName = op.body.empty() ? "stroke " + std::to_string(op.id) : op.body;
+      r.particles.reserve(static_cast<std::size_t>(br.count));
+      for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
+        const auto k = static_cast<std::size_t>(i);
+        r.particles.push(made.particles.x[k], made.particles.y[k], made.particles.z[k], made.particles.stroke[k],
+                         made.particles.material[k]);
+        r.cells.push_back(made.cells[k]);
+      }
+      auto& sum = sk_.operations[static_cast<std::size_t>(op.id)];
+      sum.created = made.operations[static_cast<std::size_t>(op.id)].created;
+      sum.remaining = sum.created;
+      sum.material = made.operations[static_cast<std::size_t>(op.id)].material;
+      sum.stamps = made.operations[static_cast<std::size_t>(op.id)].stamps;
+      sk_.runtime.push_back(std::move(r));
+    }
+  }
+
+  // Remove and move strokes after play: the cells under the brush and when, for the simulation to apply.
+  void runtimeStroke(const Operation& op, double play) {
+    const Stroke& s = op.stroke;
+    for (const Sample& smp : s.samples) checkInside(smp.position, smp.line, "sample");
+    std::vector<Vec3i> cells;
+    for (int pass = 0; pass < (op.mirror.axis >= 0 ? 2 : 1); ++pass) {
+      auto mirrored = [&](std::vector<Vec3i>& cs) {
+        if (pass == 0) return;
+        for (auto& c : cs) c = mirrorCell(c, op.mirror, sk_.mapping);
+      };
+      auto mirrorPoint = [&](Vec3 p) {
+        if (pass == 1) p[op.mirror.axis] = 2.0 * op.mirror.offset - p[op.mirror.axis];
+        return p;
+      };
+      RuntimeOp r;
+      r.op = op.id;
+      r.line = op.line;
+      r.start = op.startTime() - play;
+      r.end = op.endTime() - play;
+      if (s.op == StrokeOp::kRemove) {
+        r.kind = RuntimeOp::Kind::kRemove;
+        // The stamps of a segment happen when its end sample is reached.
+        for (const Stamp& st : stampsOf(s)) {
+          rasterize(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping, cells);
+          mirrored(cells);
+          r.removals.emplace_back(st.time - play, cells);
+          ++cur_->stamps;
+        }
+      } else {
+        r.kind = RuntimeOp::Kind::kMove;
+        const Sample& first = s.samples.front();
+        Vec3 dir = s.axis;
+        if (s.samples.size() > 1 && (s.samples.back().position - first.position).norm() > 0)
+          dir = (s.samples.back().position - first.position).normalized();
+        rasterize(brushSolid(s, first.position, first.pressure, dir, h_), sk_.mapping, cells);
+        mirrored(cells);
+        r.grab = cells;
+        for (const Sample& smp : s.samples) r.path.emplace_back(smp.t - play, mirrorPoint(smp.position));
+        ++cur_->stamps;
+      }
+      sk_.runtime.push_back(std::move(r));
+    }
   }
 
  private:
@@ -132,6 +217,7 @@ class Builder {
   struct Stamp {
     Vec3 position, direction;
     double pressure;
+    double time;  // s: the sample time at the end of the stamp's segment
   };
   std::vector<Stamp> stampsOf(const Stroke& s) {
     std::vector<Stamp> out;
@@ -148,7 +234,7 @@ class Builder {
     Vec3 dir = firstDir;
     for (std::size_t k = 0; k < sm.size(); ++k) {
       if (k == 0) {
-        out.push_back({sm[0].position, dir, sm[0].pressure});
+        out.push_back({sm[0].position, dir, sm[0].pressure, sm[0].t});
         continue;
       }
       const Vec3 seg = sm[k].position - sm[k - 1].position;
@@ -158,7 +244,7 @@ class Builder {
       for (std::size_t i = 0; i < pts.size(); ++i) {
         // Pressure varies linearly along the segment, like the position.
         const double a = len > 0 ? std::min(1.0, double(i) * h_ / len) : 0.0;
-        out.push_back({pts[i], dir, sm[k].pressure + a * (sm[k - 1].pressure - sm[k].pressure)});
+        out.push_back({pts[i], dir, sm[k].pressure + a * (sm[k - 1].pressure - sm[k].pressure), sm[k].t});
       }
     }
     return out;
@@ -607,7 +693,7 @@ Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& m) 
 
 Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
                 const StampVoxelizer& stamps) {
-  return Builder(file, mapping, materials, stamps).run();
+  return Builder(file, materials, stamps, mapping).run();
 }
 
 }  // namespace physketch::sketch

@@ -31,6 +31,25 @@ struct OperationSummary {
   int body = -1;               // body of its particles in the final sketch (-1 if none)
 };
 
+// An operation that happens while the simulation runs (it starts after `play`).
+// Times are simulation times: seconds after play.
+struct RuntimeOp {
+  enum class Kind { kCreate, kRemove, kMove } kind = Kind::kCreate;
+  int op = 0;                  // operation id (provenance)
+  int line = 0;
+  double start = 0.0, end = 0.0;
+  // kCreate: a new body, static from `start` until `end` (while it is being drawn), then dynamic.
+  ParticleArrays particles;    // at voxel centres, grouped as one body
+  std::vector<Vec3i> cells;
+  std::string bodyName;
+  // kRemove: at each time, the particles whose current cell is in the set are removed.
+  std::vector<std::pair<double, std::vector<Vec3i>>> removals;
+  // kMove: at `start` the bodies of the particles whose current cell is in `grab` become
+  // kinematic and follow the brush path (times, positions) until `end`, then are released.
+  std::vector<Vec3i> grab;
+  std::vector<std::pair<double, Vec3>> path;
+};
+
 struct Sketch {
   GridMapping mapping;
   OccupancyGrid grid;                 // M (final, particle indices after compaction)
@@ -40,6 +59,7 @@ struct Sketch {
   std::vector<BodyRange> bodies;      // contiguous particle ranges; material = the first particle's
   std::vector<std::string> bodyNames; // "chair" for body=chair, else "stroke N"
   std::vector<std::string> warnings;  // lint warnings (file:line: text)
+  std::vector<RuntimeOp> runtime;     // operations after play, in start-time order
 
   explicit Sketch(const GridMapping& m) : mapping(m) {}
 };
@@ -65,7 +85,9 @@ Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& map
 // sketch tests and tools can run without it; nullptr means stamps are an error.
 using StampVoxelizer = std::function<void(const MeshStamp&, const GridMapping&, std::vector<Vec3i>&)>;
 
-// Replays the active operations that start before the play time, in file order.
+// Replays the active operations that start before the play time, in file order;
+// operations that start after it become RuntimeOps (creates are voxelized into a
+// grid of their own, in file order, so they never overlap each other).
 // Throws InputError (stroke file:line:field) for an unknown material, a sample
 // outside the workspace, a move that carries particles out of the workspace,
 // an unreadable stamp mesh, or a sketch that crosses the particle cap (naming

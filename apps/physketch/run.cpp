@@ -1,6 +1,7 @@
 // physketch run / plan: stroke file -> sketch -> PBD passes -> meshes -> PNG frames + report.json.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,7 @@
 #include <tbb/info.h>
 
 #include "apps/physketch/app.h"
+#include "apps/physketch/runtime.h"
 #include "core/error.h"
 #include "core/profile.h"
 #include "core/scene.h"
@@ -216,32 +218,41 @@ int runScene(const RunOptions& opt) {
     const int passDraw = renderProfile.add("draw");
     const int passPng = renderProfile.add("png");
     std::unique_ptr<render::OffscreenRenderer> renderer;
+    std::size_t triangles = 0;
     struct MeshPart {
       int body;
       std::int16_t material;
       int handle;
     };
     std::vector<MeshPart> meshParts;
-    std::size_t triangles = 0;
+    RuntimeDriver runtime(sk, world);
+    // (Re)builds the meshes of one body from its live particles' rest cells: one mesh
+    // per material (mixed-material bodies), all moving with the body's pose. Rigid
+    // bodies keep their rest shape, so this runs once per body, and again only when
+    // a remove stroke after play cuts the body.
+    auto meshBody = [&](int b) {
+      ScopedPass t(renderProfile, passMesh);
+      meshParts.erase(std::remove_if(meshParts.begin(), meshParts.end(), [&](const MeshPart& m) { return m.body == b; }),
+                      meshParts.end());
+      const BodyRange& br = world.bodies()[static_cast<std::size_t>(b)];
+      std::map<std::int16_t, std::vector<Vec3i>> parts;
+      for (std::int32_t i = br.first; i < br.first + br.count; ++i)
+        if (world.alive(i))
+          parts[world.particles().material[static_cast<std::size_t>(i)]].push_back(
+              runtime.restCells()[static_cast<std::size_t>(i)]);
+      const Vec3 origin = sk.mapping.toWorld(Vec3i(0, 0, 0));
+      for (const auto& [material, cells] : parts) {
+        render::TriangleMesh mesh = render::meshVoxels(cells, sk.mapping.voxelSize(), origin);
+        triangles += mesh.triangleCount();
+        meshParts.push_back({b, material, renderer->uploadMesh(mesh)});
+      }
+    };
     if (sc.writeFrames) {
       renderer = std::make_unique<render::OffscreenRenderer>(sc.width, sc.height);
-      ScopedPass t(renderProfile, passMesh);
       // Rigid bodies keep their rest shape: mesh each body once in its rest pose
       // (particles are voxel centres, so the voxel set is exact) and move the mesh
       // with the body's pose every frame.
-      const Vec3 origin = sk.mapping.toWorld(Vec3i(0, 0, 0));
-      for (std::size_t b = 0; b < p.bodies.size(); ++b) {
-        // One mesh per material of the body (mixed-material bodies), all moving with the body.
-        const BodyRange& br = p.bodies[b];
-        std::map<std::int16_t, std::vector<Vec3i>> parts;
-        for (std::int32_t i = br.first; i < br.first + br.count; ++i)
-          parts[sk.particles.material[static_cast<std::size_t>(i)]].push_back(sk.cells[static_cast<std::size_t>(i)]);
-        for (const auto& [material, cells] : parts) {
-          render::TriangleMesh mesh = render::meshVoxels(cells, sk.mapping.voxelSize(), origin);
-          triangles += mesh.triangleCount();
-          meshParts.push_back({static_cast<int>(b), material, renderer->uploadMesh(mesh)});
-        }
-      }
+      for (std::size_t b = 0; b < p.bodies.size(); ++b) meshBody(static_cast<int>(b));
     }
 
     const fs::path out(opt.outDir);
@@ -281,8 +292,12 @@ int runScene(const RunOptions& opt) {
     const double tSimStart = nowSeconds();
     for (int f = 0; f < frames; ++f) {
       if (f > 0) {
-        for (int s = 0; s < sc.stepsPerFrame(); ++s)
+        for (int s = 0; s < sc.stepsPerFrame(); ++s) {
+          const std::vector<int> reshaped = runtime.beforeStep();
+          if (renderer)
+            for (int b : reshaped) meshBody(b);
           if (!world.step()) break;
+        }
         if (world.guard().tripped()) break;
       }
       renderFrame(f);
@@ -311,6 +326,16 @@ int runScene(const RunOptions& opt) {
                    {"workspace_center", {sc.workspaceCenter.x(), sc.workspaceCenter.y(), sc.workspaceCenter.z()}},
                    {"workspace_size_m", sc.workspaceSize}};
     rep["sketch"] = sketchJson(p);
+    json rt = json::array();
+    for (std::size_t k = 0; k < sk.runtime.size(); ++k) {
+      const auto& op = sk.runtime[k];
+      const auto& st = runtime.stats()[k];
+      static const char* kKinds[] = {"create", "remove", "move"};
+      rt.push_back({{"op", op.op}, {"line", op.line}, {"kind", kKinds[static_cast<int>(op.kind)]},
+                    {"start_s", op.start}, {"end_s", op.end}, {"started", st.started}, {"finished", st.finished},
+                    {"body", st.body}, {"grabbed_bodies", st.grabbed}, {"removed_particles", st.removed}});
+    }
+    rep["runtime"] = rt;
     rep["solver"] = {{"name", "pbd"},          {"dt", sc.dt},     {"substeps", sc.substeps},
                      {"iterations", sc.iterations}, {"steps", world.stepCount()}, {"simulated_s", world.time()},
                      {"plan", planJson(world)}};

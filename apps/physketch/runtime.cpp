@@ -1,0 +1,111 @@
+#include "apps/physketch/runtime.h"
+
+#include <algorithm>
+#include <unordered_set>
+
+namespace physketch::app {
+
+using sketch::RuntimeOp;
+
+RuntimeDriver::RuntimeDriver(const sketch::Sketch& sketch, pbd::PbdWorld& world)
+    : sketch_(sketch),
+      world_(world),
+      restCells_(sketch.cells),
+      stats_(sketch.runtime.size()),
+      nextRemoval_(sketch.runtime.size(), 0),
+      grabCentre_(sketch.runtime.size()) {}
+
+Vec3 RuntimeDriver::brushAt(const RuntimeOp& op, double t) const {
+  // The brush moves linearly between samples and rests at the ends.
+  const auto& path = op.path;
+  if (t <= path.front().first) return path.front().second;
+  for (std::size_t k = 1; k < path.size(); ++k)
+    if (t <= path[k].first) {
+      const double a = (t - path[k - 1].first) / (path[k].first - path[k - 1].first);
+      return path[k - 1].second + a * (path[k].second - path[k - 1].second);
+    }
+  return path.back().second;
+}
+
+std::vector<std::int32_t> RuntimeDriver::particlesInCells(const std::vector<Vec3i>& cells) const {
+  std::unordered_set<std::int64_t> set;
+  for (const auto& c : cells) set.insert(sketch::GridMapping::linear(c));
+  std::vector<std::int32_t> out;
+  const auto& p = world_.particles();
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!world_.alive(static_cast<std::int32_t>(i))) continue;
+    const Vec3i c = sketch_.mapping.discretize(Vec3(p.x[i], p.y[i], p.z[i]));
+    if (sketch::GridMapping::inGrid(c) && set.count(sketch::GridMapping::linear(c)))
+      out.push_back(static_cast<std::int32_t>(i));
+  }
+  return out;
+}
+
+std::vector<int> RuntimeDriver::beforeStep() {
+  const double t0 = world_.time(), dt = world_.params().dt, t1 = t0 + dt;
+  std::vector<int> reshaped;
+  for (std::size_t k = 0; k < sketch_.runtime.size(); ++k) {
+    const RuntimeOp& op = sketch_.runtime[k];
+    OpStats& st = stats_[k];
+    if (st.finished || op.start >= t1) continue;
+    switch (op.kind) {
+      case RuntimeOp::Kind::kCreate:
+        if (!st.started) {
+          // Static while being drawn (Phys-Sketch §4): kinematic until the stroke ends.
+          st.body = world_.addBody(op.particles, /*kinematic=*/op.end >= t1);
+          restCells_.insert(restCells_.end(), op.cells.begin(), op.cells.end());
+          reshaped.push_back(st.body);
+          st.started = true;
+          st.finished = op.end < t1;
+        } else if (op.end < t1) {
+          world_.setMode(st.body, pbd::BodyMode::kDynamic);
+          st.finished = true;
+        }
+        break;
+      case RuntimeOp::Kind::kRemove: {
+        st.started = true;
+        std::vector<Vec3i> cells;
+        while (nextRemoval_[k] < op.removals.size() && op.removals[nextRemoval_[k]].first < t1) {
+          const auto& cs = op.removals[nextRemoval_[k]].second;
+          cells.insert(cells.end(), cs.begin(), cs.end());
+          ++nextRemoval_[k];
+        }
+        const auto ids = particlesInCells(cells);
+        st.removed += static_cast<std::int64_t>(ids.size());
+        for (int b : world_.removeParticles(ids)) reshaped.push_back(b);
+        st.finished = nextRemoval_[k] == op.removals.size();
+        break;
+      }
+      case RuntimeOp::Kind::kMove:
+        if (!st.started) {
+          // Grab the bodies of the particles under the brush at its first sample.
+          st.started = true;
+          for (std::int32_t i : particlesInCells(op.grab)) {
+            const int b = world_.particles().body[static_cast<std::size_t>(i)];
+            if (b >= 0 && std::find(st.grabbed.begin(), st.grabbed.end(), b) == st.grabbed.end()) st.grabbed.push_back(b);
+          }
+          std::sort(st.grabbed.begin(), st.grabbed.end());
+          for (int b : st.grabbed) {
+            world_.setMode(b, pbd::BodyMode::kKinematic);
+            grabCentre_[k].push_back(world_.pose(b).centre);
+          }
+        }
+        if (t0 >= op.end) {
+          // Released: the bodies keep the velocity of the brush's last motion.
+          for (int b : st.grabbed) world_.setMode(b, pbd::BodyMode::kDynamic);
+          st.finished = true;
+          break;
+        }
+        for (std::size_t g = 0; g < st.grabbed.size(); ++g)
+          if (world_.mode(st.grabbed[g]) == pbd::BodyMode::kKinematic)  // not emptied by a remove meanwhile
+            world_.setKinematicTarget(st.grabbed[g],
+                                    grabCentre_[k][g] + brushAt(op, std::min(t1, op.end)) - brushAt(op, op.start));
+        break;
+    }
+  }
+  std::sort(reshaped.begin(), reshaped.end());
+  reshaped.erase(std::unique(reshaped.begin(), reshaped.end()), reshaped.end());
+  return reshaped;
+}
+
+}  // namespace physketch::app

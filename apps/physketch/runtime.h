@@ -1,0 +1,46 @@
+// Sketching while the simulation runs (Phys-Sketch lets the user keep sketching
+// while bodies move): applies the sketch's RuntimeOps to the PBD world at the
+// steps they fall in. Lives in the app because it is the one place that knows
+// both the sketch and the solver.
+#pragma once
+
+#include <vector>
+
+#include "pbd/world.h"
+#include "sketch/voxelize.h"
+
+namespace physketch::app {
+
+class RuntimeDriver {
+ public:
+  struct OpStats {
+    bool started = false, finished = false;
+    int body = -1;               // create: the body it made
+    std::vector<int> grabbed;    // move: bodies it carries
+    std::int64_t removed = 0;    // remove: particles it removed
+  };
+
+  // `sketch` must outlive the driver; the world starts with the sketch's particles.
+  RuntimeDriver(const sketch::Sketch& sketch, pbd::PbdWorld& world);
+
+  // Applies everything that happens during the next step, [t, t + dt) with t the
+  // world's time. Returns the bodies created or reshaped (they need new meshes).
+  std::vector<int> beforeStep();
+
+  // Rest cell of every world particle (sketch cells, then the cells of runtime creates).
+  const std::vector<Vec3i>& restCells() const { return restCells_; }
+  const std::vector<OpStats>& stats() const { return stats_; }
+
+ private:
+  Vec3 brushAt(const sketch::RuntimeOp& op, double t) const;
+  std::vector<std::int32_t> particlesInCells(const std::vector<Vec3i>& cells) const;
+
+  const sketch::Sketch& sketch_;
+  pbd::PbdWorld& world_;
+  std::vector<Vec3i> restCells_;
+  std::vector<OpStats> stats_;
+  std::vector<std::size_t> nextRemoval_;
+  std::vector<std::vector<Vec3>> grabCentre_;  // per op: each grabbed body's centre when grabbed
+};
+
+}  // namespace physketch::app

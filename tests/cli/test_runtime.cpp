@@ -1,0 +1,113 @@
+// Sketching after play: creates appear static and are released when drawn, moves
+// carry bodies along the brush path and release them with its velocity, removes cut bodies.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "apps/physketch/runtime.h"
+
+using namespace physketch;
+
+namespace {
+
+const sketch::GridMapping kMap(Vec3(0.0, 0.5, 0.0), 1.0);
+
+std::vector<Material> materials() {
+  Material m;
+  m.name = "wood";
+  return {m};
+}
+
+pbd::PbdParams params() {
+  pbd::PbdParams p;
+  p.dt = 0.01;
+  p.substeps = 2;
+  p.iterations = 4;
+  p.particleRadius = 0.5 * kMap.voxelSize();
+  return p;
+}
+
+struct Sim {
+  sketch::Sketch sketch;
+  pbd::PbdWorld world;
+  app::RuntimeDriver driver;
+  explicit Sim(const std::string& text)
+      : sketch(sketch::voxelize(sketch::parseStrokes("physketch-strokes 1\n" + text, "rt.strokes"), kMap, materials())),
+        world(sketch.particles, sketch.bodies, materials(), params()),
+        driver(sketch, world) {}
+  void steps(int n) {
+    for (int i = 0; i < n; ++i) {
+      driver.beforeStep();
+      ASSERT_TRUE(world.step()) << world.guard().message();
+    }
+  }
+  Vec3 centre(int b) const { return world.pose(b).centre; }
+};
+
+}  // namespace
+
+TEST(Runtime, CreateAfterPlayIsStaticWhileDrawnThenFalls) {
+  // play at 0.1 s; a stroke drawn from 0.2 to 0.5 s, i.e. simulation time 0.1 .. 0.4 s.
+  Sim r("primitive box wood 0  0 0.05 0  0.1 0.1 0.1\nplay 0.1\n"
+        "stroke create sphere 0.08 wood\nsample 0.2 0 0.7 0.2\nsample 0.5 0.1 0.7 0.2\n");
+  ASSERT_EQ(r.sketch.runtime.size(), 1u);
+  EXPECT_EQ(r.world.bodies().size(), 1u);
+  r.steps(11);  // t = 0.11: the body exists and is held
+  ASSERT_EQ(r.world.bodies().size(), 2u);
+  EXPECT_EQ(r.world.mode(1), pbd::BodyMode::kKinematic);
+  const Vec3 held = r.centre(1);
+  r.steps(25);  // t = 0.36: still being drawn
+  EXPECT_NEAR((r.centre(1) - held).norm(), 0.0, 1e-9);
+  r.steps(10);  // t = 0.46: released, falling
+  EXPECT_EQ(r.world.mode(1), pbd::BodyMode::kDynamic);
+  EXPECT_LT(r.centre(1).y(), held.y() - 0.001);
+  EXPECT_TRUE(r.driver.stats()[0].finished);
+}
+
+TEST(Runtime, MoveCarriesTheGrabbedBodyAlongTheBrushAndReleasesItWithItsVelocity) {
+  // A box resting on the ground is grabbed and lifted 0.3 m in 0.3 s, then let go.
+  Sim r("primitive box wood 0  0 0.05 0  0.1 0.1 0.1\nprimitive box wood 0  0.3 0.05 0  0.1 0.1 0.1\nplay 0\n"
+        "stroke move sphere 0.05\nsample 0.1 0 0.05 0\nsample 0.4 0 0.35 0\n");
+  r.steps(5);  // settle: t = 0.05
+  const Vec3 c0 = r.centre(0), other0 = r.centre(1);
+  r.steps(15);  // t = 0.2: grabbed at 0.1, carried for 0.1 s = 0.1 m
+  EXPECT_EQ(r.world.mode(0), pbd::BodyMode::kKinematic);
+  EXPECT_EQ(r.world.mode(1), pbd::BodyMode::kDynamic);  // the other box is not under the brush
+  EXPECT_NEAR(r.centre(0).y() - c0.y(), 0.1, 1e-6);
+  EXPECT_NEAR(r.centre(0).x() - c0.x(), 0.0, 1e-9);
+  r.steps(20);  // t = 0.4: at the top
+  EXPECT_NEAR(r.centre(0).y() - c0.y(), 0.3, 1e-6);
+  // Released with the brush velocity (1 m/s up): it keeps rising briefly, then falls back.
+  r.steps(1);
+  EXPECT_EQ(r.world.mode(0), pbd::BodyMode::kDynamic);
+  const float vy = r.world.particles().vy[static_cast<std::size_t>(r.world.bodies()[0].first)];
+  EXPECT_NEAR(vy, 1.0 - 9.81 * 0.01, 0.02);
+  r.steps(100);
+  EXPECT_NEAR(r.centre(0).y(), c0.y(), 1e-3);  // back on the ground
+  EXPECT_NEAR((r.centre(1) - other0).norm(), 0.0, 1e-4);
+}
+
+TEST(Runtime, RemoveAfterPlayCutsTheBodyAndRebuildsItsMass) {
+  Sim r("primitive box wood 0  0 0.05 0  0.3 0.1 0.1\nplay 0\n"
+        "stroke remove cube 0.16\nsample 0.1 0.1 0.05 0\n");
+  const int before = r.world.bodies()[0].count;
+  r.steps(5);
+  const Vec3 c0 = r.centre(0);
+  r.steps(10);  // the remove happens at t = 0.1
+  const auto& st = r.driver.stats()[0];
+  EXPECT_TRUE(st.finished);
+  EXPECT_GT(st.removed, before / 3);
+  std::int64_t alive = 0;
+  double xs = 0;
+  for (std::int32_t i = 0; i < before; ++i)
+    if (r.world.alive(i)) {
+      ++alive;
+      xs += r.world.particles().x[static_cast<std::size_t>(i)];
+    }
+  EXPECT_EQ(alive + st.removed, before);
+  // The body's centre of mass moved to the remaining (left) part, and it still rests.
+  EXPECT_NEAR(r.centre(0).x(), xs / double(alive), 1e-4);
+  EXPECT_LT(r.centre(0).x(), c0.x() - 0.02);
+  r.steps(50);
+  EXPECT_NEAR(r.centre(0).y(), c0.y(), 1e-3);
+}
