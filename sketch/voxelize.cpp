@@ -41,6 +41,7 @@ class Builder {
       if (!isActive[static_cast<std::size_t>(op.id)]) continue;
       cur_ = &sk_.operations[static_cast<std::size_t>(op.id)];
       if (op.startTime() > play) {
+        cur_->afterPlay = true;
         const bool creates = op.kind != Operation::Kind::kStroke || op.stroke.op == StrokeOp::kCreate;
         if (creates) runtimeCreates.push_back(op.id);
         else runtimeStroke(op, play);
@@ -259,7 +260,9 @@ class Builder {
         cur_->minFeature = s.size * std::min_element(s.samples.begin(), s.samples.end(), [](auto& a, auto& b) {
                                       return a.pressure < b.pressure;
                                     })->pressure;
-        if (s.brush == BrushShape::kDisc || s.brush == BrushShape::kCylinder || s.brush == BrushShape::kCapsule)
+        // A disc that follows the stroke sweeps a solid; a fixed one dragged sideways leaves a sheet.
+        if (s.brush == BrushShape::kCylinder || s.brush == BrushShape::kCapsule ||
+            (s.brush == BrushShape::kDisc && s.orient == Orientation::kFixed))
           cur_->minFeature = std::min(cur_->minFeature, s.length > 0 ? s.length : (s.brush == BrushShape::kDisc ? h_ : s.size));
         if (s.op == StrokeOp::kMove) {
           move(op);

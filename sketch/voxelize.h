@@ -29,6 +29,7 @@ struct OperationSummary {
   std::int64_t stamps = 0;     // brush positions stamped (samples + interpolated points, mirror copies included)
   double minFeature = 0.0;     // m: smallest brush/primitive dimension, for the thin-feature warning
   int body = -1;               // body of its particles in the final sketch (-1 if none)
+  bool afterPlay = false;      // happens while the simulation runs (see Sketch::runtime)
 };
 
 // An operation that happens while the simulation runs (it starts after `play`).

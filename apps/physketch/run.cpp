@@ -94,7 +94,7 @@ json sketchJson(const Prepared& p) {
   for (const auto& o : sk.operations) {
     json j = {{"id", o.id},           {"line", o.line},       {"what", o.what},   {"active", o.active},
               {"created", o.created}, {"removed", o.removed}, {"moved", o.moved}, {"particles", o.remaining},
-              {"stamps", o.stamps}};
+              {"stamps", o.stamps},   {"after_play", o.afterPlay}};
     j["material"] = o.material >= 0 ? json(sc.materials[static_cast<std::size_t>(o.material)].name) : json(nullptr);
     j["body"] = o.body >= 0 ? json(sk.bodyNames[static_cast<std::size_t>(o.body)]) : json(nullptr);
     ops.push_back(j);
@@ -147,6 +147,11 @@ int lintScene(const std::string& scenePath) {
     for (const auto& o : sk.operations) {
       const std::string mat = o.material >= 0 ? sc.materials[static_cast<std::size_t>(o.material)].name : "-";
       const std::string body = o.body >= 0 ? sk.bodyNames[static_cast<std::size_t>(o.body)] : "-";
+      if (o.afterPlay) {
+        std::printf("  line %-5d %-26s %-10s after play: applied while the simulation runs%s\n", o.line,
+                    o.what.c_str(), mat.c_str(), o.created ? (" (" + std::to_string(o.created) + " particles)").c_str() : "");
+        continue;
+      }
       std::printf("  line %-5d %-26s %-10s %s created %-7d removed %-7d moved %-7d remaining %-7d body %s\n", o.line,
                   o.what.c_str(), mat.c_str(), o.active ? "" : "(undone)", o.created, o.removed, o.moved, o.remaining,
                   body.c_str());

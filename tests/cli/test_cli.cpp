@@ -102,6 +102,30 @@ TEST(Cli, BrokenSceneExitsOneWithFileLineFieldAndWritesNothing) {
   fs::remove_all(dir);
 }
 
+TEST(Cli, LintListsOperationsAndWarnsWithoutWritingAnything) {
+  const fs::path dir = freshDir("lint");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/play.scene";
+  const std::string out = (dir / "lint.txt").string();
+  const int status = std::system((std::string(PHYSKETCH_CLI) + " lint '" + scene + "' > '" + out + "' 2>&1").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  const std::string text = slurp(out);
+  EXPECT_NE(text.find("body table"), std::string::npos) << text;
+  EXPECT_NE(text.find("after play"), std::string::npos) << text;
+  EXPECT_NE(text.find("memory estimate"), std::string::npos) << text;
+  // A sketch with an error exits 1.
+  {
+    std::ofstream s(dir / "e.strokes");
+    s << "physketch-strokes 1\nprimitive box wood 0 0 0.5 0 0.1 0.1 0.1\nundo 2\n";
+    std::ofstream sc(dir / "e.scene");
+    sc << "physketch-scene 1\nstrokes e.strokes\nmaterial wood rigid 600 0.5 1 1 1\n";
+  }
+  const Result r = runCli("lint '" + (dir / "e.scene").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("e.strokes:3: field 'count': undo past the beginning"), std::string::npos) << r.err;
+  fs::remove_all(dir);
+}
+
 TEST(Cli, HelpVersionAndUsageErrors) {
   const fs::path dir = freshDir("help");
   EXPECT_EQ(runCli("--help", dir).code, 0);

@@ -300,12 +300,23 @@ TEST(Lint, WarnsAboutThinFeaturesRemovedStrokesUnusedMaterialsAndSplitBodies) {
   EXPECT_NE(all.find("t.strokes:10: stroke create sphere: creates no particle"), std::string::npos) << all;
 }
 
-TEST(Voxelize, OperationsAfterPlayAreReportedNotIgnored) {
-  try {
-    sketchOf("primitive sphere wood 0 0 0.5 0 0.05\nplay 1\nprimitive sphere wood 2 0 0.5 0.2 0.05\n");
-    FAIL();
-  } catch (const InputError& e) {
-    EXPECT_EQ(e.line(), 4);
-    EXPECT_NE(std::string(e.what()).find("after 'play'"), std::string::npos);
-  }
+TEST(Voxelize, OperationsAfterPlayBecomeRuntimeOperations) {
+  const Sketch sk = sketchOf(
+      "primitive sphere wood 0 0 0.5 0 0.05\nplay 1\n"
+      "stroke move cube 0.1\nsample 1.5 0 0.5 0\nsample 1.8 0 0.6 0\n"
+      "primitive sphere stone 2 0 0.5 0 0.05\n"                      // same place: its own grid, not blocked
+      "stroke remove sphere 0.05\nsample 2.5 0 0.5 0\nsample 3 0.1 0.5 0\n");
+  EXPECT_EQ(sk.bodies.size(), 1u);
+  ASSERT_EQ(sk.runtime.size(), 3u);  // sorted by start time
+  EXPECT_EQ(sk.runtime[0].kind, RuntimeOp::Kind::kMove);
+  EXPECT_DOUBLE_EQ(sk.runtime[0].start, 0.5);
+  EXPECT_DOUBLE_EQ(sk.runtime[0].end, 0.8);
+  EXPECT_EQ(sk.runtime[0].path.size(), 2u);
+  EXPECT_EQ(sk.runtime[1].kind, RuntimeOp::Kind::kCreate);
+  EXPECT_DOUBLE_EQ(sk.runtime[1].start, 1.0);
+  EXPECT_EQ(sk.runtime[1].particles.size(), sk.particles.size());  // the same sphere, voxelized afresh
+  EXPECT_EQ(sk.runtime[1].particles.material[0], 1);
+  EXPECT_EQ(sk.runtime[2].kind, RuntimeOp::Kind::kRemove);
+  EXPECT_DOUBLE_EQ(sk.runtime[2].removals.front().first, 1.5);
+  EXPECT_DOUBLE_EQ(sk.runtime[2].removals.back().first, 2.0);
 }
