@@ -12,8 +12,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <map>
-#include <mutex>
 #include <string>
 
 #include "core/error.h"
@@ -67,20 +65,14 @@ Eigen::Matrix4d projectionMatrixD(const Camera& camera, double aspect, double zN
 // Linear -> display encoding for 8-bit output (a plain power law, not the piecewise sRGB curve).
 constexpr float kGamma = 2.2f;
 
-// ---- EGL display sharing
+// ---- EGL display lifetime
 //
-// EGL displays are process-global: eglGetPlatformDisplay returns the same handle each time and
-// one eglTerminate ends it for every context on it. So renderers that overlap in time count
-// their references and the last one terminates the display. This counter mirrors EGL's own
-// global; it holds no other state.
-std::mutex& displayMutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<EGLDisplay, int>& displayRefs() {
-  static std::map<EGLDisplay, int> refs;
-  return refs;
-}
+// EGL displays are process-global: eglGetPlatformDisplay returns the same handle every time,
+// eglInitialize on an initialised display is a no-op, and one eglTerminate would end it for
+// every renderer still using it. So renderers never terminate the display: it lives as long
+// as the process (like openvdb::initialize). This also keeps Mesa's driver loaded between
+// renderers instead of re-loading it (20-85 ms each, ../shared/stack.md §3) and lets leak
+// checkers see its one-time allocations as reachable rather than as leaks of an unloaded library.
 
 std::string hex(EGLint code) {
   char buf[16];
@@ -105,28 +97,12 @@ EGLDisplay tryInitialize(EGLDisplay d, const std::string& label, std::string& lo
     log += "; " + label + ": no display (" + hex(eglGetError()) + ")";
     return EGL_NO_DISPLAY;
   }
-  std::lock_guard<std::mutex> lock(displayMutex());
-  int& refs = displayRefs()[d];
-  if (refs == 0) {
-    EGLint major = 0, minor = 0;
-    if (!eglInitialize(d, &major, &minor)) {
-      log += "; " + label + ": eglInitialize failed (" + hex(eglGetError()) + ")";
-      displayRefs().erase(d);
-      return EGL_NO_DISPLAY;
-    }
+  EGLint major = 0, minor = 0;
+  if (!eglInitialize(d, &major, &minor)) {
+    log += "; " + label + ": eglInitialize failed (" + hex(eglGetError()) + ")";
+    return EGL_NO_DISPLAY;
   }
-  ++refs;
   return d;
-}
-
-void releaseDisplay(EGLDisplay d) {
-  std::lock_guard<std::mutex> lock(displayMutex());
-  auto it = displayRefs().find(d);
-  if (it == displayRefs().end()) return;
-  if (--it->second == 0) {
-    eglTerminate(d);
-    displayRefs().erase(it);
-  }
 }
 
 // Order of preference:
@@ -485,8 +461,7 @@ void OffscreenRenderer::Impl::destroy() {
     eglDestroyContext(display, context);
     context = EGL_NO_CONTEXT;
   }
-  releaseDisplay(display);
-  display = EGL_NO_DISPLAY;
+  display = EGL_NO_DISPLAY;  // never terminated: see "EGL display lifetime" above
 }
 
 OffscreenRenderer::OffscreenRenderer(int width, int height) {
