@@ -12,7 +12,11 @@
 #include <vector>
 
 #include "core/profile.h"
+#include "sketch/stamp_mesh.h"
 #include "sketch/voxelize.h"
+
+#include <filesystem>
+#include <fstream>
 
 using namespace physketch;
 using namespace physketch::sketch;
@@ -37,6 +41,30 @@ std::string helixStroke(const std::string& brush, int samples) {
     s += line;
   }
   return s;
+}
+
+// A closed UV sphere of radius r with `stacks` x `slices` quads split in two (poles as fans).
+void writeUvSphere(const std::string& path, double r, int stacks, int slices) {
+  std::ofstream out(path);
+  out << "v 0 " << r << " 0\n";
+  for (int i = 1; i < stacks; ++i) {
+    const double th = M_PI * i / stacks;
+    for (int j = 0; j < slices; ++j) {
+      const double ph = 2 * M_PI * j / slices;
+      out << "v " << r * std::sin(th) * std::cos(ph) << " " << r * std::cos(th) << " " << r * std::sin(th) * std::sin(ph)
+          << "\n";
+    }
+  }
+  out << "v 0 " << -r << " 0\n";
+  auto idx = [&](int ring, int j) { return 2 + (ring - 1) * slices + (j % slices); };
+  const int south = 2 + (stacks - 1) * slices;
+  for (int j = 0; j < slices; ++j) out << "f 1 " << idx(1, j + 1) << " " << idx(1, j) << "\n";
+  for (int i = 1; i + 1 < stacks; ++i)
+    for (int j = 0; j < slices; ++j) {
+      out << "f " << idx(i, j) << " " << idx(i, j + 1) << " " << idx(i + 1, j + 1) << "\n";
+      out << "f " << idx(i, j) << " " << idx(i + 1, j + 1) << " " << idx(i + 1, j) << "\n";
+    }
+  for (int j = 0; j < slices; ++j) out << "f " << south << " " << idx(stacks - 1, j) << " " << idx(stacks - 1, j + 1) << "\n";
 }
 
 }  // namespace
@@ -76,5 +104,24 @@ int main(int argc, char** argv) {
     std::printf("sketch,%s,%zu,%d,voxelize_ms,%.3f,ms\n", kase.c_str(), n, threads, 1e3 * median(t));
     std::printf("sketch,%s,%zu,%d,stamps,%ld,count\n", kase.c_str(), n, threads, stamps);
   }
+  // Stamping a 100k-triangle closed mesh (radius 0.2 m: 40 % of the workspace width).
+  const std::string meshPath = (std::filesystem::temp_directory_path() / "physketch_bench_sphere.obj").string();
+  writeUvSphere(meshPath, 1.0, 224, 224);
+  std::vector<double> tl, tv;
+  std::size_t faces = 0, cells = 0;
+  for (int r = 0; r < repeats; ++r) {
+    const double t0 = nowSeconds();
+    const StampMesh mesh = StampMesh::load(meshPath);
+    const double t1 = nowSeconds();
+    cells = mesh.voxelize(map, 0.2, Mat3::Identity(), Vec3(0.0, 0.5, 0.0)).size();
+    tv.push_back(nowSeconds() - t1);
+    tl.push_back(t1 - t0);
+    faces = mesh.faceCount();
+  }
+  std::filesystem::remove(meshPath);
+  char kase[64];
+  std::snprintf(kase, sizeof kase, "stamp_sphere_%zutris", faces);
+  std::printf("sketch,%s,%zu,%d,load_ms,%.3f,ms\n", kase, cells, threads, 1e3 * median(tl));
+  std::printf("sketch,%s,%zu,%d,voxelize_ms,%.3f,ms\n", kase, cells, threads, 1e3 * median(tv));
   return 0;
 }

@@ -7,6 +7,7 @@
 #include <unordered_set>
 
 #include "core/error.h"
+#include "sketch/stamp_mesh.h"
 
 namespace physketch::sketch {
 namespace {
@@ -328,10 +329,14 @@ class Builder {
       case Operation::Kind::kStamp: {
         const std::int16_t mat = resolveMaterial(op);
         cur_->material = mat;
-        if (!stamps_)
-          throw InputError(file_.path, op.line, "path", "mesh stamps are not available in this tool");
         try {
-          stamps_(op.stamp, sk_.mapping, cells);
+          if (stamps_) {
+            stamps_(op.stamp, sk_.mapping, cells);
+          } else {
+            auto it = meshes_.find(op.stamp.path);
+            if (it == meshes_.end()) it = meshes_.emplace(op.stamp.path, StampMesh::load(op.stamp.path)).first;
+            cells = it->second.voxelize(sk_.mapping, op.stamp.scale, op.stamp.rotation, op.stamp.translation);
+          }
         } catch (const InputError& e) {
           // The mesh file's own error, reported against the stamp record that named it.
           throw InputError(file_.path, op.line, "path", e.what());
@@ -534,6 +539,7 @@ class Builder {
   const StrokeFile& file_;
   const std::vector<Material>& materials_;
   const StampVoxelizer& stamps_;
+  std::map<std::string, StampMesh> meshes_;  // stamp meshes by path, loaded once
   Sketch sk_;
   double h_;
   std::vector<std::uint8_t> alive_;

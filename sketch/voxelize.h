@@ -82,8 +82,8 @@ Solid brushSolid(const Stroke& stroke, const Vec3& position, double pressure, co
 // face (so the mirrored set is exact): i' = 2m - i on the mirror axis.
 Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& mapping);
 
-// Voxelizes a mesh stamp into cells (sketch/mesh_stamp.cpp, CGAL). Injected so
-// sketch tests and tools can run without it; nullptr means stamps are an error.
+// Voxelizes a mesh stamp into cells. nullptr (the default) uses StampMesh (CGAL,
+// sketch/stamp_mesh.cpp); tools may inject their own.
 using StampVoxelizer = std::function<void(const MeshStamp&, const GridMapping&, std::vector<Vec3i>&)>;
 
 // Replays the active operations that start before the play time, in file order;
