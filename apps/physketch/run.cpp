@@ -347,12 +347,14 @@ int runScene(const RunOptions& opt) {
     const double perFrame = written > 1 ? 1.0 / (written - 1) : 0.0;
     json passes = json::array();
     for (const auto& e : world.profile().entries())
-      passes.push_back({{"pass", e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
+      if (e.calls > 0)  // passes the scene did not need never ran: leave them out
+        passes.push_back({{"pass", e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
                         {"ms_per_frame", e.seconds * 1e3 * perFrame}});
     const double renderFrames = written > 0 ? 1.0 / written : 0.0;
     for (const auto& e : renderProfile.entries())
-      passes.push_back({{"pass", "render." + e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
-                        {"ms_per_frame", e.name == "mesh" ? 0.0 : e.seconds * 1e3 * renderFrames}});
+      if (e.calls > 0)
+        passes.push_back({{"pass", "render." + e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
+                          {"ms_per_frame", e.seconds * 1e3 * renderFrames}});
     rep["passes"] = passes;
     rep["frames"] = {{"written", written}, {"requested", frames}, {"fps", sc.fps},
                      {"width", sc.width}, {"height", sc.height}, {"triangles", triangles},
