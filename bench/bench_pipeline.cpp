@@ -67,13 +67,7 @@ int main(int argc, char** argv) {
   row("pipeline", "hello", n, threads, "voxelize_ms", 1e3 * median(tv), "ms");
 
   const std::vector<BodyRange>& bodies = sk->bodies;
-  pbd::PbdParams pp;
-  pp.dt = sc.dt;
-  pp.substeps = sc.substeps;
-  pp.iterations = sc.iterations;
-  pp.gravity = sc.gravity;
-  pp.groundY = sc.groundY;
-  pp.particleRadius = 0.5 * mapping.voxelSize();
+  const pbd::PbdParams pp = pbd::paramsFromScene(sc, 0.5 * mapping.voxelSize());
   pbd::PbdWorld world(sk->particles, bodies, sc.materials, pp);
   std::vector<double> ts;
   const int steps = static_cast<int>(sc.duration / sc.dt);

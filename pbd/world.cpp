@@ -30,6 +30,17 @@ void forParticles(std::size_t n, F&& f) {
 
 }  // namespace
 
+PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius) {
+  PbdParams p;
+  p.dt = scene.dt;
+  p.substeps = scene.substeps;
+  p.iterations = scene.iterations;
+  p.gravity = scene.gravity;
+  p.groundY = scene.groundY;
+  p.particleRadius = particleRadius;
+  return p;
+}
+
 Mat4f BodyPose::model() const {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
   const Mat3 R = rotation.toRotationMatrix();

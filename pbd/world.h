@@ -30,6 +30,7 @@
 #include "core/math.h"
 #include "core/particles.h"
 #include "core/profile.h"
+#include "core/scene.h"
 
 namespace physketch::pbd {
 
@@ -42,6 +43,9 @@ struct PbdParams {
   double particleRadius = 0.0;  // m; half the particle spacing
   double maxSpeed = 100.0;    // m/s; the guard's explosion bound
 };
+
+// The solver settings a scene file asks for; the radius is half the sketch's voxel size.
+PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius);
 
 // Pose of a rigid body: world = R (rest - restCentre) + centre.
 struct BodyPose {

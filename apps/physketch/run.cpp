@@ -55,14 +55,7 @@ Prepared prepare(const std::string& scenePath) {
 }
 
 pbd::PbdParams pbdParams(const SceneDesc& s, const sketch::GridMapping& m) {
-  pbd::PbdParams p;
-  p.dt = s.dt;
-  p.substeps = s.substeps;
-  p.iterations = s.iterations;
-  p.gravity = s.gravity;
-  p.groundY = s.groundY;
-  p.particleRadius = 0.5 * m.voxelSize();
-  return p;
+  return pbd::paramsFromScene(s, 0.5 * m.voxelSize());
 }
 
 // Writes text to path atomically (temporary file + rename).
@@ -130,10 +123,25 @@ json planJson(const pbd::PbdWorld& world) {
   return a;
 }
 
+// Runs a subcommand body and maps its exceptions to the CLI's exit codes:
+// InputError -> 1 (bad input, message names file:line:field), anything else -> 2.
+template <class F>
+int withExitCodes(F&& body) {
+  try {
+    return body();
+  } catch (const InputError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitRuntime;
+  }
+}
+
 }  // namespace
 
 int lintScene(const std::string& scenePath) {
-  try {
+  return withExitCodes([&] {
     const Prepared p = prepare(scenePath);
     const SceneDesc& sc = p.scene;
     const sketch::Sketch& sk = *p.sketch;
@@ -164,17 +172,11 @@ int lintScene(const std::string& scenePath) {
     for (const auto& w : sk.warnings) std::printf("warning: %s\n", w.c_str());
     std::printf("%zu warning(s), no errors\n", sk.warnings.size());
     return kExitOk;
-  } catch (const InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitRuntime;
-  }
+  });
 }
 
 int printPlan(const std::string& scenePath) {
-  try {
+  return withExitCodes([&] {
     Prepared p = prepare(scenePath);
     pbd::PbdWorld world(p.sketch->particles, p.bodies, p.scene.materials, pbdParams(p.scene, p.sketch->mapping));
     std::cout << "scene " << p.scene.path << ": " << p.sketch->particles.size() << " particles, " << p.bodies.size()
@@ -184,30 +186,21 @@ int printPlan(const std::string& scenePath) {
     for (const auto& pass : world.plan()) std::cout << "  " << pass.name << "  (" << pass.runs << ")\n";
     std::cout << "per frame: " << p.scene.stepsPerFrame() << " steps, then mesh transform, draw, png\n";
     return kExitOk;
-  } catch (const InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitRuntime;
-  }
+  });
 }
 
 int runScene(const RunOptions& opt) {
   const double tStart = nowSeconds();
   Prepared p;
-  try {
-    p = prepare(opt.scene);
-  } catch (const InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitRuntime;
-  }
+  if (const int rc = withExitCodes([&] {
+        p = prepare(opt.scene);
+        return kExitOk;
+      });
+      rc != kExitOk)
+    return rc;
   const double tPrepared = nowSeconds();
 
-  try {
+  return withExitCodes([&] {
     const int threads = opt.threads > 0 ? opt.threads : tbb::info::default_concurrency();
     tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
     const SceneDesc& sc = p.scene;
@@ -371,13 +364,7 @@ int runScene(const RunOptions& opt) {
       std::cerr << "physketch: " << sk.particles.size() << " particles, " << p.bodies.size() << " bodies, " << written
                 << " frames in " << (tEnd - tStart) << " s -> " << out.string() << "\n";
     return kExitOk;
-  } catch (const InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitRuntime;
-  }
+  });
 }
 
 }  // namespace physketch::app

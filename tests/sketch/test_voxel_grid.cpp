@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "sketch/voxelize.h"
+#include "tests/sketch/cells.h"
 
 using namespace physketch;
 using namespace physketch::sketch;
@@ -40,35 +41,7 @@ void add(StrokeFile& f, Operation op) {
   f.operations.push_back(std::move(op));
 }
 
-// Number of 26-connected components of a set of cells.
-int components(const std::vector<Vec3i>& cells) {
-  auto key = [](const Vec3i& c) { return GridMapping::linear(c); };
-  std::set<std::int64_t> all, seen;
-  for (const auto& c : cells) all.insert(key(c));
-  int n = 0;
-  for (const auto& start : cells) {
-    if (seen.count(key(start))) continue;
-    ++n;
-    std::queue<Vec3i> q;
-    q.push(start);
-    seen.insert(key(start));
-    while (!q.empty()) {
-      const Vec3i c = q.front();
-      q.pop();
-      for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const Vec3i nb = c + Vec3i(dx, dy, dz);
-            const auto k = key(nb);
-            if (all.count(k) && !seen.count(k)) {
-              seen.insert(k);
-              q.push(nb);
-            }
-          }
-    }
-  }
-  return n;
-}
+using physketch::sketch::testing::components;
 
 }  // namespace
 
