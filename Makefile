@@ -5,6 +5,10 @@ BUILD      ?= build
 BUILD_ASAN ?= build-asan
 JOBS       ?= $(shell nproc)
 CMAKE_ARGS ?=
+# CI (CI=true) builds with warnings as errors.
+ifeq ($(CI),true)
+CMAKE_ARGS += -DPHYSKETCH_WERROR=ON
+endif
 LAUNCHER   := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 export CCACHE_BASEDIR := $(CURDIR)
 PHYSKETCH  := $(BUILD)/apps/physketch/physketch

@@ -76,6 +76,23 @@ TEST(Cli, HelloSceneWritesFramesAndReport) {
   fs::remove_all(dir);
 }
 
+TEST(Cli, FramesAreBitIdenticalForOneAndTwoThreads) {
+  const fs::path dir = freshDir("threads");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
+  for (int t : {1, 2})
+    ASSERT_EQ(runCli("run '" + scene + "' -q --frames 12 --threads " + std::to_string(t) + " --out '" +
+                         (dir / ("t" + std::to_string(t))).string() + "'",
+                     dir)
+                  .code,
+              0);
+  for (int i = 0; i < 12; i += 11) {  // frame 11 is t = 0.37 s: the bodies are falling and landing
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", i);
+    EXPECT_EQ(slurp(dir / "t1" / "frames" / name), slurp(dir / "t2" / "frames" / name)) << name;
+  }
+  fs::remove_all(dir);
+}
+
 TEST(Cli, BrokenSceneExitsOneWithFileLineFieldAndWritesNothing) {
   const fs::path dir = freshDir("broken");
   {
