@@ -186,10 +186,9 @@ class Builder {
     std::int32_t& cell = sk_.grid.at(c);
     if (cell >= 0) return;  // one particle per voxel, never two at one place
     if (live_ >= kMaxParticles) throw CapReached{};
-    const Vec3 q = sk_.mapping.toWorld(c);  // Eq. 5
-    cell = sk_.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
-                              cur_->id, material);
-    sk_.cells.push_back(c);
+    // A compact record while sketching; positions (Eq. 5) and the SoA arrays are built once in finalize().
+    cell = static_cast<std::int32_t>(protos_.size());
+    protos_.push_back(Proto{c, cur_->id, material});
     alive_.push_back(1);
     ++live_;
     ++cur_->created;
@@ -386,15 +385,11 @@ class Builder {
       }
     }
     cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
-    for (const Grab& g : grabbed) sk_.grid.at(sk_.cells[static_cast<std::size_t>(g.particle)]) = -1;
+    for (const Grab& g : grabbed) sk_.grid.at(protos_[static_cast<std::size_t>(g.particle)].cell) = -1;
     for (const Grab& g : grabbed) {
       drop(g.to);  // a particle in the way is replaced (counted as removed by this move)
       sk_.grid.at(g.to) = g.particle;
-      sk_.cells[static_cast<std::size_t>(g.particle)] = g.to;
-      const Vec3 q = sk_.mapping.toWorld(g.to);
-      sk_.particles.x[static_cast<std::size_t>(g.particle)] = static_cast<float>(q.x());
-      sk_.particles.y[static_cast<std::size_t>(g.particle)] = static_cast<float>(q.y());
-      sk_.particles.z[static_cast<std::size_t>(g.particle)] = static_cast<float>(q.z());
+      protos_[static_cast<std::size_t>(g.particle)].cell = g.to;
       ++cur_->moved;
     }
   }
@@ -418,12 +413,12 @@ class Builder {
         bodyOfOp[static_cast<std::size_t>(op.id)] = it->second;
       }
     }
-    const std::size_t n = sk_.particles.size();
+    const std::size_t n = protos_.size();
     std::vector<std::int64_t> count(names.size() + 1, 0);
     std::vector<int> bodyOf(n, -1);
     for (std::size_t i = 0; i < n; ++i) {
       if (!alive_[i]) continue;
-      bodyOf[i] = bodyOfOp[static_cast<std::size_t>(sk_.particles.stroke[i])];
+      bodyOf[i] = bodyOfOp[static_cast<std::size_t>(protos_[i].stroke)];
       ++count[static_cast<std::size_t>(bodyOf[i]) + 1];
     }
     // Counting sort by body: stable, so particles keep creation order within a body.
@@ -441,13 +436,15 @@ class Builder {
     for (std::size_t i = 0; i < n; ++i) {
       if (bodyOf[i] < 0) continue;
       const auto j = static_cast<std::size_t>(next[static_cast<std::size_t>(bodyOf[i])]++);
-      out.x[j] = sk_.particles.x[i];
-      out.y[j] = sk_.particles.y[i];
-      out.z[j] = sk_.particles.z[i];
+      const Proto& pr = protos_[i];
+      const Vec3 q = sk_.mapping.toWorld(pr.cell);  // Eq. 5: the particle sits at its voxel centre
+      out.x[j] = static_cast<float>(q.x());
+      out.y[j] = static_cast<float>(q.y());
+      out.z[j] = static_cast<float>(q.z());
       out.invMass[j] = 0.0f;  // static while sketched (Phys-Sketch §4)
-      out.stroke[j] = sk_.particles.stroke[i];
-      out.material[j] = sk_.particles.material[i];
-      cells[j] = sk_.cells[i];
+      out.stroke[j] = pr.stroke;
+      out.material[j] = pr.material;
+      cells[j] = pr.cell;
     }
     for (std::size_t b = 0; b < names.size(); ++b) {
       const std::int64_t c = count[b + 1];
@@ -471,7 +468,7 @@ class Builder {
     }
     // Rebuild M with the final indices.
     for (std::size_t i = 0; i < n; ++i)
-      if (alive_[i]) sk_.grid.at(sk_.cells[i]) = -1;
+      if (alive_[i]) sk_.grid.at(protos_[i].cell) = -1;
     for (std::size_t j = 0; j < cells.size(); ++j) sk_.grid.at(cells[j]) = static_cast<std::int32_t>(j);
     sk_.particles = std::move(out);
     sk_.cells = std::move(cells);
@@ -542,6 +539,13 @@ class Builder {
   std::map<std::string, StampMesh> meshes_;  // stamp meshes by path, loaded once
   Sketch sk_;
   double h_;
+  // Particles while sketching: grid cell, creating operation, material (the SoA arrays are built at the end).
+  struct Proto {
+    Vec3i cell;
+    std::int32_t stroke;
+    std::int16_t material;
+  };
+  std::vector<Proto> protos_;
   std::vector<std::uint8_t> alive_;
   std::int64_t live_ = 0;
   OperationSummary* cur_ = nullptr;
