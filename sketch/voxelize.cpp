@@ -120,11 +120,21 @@ class Builder {
       r.end = op.endTime() - play;
       if (s.op == StrokeOp::kRemove) {
         r.kind = RuntimeOp::Kind::kRemove;
-        // The stamps of a segment happen when its end sample is reached.
+        // The stamps of a segment happen when its end sample is reached. Each keeps only
+        // the cells its predecessor did not cover (as before play), so a long stroke with a
+        // big brush stores its swept volume once rather than once per stamp.
+        Solid prev;
+        bool havePrev = false;
         for (const Stamp& st : stampsOf(s)) {
-          rasterize(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping, cells);
+          const Solid brush = brushSolid(s, st.position, st.pressure, st.direction, h_);
+          rasterizeRows(brush, havePrev ? &prev : nullptr, sk_.mapping, cells);
+          prev = brush;
+          havePrev = true;
           mirrored(cells);
-          r.removals.emplace_back(st.time - play, cells);
+          if (!r.removals.empty() && r.removals.back().first == st.time - play)
+            r.removals.back().second.insert(r.removals.back().second.end(), cells.begin(), cells.end());
+          else
+            r.removals.emplace_back(st.time - play, cells);
           ++cur_->stamps;
         }
       } else {
