@@ -47,6 +47,9 @@ GuardRecord checkParticles(const ParticleArrays& p, const GuardLimits& limits, c
            "A non-finite value usually comes from a degenerate constraint; lower 'dt' or raise 'substeps'.");
       return r;
     }
+    // Static and kinematic particles (inverse mass 0) move as prescribed: their speed and
+    // depth are the input's, not the solver's, so only NaN is checked for them.
+    if (!p.invMass.empty() && p.invMass[i] == 0.0f) continue;
     const double s2 = double(vx) * vx + double(vy) * vy + double(vz) * vz;
     if (s2 > maxSpeed2) {
       fill(GuardKind::kExplosion, std::sqrt(s2), limits.maxSpeed,

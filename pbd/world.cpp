@@ -366,6 +366,17 @@ void PbdWorld::kinematic(int substep) {
     centre_[b] = kinStart_[b] + a * (kinTarget_[b] - kinStart_[b]);
     const Mat3 R = rot_[b].toRotationMatrix();
     const BodyRange& br = bodies_[b];
+    // The ground stops a carried body as it stops any other: a brush that dips below the
+    // floor slides the body along it instead of pushing it through.
+    double lowest = 1e300;
+    for (std::int32_t i = br.first; i < br.first + br.count; ++i)
+      if (alive_[i]) lowest = std::min(lowest, (R * Vec3(rx_[i], ry_[i], rz_[i])).y());
+    const double floorY = params_.groundY + params_.particleRadius;
+    if (centre_[b].y() + lowest < floorY) {
+      const double lift = floorY - (centre_[b].y() + lowest);
+      centre_[b].y() += lift;
+      kinTarget_[b].y() = std::max(kinTarget_[b].y(), centre_[b].y());
+    }
     for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
       if (!alive_[i]) continue;
       const Vec3 g = R * Vec3(rx_[i], ry_[i], rz_[i]) + centre_[b];

@@ -111,3 +111,15 @@ TEST(Runtime, RemoveAfterPlayCutsTheBodyAndRebuildsItsMass) {
   r.steps(50);
   EXPECT_NEAR(r.centre(0).y(), c0.y(), 1e-3);
 }
+
+TEST(Runtime, AMoveBelowTheGroundSlidesTheBodyAlongItInsteadOfThroughIt) {
+  Sim r("primitive box wood 0  0 0.05 0  0.1 0.1 0.1\nplay 0\n"
+        "stroke move sphere 0.05\nsample 0.1 0 0.08 0\nsample 0.3 0.2 0.0 0\n");
+  r.steps(5);
+  const Vec3 c0 = r.centre(0);
+  r.steps(25);  // carried to x + 0.2 while the brush dips 0.08 m: the ground holds it up
+  EXPECT_NEAR(r.centre(0).x() - c0.x(), 0.2, 1e-6);
+  EXPECT_NEAR(r.centre(0).y(), c0.y(), 1e-6);
+  r.steps(30);
+  EXPECT_EQ(r.world.guard().kind, GuardKind::kNone);
+}

@@ -11,6 +11,7 @@ namespace {
 ParticleArrays threeParticles() {
   ParticleArrays p;
   for (int i = 0; i < 3; ++i) p.push(0.0f, 1.0f, 0.0f, 0, 0);
+  p.invMass.assign(3, 1.0f);  // dynamic
   return p;
 }
 }  // namespace
@@ -52,4 +53,18 @@ TEST(Guard, ExplosionAndPenetrationBounds) {
   EXPECT_EQ(r.particle, 2);
   p.y[2] = 0.0005f;  // 0.0095 deep: within the bound
   EXPECT_FALSE(checkParticles(p, lim, "update", 2).tripped());
+}
+
+TEST(Guard, PrescribedParticlesAreCheckedForNaNOnly) {
+  auto p = threeParticles();
+  GuardLimits lim;
+  lim.maxSpeed = 10.0;
+  lim.maxPenetration = 0.01;
+  lim.particleRadius = 0.01;
+  p.invMass[1] = 0.0f;  // kinematic: carried by a brush
+  p.vx[1] = 500.0f;
+  p.y[1] = -1.0f;
+  EXPECT_FALSE(checkParticles(p, lim, "update", 0).tripped());
+  p.z[1] = std::nanf("");
+  EXPECT_EQ(checkParticles(p, lim, "update", 0).kind, GuardKind::kNaN);
 }
