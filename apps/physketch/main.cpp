@@ -9,9 +9,11 @@ int main(int argc, char** argv) {
   using namespace physketch::app;
   CLI::App cli{
       "physketch: turns scripted 3D brush strokes into physically simulated objects and renders them off-screen.\n\n"
-      "A scene file (how to run) names a stroke file (what was drawn). Strokes are voxelized into a 151^3 grid,\n"
-      "each stroke becomes a rigid body, the bodies fall under gravity onto the ground, and every frame is\n"
-      "rendered to PNG. File formats: docs/formats.md.\n\n"
+      "A scene file (how to run) names a stroke file (what was drawn: strokes, primitives, mesh stamps,\n"
+      "removes, moves, mirror, undo). Everything drawn before 'play' is voxelized into a 151^3 grid; each\n"
+      "stroke (or named body) becomes a rigid body that falls under gravity onto the ground; what is drawn\n"
+      "after 'play' happens while the bodies move. Every frame is rendered to PNG.\n"
+      "File formats: docs/formats.md. Examples: scenes/hello.scene, scenes/play.scene.\n\n"
       "Examples:\n"
       "  physketch run scenes/hello.scene --out out/hello      # frames in out/hello/frames, report.json\n"
       "  physketch run scenes/hello.scene --frames 10 --threads 1\n"

@@ -185,6 +185,13 @@ int printPlan(const std::string& scenePath) {
     std::cout << "per step:\n";
     for (const auto& pass : world.plan()) std::cout << "  " << pass.name << "  (" << pass.runs << ")\n";
     std::cout << "per frame: " << p.scene.stepsPerFrame() << " steps, then mesh transform, draw, png\n";
+    if (!p.sketch->runtime.empty()) {
+      int counts[3] = {0, 0, 0};
+      for (const auto& op : p.sketch->runtime) ++counts[static_cast<int>(op.kind)];
+      std::cout << "after play: " << counts[0] << " create(s) (a new body each, re-meshed once), " << counts[1]
+                << " remove(s) (the cut bodies are rebuilt and re-meshed), " << counts[2]
+                << " move(s) (the 'kinematic' pass runs while a body is carried)\n";
+    }
     return kExitOk;
   });
 }
