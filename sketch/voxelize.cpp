@@ -21,9 +21,12 @@ const char* kAxisNames[] = {"x", "y", "z"};
 
 class Builder {
  public:
+  // `alreadyLive` particles exist elsewhere and count towards the cap (the sketch's,
+  // when this builder voxelizes the creates that happen after play).
   Builder(const StrokeFile& file, const std::vector<Material>& materials, const StampVoxelizer& stamps,
-          const GridMapping& mapping)
-      : file_(file), materials_(materials), stamps_(stamps), sk_(mapping), h_(mapping.voxelSize()) {}
+          const GridMapping& mapping, std::int64_t alreadyLive = 0)
+      : file_(file), materials_(materials), stamps_(stamps), sk_(mapping), h_(mapping.voxelSize()),
+        live_(alreadyLive) {}
 
   Sketch run() {
     const double play = file_.playTime();
@@ -72,7 +75,7 @@ class Builder {
     rt.active = ids;
     rt.play = 1e300;
     for (int id : ids) rt.operations[static_cast<std::size_t>(id)].body.clear();  // one body per operation
-    Sketch made = Builder(rt, materials_, stamps_, sk_.mapping).run();
+    Sketch made = Builder(rt, materials_, stamps_, sk_.mapping, static_cast<std::int64_t>(sk_.particles.size())).run();
     for (std::size_t b = 0; b < made.bodies.size(); ++b) {
       const BodyRange& br = made.bodies[b];
       const Operation& op = file_.operations[static_cast<std::size_t>(br.stroke)];
@@ -557,7 +560,7 @@ class Builder {
   };
   std::vector<Proto> protos_;
   std::vector<std::uint8_t> alive_;
-  std::int64_t live_ = 0;
+  std::int64_t live_;  // particles alive now, including those counted in from elsewhere
   OperationSummary* cur_ = nullptr;
 };
 

@@ -298,3 +298,15 @@ TEST(Voxelize, OperationsAfterPlayBecomeRuntimeOperations) {
   EXPECT_DOUBLE_EQ(sk.runtime[2].removals.front().first, 1.5);
   EXPECT_DOUBLE_EQ(sk.runtime[2].removals.back().first, 2.0);
 }
+
+TEST(Voxelize, CreatesAfterPlayCountTowardsTheCap) {
+  // Each box alone is ~421k particles (under the cap); together they are over it.
+  try {
+    sketchOf("primitive box wood 0  0 0.5 0  0.495 0.495 0.495\nplay 1\n"
+             "primitive box wood 2  0 0.5 0  0.495 0.495 0.495\n");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 4);
+    EXPECT_NE(std::string(e.what()).find("particle cap"), std::string::npos);
+  }
+}
