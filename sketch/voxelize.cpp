@@ -12,7 +12,34 @@
 namespace physketch::sketch {
 namespace {
 
-void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, std::vector<Vec3i>& out);
+// Row intervals [lo, hi] of one stamp over its bounding rows (j, k); empty rows have lo > hi.
+class RowCache {
+ public:
+  void reset(int j0, int j1, int k0, int k1) {
+    j0_ = j0, k0_ = k0, nj_ = std::max(0, j1 - j0 + 1), nk_ = std::max(0, k1 - k0 + 1);
+    lo_.assign(static_cast<std::size_t>(nj_) * static_cast<std::size_t>(nk_), 1);
+    hi_.assign(lo_.size(), 0);
+  }
+  void clear() { reset(0, -1, 0, -1); }
+  void set(int j, int k, int a, int b) {
+    const std::size_t at = index(j, k);
+    lo_[at] = a, hi_[at] = b;
+  }
+  void get(int j, int k, int& a, int& b) const {
+    if (j < j0_ || k < k0_ || j >= j0_ + nj_ || k >= k0_ + nk_) return;
+    const std::size_t at = index(j, k);
+    a = lo_[at], b = hi_[at];
+  }
+
+ private:
+  std::size_t index(int j, int k) const {
+    return static_cast<std::size_t>(k - k0_) * static_cast<std::size_t>(nj_) + static_cast<std::size_t>(j - j0_);
+  }
+  int j0_ = 0, k0_ = 0, nj_ = 0, nk_ = 0;
+  std::vector<int> lo_, hi_;
+};
+
+void rasterizeRows(const Solid& solid, RowCache* cache, const GridMapping& m, std::vector<Vec3i>& out);
 
 // Thrown when the particle cap is reached; voxelize() turns it into an InputError naming the operation.
 struct CapReached {};
@@ -126,13 +153,9 @@ class Builder {
         // The stamps of a segment happen when its end sample is reached. Each keeps only
         // the cells its predecessor did not cover (as before play), so a long stroke with a
         // big brush stores its swept volume once rather than once per stamp.
-        Solid prev;
-        bool havePrev = false;
+        RowCache rows;
         for (const Stamp& st : stampsOf(s)) {
-          const Solid brush = brushSolid(s, st.position, st.pressure, st.direction, h_);
-          rasterizeRows(brush, havePrev ? &prev : nullptr, sk_.mapping, cells);
-          prev = brush;
-          havePrev = true;
+          rasterizeRows(brushSolid(s, st.position, st.pressure, st.direction, h_), &rows, sk_.mapping, cells);
           mirrored(cells);
           if (!r.removals.empty() && r.removals.back().first == st.time - play)
             r.removals.back().second.insert(r.removals.back().second.end(), cells.begin(), cells.end());
@@ -283,17 +306,13 @@ class Builder {
         }
         const std::int16_t mat = s.op == StrokeOp::kCreate ? resolveMaterial(op) : std::int16_t(-1);
         cur_->material = mat;
-        Solid prev;
-        bool havePrev = false;
+        RowCache rows;  // the previous stamp's row intervals
         for (const Stamp& st : stampsOf(s)) {
-          const Solid brush = brushSolid(s, st.position, st.pressure, st.direction, h_);
           // Consecutive stamps overlap almost entirely; cells inside the previous stamp
           // were already created (or removed) by this stroke, so only the new part is visited.
-          rasterizeRows(brush, havePrev ? &prev : nullptr, sk_.mapping, cells);
+          rasterizeRows(brushSolid(s, st.position, st.pressure, st.direction, h_), &rows, sk_.mapping, cells);
           applyCells(cells, op.mirror, mat);
           cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
-          prev = brush;
-          havePrev = true;
         }
         return;
       }
@@ -585,9 +604,10 @@ namespace {
 // Cells of a solid row by row (z, then y, then x ascending). For a convex solid each
 // row (j, k) is one interval of x found analytically from the line through the cell
 // centres, so the cost is one small solve per row instead of one test per cell.
-// `prev`, when given, is the previous stamp of the same stroke: cells inside it were
-// already handled, so only the part of each row outside it is emitted.
-void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, std::vector<Vec3i>& out) {
+// `cache`, when given, holds the row intervals of the previous stamp of the same stroke:
+// cells inside it were already handled, so only the part of each row outside it is
+// emitted; on return it holds this stamp's intervals.
+void rasterizeRows(const Solid& solid, RowCache* cache, const GridMapping& m, std::vector<Vec3i>& out) {
   out.clear();
   const double h = m.voxelSize();
   const Vec3 g = m.toGrid(solid.centre);
@@ -598,37 +618,28 @@ void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, 
                      std::min(kGridSize - 1, static_cast<int>(std::floor(g.y() + r))),
                      std::min(kGridSize - 1, static_cast<int>(std::floor(g.z() + r)))};
   bool any = false;
-  if (solid.convex() && (!prev || prev->convex())) {
-    // Row (j, k) is the line origin(j, k) + t * (h, 0, 0): t is the cell index i. In a
+  if (solid.convex()) {
+    // Row (j, k) is the line origin(j, k) + t * (h, 0, 0): t is the cell index i. In the
     // solid's local frame the origin is affine in (j, k), so it is built from three vectors.
-    struct LocalRows {
-      Vec3 o00, dj, dk, d;
-      LocalRows(const Solid& s, const GridMapping& map, double hh) {
-        const Mat3 Rt = s.rotation.transpose();
-        o00 = Rt * (map.toWorld(Vec3i(0, 0, 0)) - s.centre);
-        dj = Rt * Vec3(0, hh, 0);
-        dk = Rt * Vec3(0, 0, hh);
-        d = Rt * Vec3(hh, 0, 0);
-      }
-    };
-    const LocalRows cur(solid, m, h);
-    const LocalRows before = prev ? LocalRows(*prev, m, h) : cur;
-    const double r2 = r * r;
-    const bool sphereFast = solid.shape == SolidShape::kSphere && (!prev || prev->shape == SolidShape::kSphere);
+    const Mat3 Rt = solid.rotation.transpose();
+    const Vec3 o00 = Rt * (m.toWorld(Vec3i(0, 0, 0)) - solid.centre);
+    const Vec3 dj = Rt * Vec3(0, h, 0), dk = Rt * Vec3(0, 0, h), d = Rt * Vec3(h, 0, 0);
+    const bool sphere = solid.shape == SolidShape::kSphere;
     const double ra2 = (solid.a / h) * (solid.a / h);
-    const Vec3 gp = prev ? m.toGrid(prev->centre) : g;
-    const double rp2 = prev ? (prev->a / h) * (prev->a / h) : 0.0;
+    const double r2 = r * r;
+    RowCache next;
+    if (cache) next.reset(lo[1], hi[1], lo[2], hi[2]);
     for (int k = lo[2]; k <= hi[2]; ++k)
       for (int j = lo[1]; j <= hi[1]; ++j) {
         const double ej = j - g.y(), ek = k - g.z();
         if (ej * ej + ek * ek > r2) continue;  // the row misses the bounding sphere
         double t0, t1;
-        if (sphereFast) {  // the common brush: the row's chord in closed form, in cells
+        if (sphere) {  // the common brush: the row's chord in closed form, in cells
           const double w2 = ra2 - ej * ej - ek * ek;
           if (w2 < 0) continue;
           const double w = std::sqrt(w2);
           t0 = g.x() - w, t1 = g.x() + w;
-        } else if (!solid.lineIntervalLocal(cur.o00 + double(j) * cur.dj + double(k) * cur.dk, cur.d, t0, t1)) {
+        } else if (!solid.lineIntervalLocal(o00 + double(j) * dj + double(k) * dk, d, t0, t1)) {
           continue;
         }
         const int i0 = std::max(lo[0], static_cast<int>(std::ceil(t0)));
@@ -636,18 +647,9 @@ void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, 
         if (i0 > i1) continue;
         any = true;
         int p0 = 1, p1 = 0;  // previous stamp's cells on this row (empty by default)
-        double q0, q1;
-        if (sphereFast && prev) {
-          const double pj = j - gp.y(), pk = k - gp.z();
-          const double w2 = rp2 - pj * pj - pk * pk;
-          if (w2 >= 0) {
-            const double w = std::sqrt(w2);
-            p0 = static_cast<int>(std::ceil(gp.x() - w));
-            p1 = static_cast<int>(std::floor(gp.x() + w));
-          }
-        } else if (prev && prev->lineIntervalLocal(before.o00 + double(j) * before.dj + double(k) * before.dk, before.d, q0, q1)) {
-          p0 = static_cast<int>(std::ceil(q0));
-          p1 = static_cast<int>(std::floor(q1));
+        if (cache) {
+          cache->get(j, k, p0, p1);
+          next.set(j, k, i0, i1);
         }
         for (int i = i0; i <= i1; ++i) {
           if (i >= p0 && i <= p1) {
@@ -657,6 +659,7 @@ void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, 
           out.emplace_back(i, j, k);
         }
       }
+    if (cache) *cache = std::move(next);
   } else {
     const Mat3 Rt = solid.rotation.transpose();
     for (int k = lo[2]; k <= hi[2]; ++k)
@@ -666,6 +669,7 @@ void rasterizeRows(const Solid& solid, const Solid* prev, const GridMapping& m, 
           if (solid.containsLocal(local)) out.emplace_back(i, j, k);
         }
     any = !out.empty();
+    if (cache) cache->clear();  // a non-convex stamp leaves no intervals: the next one emits all its cells
   }
   if (!any) {
     // A solid smaller than a cell covers no cell centre: it still marks the cell it is in.
