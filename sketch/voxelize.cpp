@@ -50,9 +50,9 @@ class Builder {
  public:
   // `alreadyLive` particles exist elsewhere and count towards the cap (the sketch's,
   // when this builder voxelizes the creates that happen after play).
-  Builder(const StrokeFile& file, const std::vector<Material>& materials, const StampVoxelizer& stamps,
-          const GridMapping& mapping, std::int64_t alreadyLive = 0)
-      : file_(file), materials_(materials), stamps_(stamps), sk_(mapping), h_(mapping.voxelSize()),
+  Builder(const StrokeFile& file, const std::vector<Material>& materials, const GridMapping& mapping,
+          std::int64_t alreadyLive = 0)
+      : file_(file), materials_(materials), sk_(mapping), h_(mapping.voxelSize()),
         live_(alreadyLive) {}
 
   Sketch run() {
@@ -102,7 +102,7 @@ class Builder {
     rt.active = ids;
     rt.play = 1e300;
     for (int id : ids) rt.operations[static_cast<std::size_t>(id)].body.clear();  // one body per operation
-    Sketch made = Builder(rt, materials_, stamps_, sk_.mapping, static_cast<std::int64_t>(sk_.particles.size())).run();
+    Sketch made = Builder(rt, materials_, sk_.mapping, static_cast<std::int64_t>(sk_.particles.size())).run();
     for (std::size_t b = 0; b < made.bodies.size(); ++b) {
       const BodyRange& br = made.bodies[b];
       const Operation& op = file_.operations[static_cast<std::size_t>(br.stroke)];
@@ -361,13 +361,9 @@ class Builder {
         const std::int16_t mat = resolveMaterial(op);
         cur_->material = mat;
         try {
-          if (stamps_) {
-            stamps_(op.stamp, sk_.mapping, cells);
-          } else {
-            auto it = meshes_.find(op.stamp.path);
-            if (it == meshes_.end()) it = meshes_.emplace(op.stamp.path, StampMesh::load(op.stamp.path)).first;
-            cells = it->second.voxelize(sk_.mapping, op.stamp.scale, op.stamp.rotation, op.stamp.translation);
-          }
+          auto it = meshes_.find(op.stamp.path);
+          if (it == meshes_.end()) it = meshes_.emplace(op.stamp.path, StampMesh::load(op.stamp.path)).first;
+          cells = it->second.voxelize(sk_.mapping, op.stamp.scale, op.stamp.rotation, op.stamp.translation);
         } catch (const InputError& e) {
           // The mesh file's own error, reported against the stamp record that named it.
           throw InputError(file_.path, op.line, "path", e.what());
@@ -567,7 +563,6 @@ class Builder {
 
   const StrokeFile& file_;
   const std::vector<Material>& materials_;
-  const StampVoxelizer& stamps_;
   std::map<std::string, StampMesh> meshes_;  // stamp meshes by path, loaded once
   Sketch sk_;
   double h_;
@@ -721,9 +716,8 @@ Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& m) 
   return out;
 }
 
-Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
-                const StampVoxelizer& stamps) {
-  return Builder(file, materials, stamps, mapping).run();
+Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials) {
+  return Builder(file, materials, mapping).run();
 }
 
 }  // namespace physketch::sketch

@@ -3,7 +3,6 @@
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <string>
 #include <vector>
 
@@ -82,9 +81,6 @@ Solid brushSolid(const Stroke& stroke, const Vec3& position, double pressure, co
 // face (so the mirrored set is exact): i' = 2m - i on the mirror axis.
 Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& mapping);
 
-// Voxelizes a mesh stamp into cells. nullptr (the default) uses StampMesh (CGAL,
-// sketch/stamp_mesh.cpp); tools may inject their own.
-using StampVoxelizer = std::function<void(const MeshStamp&, const GridMapping&, std::vector<Vec3i>&)>;
 
 // Replays the active operations that start before the play time, in file order;
 // operations that start after it become RuntimeOps (creates are voxelized into a
@@ -93,7 +89,7 @@ using StampVoxelizer = std::function<void(const MeshStamp&, const GridMapping&, 
 // outside the workspace, a move that carries particles out of the workspace,
 // an unreadable stamp mesh, or a sketch that crosses the particle cap (naming
 // the operation that crossed it).
-Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
-                const StampVoxelizer& stamps = nullptr);
+// Mesh stamps are voxelized with StampMesh (CGAL, sketch/stamp_mesh.cpp).
+Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials);
 
 }  // namespace physketch::sketch
