@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "core/profile.h"
-#include "sketch/stamp_mesh.h"
+#include "sketch/mesh_stamp.h"
 #include "sketch/voxelize.h"
 
 #include <filesystem>
@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
     const double t0 = nowSeconds();
     const StampMesh mesh = StampMesh::load(meshPath);
     const double t1 = nowSeconds();
-    cells = mesh.voxelize(map, 0.2, Mat3::Identity(), Vec3(0.0, 0.5, 0.0)).size();
+    cells = voxelizeMesh(mesh, map, 0.2, Mat3::Identity(), Vec3(0.0, 0.5, 0.0)).size();
     tv.push_back(nowSeconds() - t1);
     tl.push_back(t1 - t0);
     faces = mesh.faceCount();

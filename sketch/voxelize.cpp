@@ -7,7 +7,7 @@
 #include <unordered_set>
 
 #include "core/error.h"
-#include "sketch/stamp_mesh.h"
+#include "sketch/mesh_stamp.h"
 
 namespace physketch::sketch {
 namespace {
@@ -363,7 +363,7 @@ class Builder {
         try {
           auto it = meshes_.find(op.stamp.path);
           if (it == meshes_.end()) it = meshes_.emplace(op.stamp.path, StampMesh::load(op.stamp.path)).first;
-          cells = it->second.voxelize(sk_.mapping, op.stamp.scale, op.stamp.rotation, op.stamp.translation);
+          cells = voxelizeMesh(it->second, sk_.mapping, op.stamp.scale, op.stamp.rotation, op.stamp.translation);
         } catch (const InputError& e) {
           // The mesh file's own error, reported against the stamp record that named it.
           throw InputError(file_.path, op.line, "path", e.what());

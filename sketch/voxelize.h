@@ -89,7 +89,7 @@ Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& map
 // outside the workspace, a move that carries particles out of the workspace,
 // an unreadable stamp mesh, or a sketch that crosses the particle cap (naming
 // the operation that crossed it).
-// Mesh stamps are voxelized with StampMesh (CGAL, sketch/stamp_mesh.cpp).
+// Mesh stamps are voxelized with StampMesh (CGAL, sketch/mesh_stamp.cpp).
 Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials);
 
 }  // namespace physketch::sketch

@@ -310,3 +310,16 @@ TEST(Voxelize, CreatesAfterPlayCountTowardsTheCap) {
     EXPECT_NE(std::string(e.what()).find("particle cap"), std::string::npos);
   }
 }
+
+TEST(Voxelize, AStampRecordWithABadMeshNamesTheStrokeLineAndTheMesh) {
+  try {
+    voxelize(parseStrokes("physketch-strokes 1\n\nstamp meshes/cube_open.obj wood 0 scale=0.1\n",
+                          PHYSKETCH_SOURCE_DIR "/scenes/x.strokes"),
+             kMap, materials());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 3);
+    EXPECT_EQ(e.field(), "path");
+    EXPECT_NE(std::string(e.what()).find("cube_open.obj: mesh is not closed"), std::string::npos) << e.what();
+  }
+}
