@@ -2,7 +2,7 @@
 // and the primitives. Prints CSV rows `bench,case,particles,threads,metric,value,unit`
 // with the median of --repeats runs.
 //
-//   bench_sketch [--threads N] [--repeats R]
+//   bench_sketch [--threads N] [--repeats R] [--only SUBSTRING]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -71,11 +71,13 @@ void writeUvSphere(const std::string& path, double r, int stacks, int slices) {
 
 int main(int argc, char** argv) {
   int repeats = 5, threads = 1;
+  std::string only;  // run only the cases whose name contains this (for profiling one case)
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
     else {
-      std::fprintf(stderr, "usage: bench_sketch [--threads N] [--repeats R]\n");
+      std::fprintf(stderr, "usage: bench_sketch [--threads N] [--repeats R] [--only SUBSTRING]\n");
       return 1;
     }
   }
@@ -87,6 +89,10 @@ int main(int argc, char** argv) {
   const char* brushes[] = {"sphere 0.02 wood", "sphere 0.05 wood", "sphere 0.1 wood", "cube 0.1 wood",
                            "capsule 0.05 wood orient=follow", "disc 0.1 wood orient=follow"};
   for (const char* brush : brushes) {
+    std::string kase = std::string("stroke10k_") + brush;
+    std::replace(kase.begin(), kase.end(), ' ', '_');
+    std::replace(kase.begin(), kase.end(), ',', ';');
+    if (kase.find(only) == std::string::npos) continue;
     const StrokeFile f = parseStrokes(helixStroke(brush, 10000), "bench.strokes");
     std::vector<double> t;
     std::size_t n = 0;
@@ -98,13 +104,11 @@ int main(int argc, char** argv) {
       n = sk.particles.size();
       stamps = sk.operations[0].stamps;
     }
-    std::string kase = std::string("stroke10k_") + brush;
-    std::replace(kase.begin(), kase.end(), ' ', '_');
-    std::replace(kase.begin(), kase.end(), ',', ';');
     std::printf("sketch,%s,%zu,%d,voxelize_ms,%.3f,ms\n", kase.c_str(), n, threads, 1e3 * median(t));
     std::printf("sketch,%s,%zu,%d,stamps,%ld,count\n", kase.c_str(), n, threads, stamps);
   }
   // Stamping a 100k-triangle closed mesh (radius 0.2 m: 40 % of the workspace width).
+  if (std::string("stamp_sphere").find(only) == std::string::npos) return 0;
   const std::string meshPath = (std::filesystem::temp_directory_path() / "physketch_bench_sphere.obj").string();
   writeUvSphere(meshPath, 1.0, 224, 224);
   std::vector<double> tl, tv;

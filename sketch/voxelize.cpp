@@ -3,43 +3,16 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <queue>
 #include <unordered_set>
 
 #include "core/error.h"
 #include "sketch/mesh_stamp.h"
+#include "sketch/rasterize.h"
 
 namespace physketch::sketch {
 namespace {
-
-// Row intervals [lo, hi] of one stamp over its bounding rows (j, k); empty rows have lo > hi.
-class RowCache {
- public:
-  void reset(int j0, int j1, int k0, int k1) {
-    j0_ = j0, k0_ = k0, nj_ = std::max(0, j1 - j0 + 1), nk_ = std::max(0, k1 - k0 + 1);
-    lo_.assign(static_cast<std::size_t>(nj_) * static_cast<std::size_t>(nk_), 1);
-    hi_.assign(lo_.size(), 0);
-  }
-  void clear() { reset(0, -1, 0, -1); }
-  void set(int j, int k, int a, int b) {
-    const std::size_t at = index(j, k);
-    lo_[at] = a, hi_[at] = b;
-  }
-  void get(int j, int k, int& a, int& b) const {
-    if (j < j0_ || k < k0_ || j >= j0_ + nj_ || k >= k0_ + nk_) return;
-    const std::size_t at = index(j, k);
-    a = lo_[at], b = hi_[at];
-  }
-
- private:
-  std::size_t index(int j, int k) const {
-    return static_cast<std::size_t>(k - k0_) * static_cast<std::size_t>(nj_) + static_cast<std::size_t>(j - j0_);
-  }
-  int j0_ = 0, k0_ = 0, nj_ = 0, nk_ = 0;
-  std::vector<int> lo_, hi_;
-};
-
-void rasterizeRows(const Solid& solid, RowCache* cache, const GridMapping& m, std::vector<Vec3i>& out);
 
 // Thrown when the particle cap is reached; voxelize() turns it into an InputError naming the operation.
 struct CapReached {};
@@ -153,9 +126,9 @@ class Builder {
         // The stamps of a segment happen when its end sample is reached. Each keeps only
         // the cells its predecessor did not cover (as before play), so a long stroke with a
         // big brush stores its swept volume once rather than once per stamp.
-        RowCache rows;
+        StampDiff diff;
         for (const Stamp& st : stampsOf(s)) {
-          rasterizeRows(brushSolid(s, st.position, st.pressure, st.direction, h_), &rows, sk_.mapping, cells);
+          diff.stamp(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping, cells);
           mirrored(cells);
           if (!r.removals.empty() && r.removals.back().first == st.time - play)
             r.removals.back().second.insert(r.removals.back().second.end(), cells.begin(), cells.end());
@@ -240,14 +213,19 @@ class Builder {
   }
 
   // Applies create (material >= 0) or remove (material < 0) to cells and their mirror image.
-  void applyCells(const std::vector<Vec3i>& cells, const Mirror& mirror, std::int16_t material) {
+  // `forEach(f)` calls f(cell) for each cell (a vector's or a CellMask's).
+  template <class ForEach>
+  void applyEach(ForEach&& forEach, const Mirror& mirror, std::int16_t material) {
     for (int pass = 0; pass < (mirror.axis >= 0 ? 2 : 1); ++pass)
-      for (const Vec3i& c0 : cells) {
+      forEach([&](const Vec3i& c0) {
         const Vec3i c = pass == 0 ? c0 : mirrorCell(c0, mirror, sk_.mapping);
-        if (!GridMapping::inGrid(c)) continue;
+        if (!GridMapping::inGrid(c)) return;
         if (material >= 0) take(c, material);
         else drop(c);
-      }
+      });
+  }
+  void applyCells(const std::vector<Vec3i>& cells, const Mirror& mirror, std::int16_t material) {
+    applyEach([&](auto&& f) { for (const Vec3i& c : cells) f(c); }, mirror, material);
   }
 
   // Brush positions of a stroke (Eq. 6-7), with pressure and travel direction per stamp.
@@ -306,14 +284,15 @@ class Builder {
         }
         const std::int16_t mat = s.op == StrokeOp::kCreate ? resolveMaterial(op) : std::int16_t(-1);
         cur_->material = mat;
-        RowCache rows;  // the previous stamp's row intervals
+        // Consecutive stamps overlap almost entirely: the stroke's swept cells are
+        // gathered in a bit mask and applied once each, in z, y, x order.
+        if (!mask_) mask_ = std::make_unique<CellMask>();
+        mask_->clear();
         for (const Stamp& st : stampsOf(s)) {
-          // Consecutive stamps overlap almost entirely; cells inside the previous stamp
-          // were already created (or removed) by this stroke, so only the new part is visited.
-          rasterizeRows(brushSolid(s, st.position, st.pressure, st.direction, h_), &rows, sk_.mapping, cells);
-          applyCells(cells, op.mirror, mat);
+          mask_->add(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping);
           cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
         }
+        applyEach([&](auto&& f) { mask_->forEachCell(f); }, op.mirror, mat);
         return;
       }
       case Operation::Kind::kPrimitive: {
@@ -494,10 +473,11 @@ class Builder {
       const int b = bodyOfOp[static_cast<std::size_t>(sum.id)];
       sum.body = b >= 0 ? newBody[static_cast<std::size_t>(b)] : -1;
     }
-    // Rebuild M with the final indices.
-    for (std::size_t i = 0; i < n; ++i)
-      if (alive_[i]) sk_.grid.at(protos_[i].cell) = -1;
-    for (std::size_t j = 0; j < cells.size(); ++j) sk_.grid.at(cells[j]) = static_cast<std::int32_t>(j);
+    // M with the final indices (removed particles' cells are -1 already).
+    for (std::size_t j = 0; j < cells.size(); ++j) {
+      std::int32_t& m = sk_.grid.at(cells[j]);
+      if (m != static_cast<std::int32_t>(j)) m = static_cast<std::int32_t>(j);
+    }
     sk_.particles = std::move(out);
     sk_.cells = std::move(cells);
     lint(named);
@@ -564,6 +544,7 @@ class Builder {
   const StrokeFile& file_;
   const std::vector<Material>& materials_;
   std::map<std::string, StampMesh> meshes_;  // stamp meshes by path, loaded once
+  std::unique_ptr<CellMask> mask_;           // cells the current stroke has covered (made on the first stroke)
   Sketch sk_;
   double h_;
   // Particles while sketching: grid cell, creating operation, material (the SoA arrays are built at the end).
@@ -592,91 +573,6 @@ void interpolateSegment(const Vec3& prev, const Vec3& cur, double particleDiamet
   const long iMax = std::lround(dist / particleDiameter);  // Eq. 6
   out.reserve(static_cast<std::size_t>(iMax) + 1);
   for (long i = 0; i <= iMax; ++i) out.push_back(cur - double(i) * particleDiameter * dir);  // Eq. 7
-}
-
-namespace {
-
-// Cells of a solid row by row (z, then y, then x ascending). For a convex solid each
-// row (j, k) is one interval of x found analytically from the line through the cell
-// centres, so the cost is one small solve per row instead of one test per cell.
-// `cache`, when given, holds the row intervals of the previous stamp of the same stroke:
-// cells inside it were already handled, so only the part of each row outside it is
-// emitted; on return it holds this stamp's intervals.
-void rasterizeRows(const Solid& solid, RowCache* cache, const GridMapping& m, std::vector<Vec3i>& out) {
-  out.clear();
-  const double h = m.voxelSize();
-  const Vec3 g = m.toGrid(solid.centre);
-  const double r = solid.boundingRadius() / h;
-  const int lo[3] = {std::max(0, static_cast<int>(std::ceil(g.x() - r))), std::max(0, static_cast<int>(std::ceil(g.y() - r))),
-                     std::max(0, static_cast<int>(std::ceil(g.z() - r)))};
-  const int hi[3] = {std::min(kGridSize - 1, static_cast<int>(std::floor(g.x() + r))),
-                     std::min(kGridSize - 1, static_cast<int>(std::floor(g.y() + r))),
-                     std::min(kGridSize - 1, static_cast<int>(std::floor(g.z() + r)))};
-  bool any = false;
-  if (solid.convex()) {
-    // Row (j, k) is the line origin(j, k) + t * (h, 0, 0): t is the cell index i. In the
-    // solid's local frame the origin is affine in (j, k), so it is built from three vectors.
-    const Mat3 Rt = solid.rotation.transpose();
-    const Vec3 o00 = Rt * (m.toWorld(Vec3i(0, 0, 0)) - solid.centre);
-    const Vec3 dj = Rt * Vec3(0, h, 0), dk = Rt * Vec3(0, 0, h), d = Rt * Vec3(h, 0, 0);
-    const bool sphere = solid.shape == SolidShape::kSphere;
-    const double ra2 = (solid.a / h) * (solid.a / h);
-    const double r2 = r * r;
-    RowCache next;
-    if (cache) next.reset(lo[1], hi[1], lo[2], hi[2]);
-    for (int k = lo[2]; k <= hi[2]; ++k)
-      for (int j = lo[1]; j <= hi[1]; ++j) {
-        const double ej = j - g.y(), ek = k - g.z();
-        if (ej * ej + ek * ek > r2) continue;  // the row misses the bounding sphere
-        double t0, t1;
-        if (sphere) {  // the common brush: the row's chord in closed form, in cells
-          const double w2 = ra2 - ej * ej - ek * ek;
-          if (w2 < 0) continue;
-          const double w = std::sqrt(w2);
-          t0 = g.x() - w, t1 = g.x() + w;
-        } else if (!solid.lineIntervalLocal(o00 + double(j) * dj + double(k) * dk, d, t0, t1)) {
-          continue;
-        }
-        const int i0 = std::max(lo[0], static_cast<int>(std::ceil(t0)));
-        const int i1 = std::min(hi[0], static_cast<int>(std::floor(t1)));
-        if (i0 > i1) continue;
-        any = true;
-        int p0 = 1, p1 = 0;  // previous stamp's cells on this row (empty by default)
-        if (cache) {
-          cache->get(j, k, p0, p1);
-          next.set(j, k, i0, i1);
-        }
-        for (int i = i0; i <= i1; ++i) {
-          if (i >= p0 && i <= p1) {
-            i = p1;  // skip the run already stamped
-            continue;
-          }
-          out.emplace_back(i, j, k);
-        }
-      }
-    if (cache) *cache = std::move(next);
-  } else {
-    const Mat3 Rt = solid.rotation.transpose();
-    for (int k = lo[2]; k <= hi[2]; ++k)
-      for (int j = lo[1]; j <= hi[1]; ++j)
-        for (int i = lo[0]; i <= hi[0]; ++i) {
-          const Vec3 local = Rt * (Vec3(i - g.x(), j - g.y(), k - g.z()) * h);
-          if (solid.containsLocal(local)) out.emplace_back(i, j, k);
-        }
-    any = !out.empty();
-    if (cache) cache->clear();  // a non-convex stamp leaves no intervals: the next one emits all its cells
-  }
-  if (!any) {
-    // A solid smaller than a cell covers no cell centre: it still marks the cell it is in.
-    const Vec3i c = m.discretize(solid.centre);
-    if (GridMapping::inGrid(c)) out.push_back(c);
-  }
-}
-
-}  // namespace
-
-void rasterize(const Solid& solid, const GridMapping& m, std::vector<Vec3i>& out) {
-  rasterizeRows(solid, nullptr, m, out);
 }
 
 Solid brushSolid(const Stroke& s, const Vec3& position, double pressure, const Vec3& direction, double voxelSize) {

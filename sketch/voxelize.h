@@ -9,6 +9,7 @@
 #include "core/material.h"
 #include "core/particles.h"
 #include "sketch/grid.h"
+#include "sketch/rasterize.h"
 #include "sketch/solids.h"
 #include "sketch/strokes.h"
 
@@ -68,11 +69,6 @@ struct Sketch {
 // P'(i) = cur - i * V/|V| * d for i in [0, i_max], i_max = Round(|V| dt / d).
 // |V| dt is the distance travelled. `out` is cleared first; a zero-length segment gives {cur}.
 void interpolateSegment(const Vec3& prev, const Vec3& cur, double particleDiameter, std::vector<Vec3>& out);
-
-// The cells whose centres lie inside `solid`, in z, y, x order; when none does
-// (a solid smaller than a cell), the cell containing its centre. Cells outside
-// the grid are skipped (Alg. 1: "if p in M").
-void rasterize(const Solid& solid, const GridMapping& mapping, std::vector<Vec3i>& out);
 
 // The brush of a stroke at one stamp: size scaled by pressure, axis fixed or along `direction`.
 Solid brushSolid(const Stroke& stroke, const Vec3& position, double pressure, const Vec3& direction, double voxelSize);

@@ -1,0 +1,102 @@
+// Rasterizing solids into the sketch grid (Phys-Sketch Alg. 1: a cell belongs to
+// a solid when its centre is inside). Every function visits the cells row by row
+// (z, then y, then x ascending), one interval of x per row of a convex solid found
+// in closed form, so the cost is one small solve per row rather than one test per cell.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/math.h"
+#include "sketch/grid.h"
+#include "sketch/solids.h"
+
+namespace physketch::sketch {
+
+// The cells whose centres lie inside `solid`, in z, y, x order; when none does
+// (a solid smaller than a cell), the cell containing its centre. Cells outside
+// the grid are skipped (Alg. 1: "if p in M"). `out` is cleared first.
+void rasterize(const Solid& solid, const GridMapping& mapping, std::vector<Vec3i>& out);
+
+// The cells one operation covers, one bit per cell of the 151^3 grid (a row of 151
+// cells in 3 words of 64 bits, padded to 4 so each row is one aligned 32-byte
+// vector: 713 KiB). A stroke is thousands of stamps that
+// overlap almost entirely: each stamp only ORs its row runs into the mask (a few
+// word operations per row, no lookup per cell), and the operation then applies
+// every covered cell once, in z, y, x order.
+class CellMask {
+ public:
+  CellMask();
+  CellMask(const CellMask&) = delete;
+  CellMask& operator=(const CellMask&) = delete;
+
+  // Marks the cells of `solid` (those rasterize() gives).
+  void add(const Solid& solid, const GridMapping& mapping);
+  // Calls f(cell) for every marked cell, in z, y, x order.
+  template <class CellFn>
+  void forEachCell(CellFn&& f) const {
+    for (int k = k0_; k <= k1_; ++k)
+      for (int j = j0_; j <= j1_; ++j) {
+        const std::uint64_t* w = row(j, k);
+        for (int q = 0; q < kWords; ++q)
+          for (std::uint64_t b = w[q]; b; b &= b - 1) f(Vec3i(q * 64 + __builtin_ctzll(b), j, k));
+      }
+  }
+  // Unmarks every cell (costs the rows marked since the last clear only).
+  void clear();
+
+  static constexpr int kWords = (kGridSize + 63) / 64;  // words a row uses
+  static constexpr int kStride = 4;                      // words a row takes
+
+ private:
+  std::uint64_t* row(int j, int k) { return base_ + (std::size_t(k) * kGridSize + std::size_t(j)) * kStride; }
+  const std::uint64_t* row(int j, int k) const { return base_ + (std::size_t(k) * kGridSize + std::size_t(j)) * kStride; }
+  void markRow(int j, int k, int i0, int i1);
+  std::vector<std::uint64_t> bits_;
+  std::uint64_t* base_;  // the first 32-byte aligned word of bits_
+  int k0_, k1_, j0_, j1_;  // bounds of the rows marked since the last clear (empty: k0_ > k1_)
+};
+
+// The previous stamp of a stroke, as row intervals: each stamp hands on only the
+// cells its predecessor did not cover. Used for removals while the simulation runs,
+// where a cell the brush comes back to must be removed again (bodies move in between),
+// so the whole operation's cells cannot be masked.
+class StampDiff {
+ public:
+  // Rasterizes `solid` and writes to `out` (cleared first) its cells outside the
+  // previous stamp's, in z, y, x order; remembers this stamp's rows for the next.
+  void stamp(const Solid& solid, const GridMapping& mapping, std::vector<Vec3i>& out);
+
+ private:
+  struct Rows {
+    int j0 = 0, k0 = 0, nj = 0, nk = 0;
+    std::vector<int> lo, hi;  // per row (j, k): interval [lo, hi]; empty when lo > hi
+    void reset(int j0, int j1, int k0, int k1);
+    std::size_t index(int j, int k) const { return std::size_t(k - k0) * std::size_t(nj) + std::size_t(j - j0); }
+    bool has(int j, int k) const { return j >= j0 && k >= k0 && j < j0 + nj && k < k0 + nk; }
+  };
+  Rows prev_, next_;
+};
+
+namespace detail {
+
+// The sphere brush's inner loop, exposed so tests can hold its two forms to each other.
+// For the rows j0 .. j0+n-1 (n <= kGridSize) of a plane at distance ek (cells) from the
+// centre (gx, gy): lo[t]..hi[t] are the cells of row j0+t whose centres are inside,
+// ceil(gx - w)..floor(gx + w) with w = sqrt(ra2 - (j-gy)^2 - ek^2), lo > hi when the
+// row misses the sphere (or its bounding radius^2 r2); values are clamped to +-1e9.
+// Arrays hold at least kChordPad entries.
+constexpr int kChordPad = kGridSize + 5;
+void sphereChordsScalar(double gx, double gy, double ek, double r2, double ra2, int j0, int n, int* lo, int* hi);
+// The same four rows at a time with AVX2 (bit-identical: every operation is exactly
+// rounded IEEE arithmetic); call it only where hasAvx2().
+void sphereChordsAvx2(double gx, double gy, double ek, double r2, double ra2, int j0, int n, int* lo, int* hi);
+// ORs the runs c0[t]..c1[t], clamped to lo..hi, into rows t = 0..n-1 of a CellMask
+// plane (consecutive rows of CellMask::kStride words, 32-byte aligned); returns
+// whether any run was non-empty.
+bool markPlaneScalar(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo, int hi);
+bool markPlaneAvx2(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo, int hi);
+bool hasAvx2();
+
+}  // namespace detail
+}  // namespace physketch::sketch
