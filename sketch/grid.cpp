@@ -1,6 +1,9 @@
 #include "sketch/grid.h"
 
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <new>
 
 #include "core/error.h"
 
@@ -22,6 +25,38 @@ bool GridMapping::contains(const Vec3& world) const {
   const Vec3 g = toGrid(world);
   const double lo = -0.5, hi = kGridSize - 0.5;
   return g.x() >= lo && g.y() >= lo && g.z() >= lo && g.x() < hi && g.y() < hi && g.z() < hi;
+}
+
+namespace {
+std::int32_t* zeroCells() {
+  auto* p = static_cast<std::int32_t*>(std::calloc(static_cast<std::size_t>(kGridCells), sizeof(std::int32_t)));
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+}  // namespace
+
+void OccupancyGrid::Free::operator()(std::int32_t* p) const { std::free(p); }
+
+OccupancyGrid::OccupancyGrid() : cells_(zeroCells()) {}
+
+OccupancyGrid::OccupancyGrid(const OccupancyGrid& other) : cells_(zeroCells()) { *this = other; }
+
+OccupancyGrid& OccupancyGrid::operator=(const OccupancyGrid& other) {
+  if (this != &other) {
+    if (!cells_) cells_.reset(zeroCells());
+    std::memcpy(cells_.get(), other.cells_.get(), static_cast<std::size_t>(kGridCells) * sizeof(std::int32_t));
+  }
+  return *this;
+}
+
+std::int64_t OccupancyGrid::occupied() const {
+  std::int64_t n = 0;
+  for (std::int64_t i = 0; i < kGridCells; ++i) n += cells_[static_cast<std::size_t>(i)] != 0;
+  return n;
+}
+
+bool OccupancyGrid::operator==(const OccupancyGrid& other) const {
+  return std::memcmp(cells_.get(), other.cells_.get(), static_cast<std::size_t>(kGridCells) * sizeof(std::int32_t)) == 0;
 }
 
 }  // namespace physketch::sketch

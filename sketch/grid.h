@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "core/math.h"
@@ -38,6 +39,11 @@ class GridMapping {
   static std::int64_t linear(const Vec3i& c) {
     return (std::int64_t(c.z()) * kGridSize + c.y()) * kGridSize + c.x();
   }
+  // The cell of a linear index (the inverse of linear()).
+  static Vec3i cellOf(std::int64_t l) {
+    return Vec3i(static_cast<int>(l % kGridSize), static_cast<int>(l / kGridSize % kGridSize),
+                 static_cast<int>(l / (std::int64_t(kGridSize) * kGridSize)));
+  }
 
  private:
   Vec3 center_;
@@ -45,16 +51,32 @@ class GridMapping {
   double h_;
 };
 
-// M: one int32 per cell (13.8 MB), -1 = empty.
+// M: one int32 per cell (13.8 MB), -1 = empty. Stored as index + 1, so that an
+// empty grid is all zero bytes: it is calloc'ed, and the system hands out zero
+// pages only when they are first written, so the cells a sketch never reaches
+// cost neither time nor memory.
 class OccupancyGrid {
  public:
-  OccupancyGrid() : cells_(static_cast<std::size_t>(kGridCells), -1) {}
-  std::int32_t at(const Vec3i& c) const { return cells_[static_cast<std::size_t>(GridMapping::linear(c))]; }
-  std::int32_t& at(const Vec3i& c) { return cells_[static_cast<std::size_t>(GridMapping::linear(c))]; }
-  const std::vector<std::int32_t>& cells() const { return cells_; }
+  OccupancyGrid();
+  OccupancyGrid(const OccupancyGrid& other);
+  OccupancyGrid& operator=(const OccupancyGrid& other);
+  OccupancyGrid(OccupancyGrid&&) noexcept = default;
+  OccupancyGrid& operator=(OccupancyGrid&&) noexcept = default;
+
+  // The particle in cell c, -1 when empty.
+  std::int32_t at(const Vec3i& c) const { return cells_[static_cast<std::size_t>(GridMapping::linear(c))] - 1; }
+  // Puts particle p (-1: none) in cell c.
+  void set(const Vec3i& c, std::int32_t p) { cells_[static_cast<std::size_t>(GridMapping::linear(c))] = p + 1; }
+  // Number of occupied cells.
+  std::int64_t occupied() const;
+  bool operator==(const OccupancyGrid& other) const;
+  bool operator!=(const OccupancyGrid& other) const { return !(*this == other); }
 
  private:
-  std::vector<std::int32_t> cells_;
+  struct Free {
+    void operator()(std::int32_t* p) const;
+  };
+  std::unique_ptr<std::int32_t[], Free> cells_;
 };
 
 }  // namespace physketch::sketch

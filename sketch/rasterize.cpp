@@ -209,10 +209,15 @@ void CellMask::add(const Solid& solid, const GridMapping& m) {
     j0_ = std::min(j0_, cb.lo[1]), j1_ = std::max(j1_, cb.hi[1]);
     return;
   }
-  centreCell(solid, m, [&](const Vec3i& c) {
-    k0_ = std::min(k0_, c.z()), k1_ = std::max(k1_, c.z()), j0_ = std::min(j0_, c.y()), j1_ = std::max(j1_, c.y());
-    markRow(c.y(), c.z(), c.x(), c.x());
-  });
+  centreCell(solid, m, [&](const Vec3i& c) { set(c); });
+}
+
+std::int64_t CellMask::count() const {
+  std::int64_t n = 0;
+  for (int k = k0_; k <= k1_; ++k)
+    for (int j = j0_; j <= j1_; ++j)
+      for (int q = 0; q < kWords; ++q) n += __builtin_popcountll(row(j, k)[q]);
+  return n;
 }
 
 // --- StampDiff ---------------------------------------------------------------

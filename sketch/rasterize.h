@@ -4,6 +4,7 @@
 // in closed form, so the cost is one small solve per row rather than one test per cell.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -44,11 +45,41 @@ class CellMask {
   }
   // Unmarks every cell (costs the rows marked since the last clear only).
   void clear();
+  // Calls f(cell) for every cell marked here and not in `taken`, in z, y, x order,
+  // and marks it in `taken` (a whole word of cells at a time).
+  template <class CellFn>
+  void forEachCellNotIn(CellMask& taken, CellFn&& f) const {
+    for (int k = k0_; k <= k1_; ++k)
+      for (int j = j0_; j <= j1_; ++j) {
+        const std::uint64_t* w = row(j, k);
+        std::uint64_t* t = taken.row(j, k);
+        for (int q = 0; q < kWords; ++q) {
+          std::uint64_t fresh = w[q] & ~t[q];
+          if (!fresh) continue;
+          taken.grow(Vec3i(0, j, k));
+          t[q] |= fresh;
+          for (; fresh; fresh &= fresh - 1) f(Vec3i(q * 64 + __builtin_ctzll(fresh), j, k));
+        }
+      }
+  }
+  // Number of marked cells.
+  std::int64_t count() const;
+
+  // Single cells (c must be in the grid).
+  bool test(const Vec3i& c) const { return (row(c.y(), c.z())[c.x() >> 6] >> (c.x() & 63)) & 1; }
+  void set(const Vec3i& c) {
+    grow(c);
+    row(c.y(), c.z())[c.x() >> 6] |= std::uint64_t(1) << (c.x() & 63);
+  }
+  void reset(const Vec3i& c) { row(c.y(), c.z())[c.x() >> 6] &= ~(std::uint64_t(1) << (c.x() & 63)); }
 
   static constexpr int kWords = (kGridSize + 63) / 64;  // words a row uses
   static constexpr int kStride = 4;                      // words a row takes
 
  private:
+  void grow(const Vec3i& c) {
+    k0_ = std::min(k0_, c.z()), k1_ = std::max(k1_, c.z()), j0_ = std::min(j0_, c.y()), j1_ = std::max(j1_, c.y());
+  }
   std::uint64_t* row(int j, int k) { return base_ + (std::size_t(k) * kGridSize + std::size_t(j)) * kStride; }
   const std::uint64_t* row(int j, int k) const { return base_ + (std::size_t(k) * kGridSize + std::size_t(j)) * kStride; }
   void markRow(int j, int k, int i0, int i1);

@@ -191,41 +191,64 @@ class Builder {
   }
 
   // --- Alg. 1 and Alg. 2 on single cells ------------------------------------
-  void take(const Vec3i& c, std::int16_t material) {
-    std::int32_t& cell = sk_.grid.at(c);
-    if (cell >= 0) return;  // one particle per voxel, never two at one place
+  // While sketching, M holds each particle's index in protoCell_, and occ_ marks
+  // the taken cells: the common question "is this cell free" reads bits that stay
+  // in cache rather than the 13.8 MB grid.
+  std::int32_t particleAt(const Vec3i& c) const { return occ_.test(c) ? sk_.grid.at(c) : -1; }
+  void place(const Vec3i& c, std::int32_t p) {
+    if (p >= 0) occ_.set(c);
+    else occ_.reset(c);
+    sk_.grid.set(c, p);
+  }
+
+  void take(const Vec3i& c) {
+    if (occ_.test(c)) return;  // one particle per voxel, never two at one place
+    occ_.set(c);
+    takeFree(c);
+  }
+  // take() of a cell known to be free and already marked in occ_.
+  void takeFree(const Vec3i& c) {
     if (live_ >= kMaxParticles) throw CapReached{};
     // A compact record while sketching; positions (Eq. 5) and the SoA arrays are built once in finalize().
-    cell = static_cast<std::int32_t>(protos_.size());
-    protos_.push_back(Proto{c, cur_->id, material});
-    alive_.push_back(1);
+    const auto p = static_cast<std::int32_t>(protoCell_.size());
+    sk_.grid.set(c, p);
+    protoCell_.push_back(static_cast<std::int32_t>(GridMapping::linear(c)));
+    if (opRuns_.empty() || opRuns_.back().op != cur_->id) opRuns_.push_back({cur_->id, p, p});
+    ++opRuns_.back().end;
     ++live_;
     ++cur_->created;
   }
 
   void drop(const Vec3i& c) {
-    std::int32_t& cell = sk_.grid.at(c);
-    if (cell < 0) return;
-    alive_[static_cast<std::size_t>(cell)] = 0;
-    cell = -1;
+    const std::int32_t p = particleAt(c);
+    if (p < 0) return;
+    protoCell_[static_cast<std::size_t>(p)] = -1;
+    place(c, -1);
     --live_;
     ++cur_->removed;
   }
 
-  // Applies create (material >= 0) or remove (material < 0) to cells and their mirror image.
+  // Room for `more` particles, growing geometrically (many small operations stay linear).
+  void reserveProtos(std::int64_t more) {
+    const std::size_t want = protoCell_.size() + static_cast<std::size_t>(std::min<std::int64_t>(more, kMaxParticles));
+    if (want > protoCell_.capacity()) protoCell_.reserve(std::max(want, 2 * protoCell_.capacity()));
+  }
+
+  // Applies create or remove to cells and their mirror image.
   // `forEach(f)` calls f(cell) for each cell (a vector's or a CellMask's).
   template <class ForEach>
-  void applyEach(ForEach&& forEach, const Mirror& mirror, std::int16_t material) {
+  void applyEach(ForEach&& forEach, const Mirror& mirror, bool create) {
     for (int pass = 0; pass < (mirror.axis >= 0 ? 2 : 1); ++pass)
       forEach([&](const Vec3i& c0) {
         const Vec3i c = pass == 0 ? c0 : mirrorCell(c0, mirror, sk_.mapping);
         if (!GridMapping::inGrid(c)) return;
-        if (material >= 0) take(c, material);
+        if (create) take(c);
         else drop(c);
       });
   }
-  void applyCells(const std::vector<Vec3i>& cells, const Mirror& mirror, std::int16_t material) {
-    applyEach([&](auto&& f) { for (const Vec3i& c : cells) f(c); }, mirror, material);
+  void applyCells(const std::vector<Vec3i>& cells, const Mirror& mirror, bool create) {
+    if (create) reserveProtos(static_cast<std::int64_t>(cells.size()) * (mirror.axis >= 0 ? 2 : 1));
+    applyEach([&](auto&& f) { for (const Vec3i& c : cells) f(c); }, mirror, create);
   }
 
   // Brush positions of a stroke (Eq. 6-7), with pressure and travel direction per stamp.
@@ -292,7 +315,11 @@ class Builder {
           mask_->add(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping);
           cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
         }
-        applyEach([&](auto&& f) { mask_->forEachCell(f); }, op.mirror, mat);
+        if (mat >= 0) reserveProtos(mask_->count() * (op.mirror.axis >= 0 ? 2 : 1));
+        if (mat >= 0 && op.mirror.axis < 0)  // the common case, a word of free cells at a time
+          mask_->forEachCellNotIn(occ_, [&](const Vec3i& c) { takeFree(c); });
+        else
+          applyEach([&](auto&& f) { mask_->forEachCell(f); }, op.mirror, mat >= 0);
         return;
       }
       case Operation::Kind::kPrimitive: {
@@ -332,7 +359,7 @@ class Builder {
             break;
         }
         rasterize(solid, sk_.mapping, cells);
-        applyCells(cells, op.mirror, mat);
+        applyCells(cells, op.mirror, true);
         cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
         return;
       }
@@ -348,7 +375,7 @@ class Builder {
           throw InputError(file_.path, op.line, "path", e.what());
         }
         cur_->minFeature = 1e300;
-        applyCells(cells, op.mirror, mat);
+        applyCells(cells, op.mirror, true);
         cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
         return;
       }
@@ -382,7 +409,7 @@ class Builder {
       for (const Vec3i& c0 : under) {
         const Vec3i c = pass == 0 ? c0 : mirrorCell(c0, op.mirror, sk_.mapping);
         if (!GridMapping::inGrid(c)) continue;
-        const std::int32_t p = sk_.grid.at(c);
+        const std::int32_t p = particleAt(c);
         if (p < 0 || !seen.insert(p).second) continue;
         const Vec3i to = c + sh;
         if (!GridMapping::inGrid(to))
@@ -392,11 +419,11 @@ class Builder {
       }
     }
     cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
-    for (const Grab& g : grabbed) sk_.grid.at(protos_[static_cast<std::size_t>(g.particle)].cell) = -1;
+    for (const Grab& g : grabbed) place(GridMapping::cellOf(protoCell_[static_cast<std::size_t>(g.particle)]), -1);
     for (const Grab& g : grabbed) {
       drop(g.to);  // a particle in the way is replaced (counted as removed by this move)
-      sk_.grid.at(g.to) = g.particle;
-      protos_[static_cast<std::size_t>(g.particle)].cell = g.to;
+      place(g.to, g.particle);
+      protoCell_[static_cast<std::size_t>(g.particle)] = static_cast<std::int32_t>(GridMapping::linear(g.to));
       ++cur_->moved;
     }
   }
@@ -420,41 +447,43 @@ class Builder {
         bodyOfOp[static_cast<std::size_t>(op.id)] = it->second;
       }
     }
-    const std::size_t n = protos_.size();
-    std::vector<std::int64_t> count(names.size() + 1, 0);
-    std::vector<int> bodyOf(n, -1);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!alive_[i]) continue;
-      bodyOf[i] = bodyOfOp[static_cast<std::size_t>(protos_[i].stroke)];
-      ++count[static_cast<std::size_t>(bodyOf[i]) + 1];
-    }
-    // Counting sort by body: stable, so particles keep creation order within a body.
-    std::vector<int> newBody(names.size(), -1);
-    std::vector<std::int64_t> start(names.size(), 0);
-    std::int64_t total = 0;
-    for (std::size_t b = 0; b < names.size(); ++b) {
-      start[b] = total;
-      total += count[b + 1];
-    }
+    // Particles grouped by body (in body order), in creation order within a body:
+    // each body takes the runs of its operations in the order they were applied.
+    std::vector<std::vector<const OpRun*>> runsOfBody(names.size());
+    for (const OpRun& run : opRuns_) runsOfBody[static_cast<std::size_t>(bodyOfOp[static_cast<std::size_t>(run.op)])].push_back(&run);
+    std::size_t total = 0;
+    for (const std::int32_t l : protoCell_) total += l >= 0;
     ParticleArrays out;
-    out.resize(static_cast<std::size_t>(total));
-    std::vector<Vec3i> cells(static_cast<std::size_t>(total));
-    std::vector<std::int64_t> next = start;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (bodyOf[i] < 0) continue;
-      const auto j = static_cast<std::size_t>(next[static_cast<std::size_t>(bodyOf[i])]++);
-      const Proto& pr = protos_[i];
-      const Vec3 q = sk_.mapping.toWorld(pr.cell);  // Eq. 5: the particle sits at its voxel centre
-      out.x[j] = static_cast<float>(q.x());
-      out.y[j] = static_cast<float>(q.y());
-      out.z[j] = static_cast<float>(q.z());
-      out.invMass[j] = 0.0f;  // static while sketched (Phys-Sketch §4)
-      out.stroke[j] = pr.stroke;
-      out.material[j] = pr.material;
-      cells[j] = pr.cell;
-    }
+    out.resize(total);  // at rest, inverse mass 0: static while sketched (Phys-Sketch §4)
+    std::vector<Vec3i> cells(total);
+    std::vector<std::int64_t> start(names.size() + 1, 0);
+    std::size_t j = 0;
     for (std::size_t b = 0; b < names.size(); ++b) {
-      const std::int64_t c = count[b + 1];
+      start[b] = static_cast<std::int64_t>(j);
+      for (const OpRun* run : runsOfBody[b]) {
+        auto& sum = sk_.operations[static_cast<std::size_t>(run->op)];
+        for (std::int32_t i = run->first; i < run->end; ++i) {
+          const std::int32_t l = protoCell_[static_cast<std::size_t>(i)];
+          if (l < 0) continue;  // removed
+          const Vec3i c = GridMapping::cellOf(l);
+          const Vec3 q = sk_.mapping.toWorld(c);  // Eq. 5: the particle sits at its voxel centre
+          out.x[j] = static_cast<float>(q.x());
+          out.y[j] = static_cast<float>(q.y());
+          out.z[j] = static_cast<float>(q.z());
+          out.stroke[j] = run->op;
+          out.material[j] = sum.material;
+          cells[j] = c;
+          // M with the final indices (removed particles' cells are empty already).
+          if (i != static_cast<std::int32_t>(j)) sk_.grid.set(c, static_cast<std::int32_t>(j));
+          ++sum.remaining;
+          ++j;
+        }
+      }
+    }
+    start[names.size()] = static_cast<std::int64_t>(j);
+    std::vector<int> newBody(names.size(), -1);
+    for (std::size_t b = 0; b < names.size(); ++b) {
+      const std::int64_t c = start[b + 1] - start[b];
       if (c == 0) continue;
       newBody[b] = static_cast<int>(sk_.bodies.size());
       BodyRange r;
@@ -465,18 +494,9 @@ class Builder {
       sk_.bodies.push_back(r);
       sk_.bodyNames.push_back(names[b]);
     }
-    for (std::size_t j = 0; j < static_cast<std::size_t>(total); ++j) {
-      auto& sum = sk_.operations[static_cast<std::size_t>(out.stroke[j])];
-      ++sum.remaining;
-    }
     for (auto& sum : sk_.operations) {
       const int b = bodyOfOp[static_cast<std::size_t>(sum.id)];
       sum.body = b >= 0 ? newBody[static_cast<std::size_t>(b)] : -1;
-    }
-    // M with the final indices (removed particles' cells are -1 already).
-    for (std::size_t j = 0; j < cells.size(); ++j) {
-      std::int32_t& m = sk_.grid.at(cells[j]);
-      if (m != static_cast<std::int32_t>(j)) m = static_cast<std::int32_t>(j);
     }
     sk_.particles = std::move(out);
     sk_.cells = std::move(cells);
@@ -548,13 +568,15 @@ class Builder {
   Sketch sk_;
   double h_;
   // Particles while sketching: grid cell, creating operation, material (the SoA arrays are built at the end).
-  struct Proto {
-    Vec3i cell;
-    std::int32_t stroke;
-    std::int16_t material;
+  // Particles while sketching, in creation order: the linear grid cell of each, -1
+  // once removed. The particles one operation created are consecutive: a run.
+  std::vector<std::int32_t> protoCell_;
+  struct OpRun {
+    int op;
+    std::int32_t first, end;  // particles [first, end)
   };
-  std::vector<Proto> protos_;
-  std::vector<std::uint8_t> alive_;
+  std::vector<OpRun> opRuns_;
+  CellMask occ_;  // cells holding a particle (see take())
   std::int64_t live_;  // particles alive now, including those counted in from elsewhere
   OperationSummary* cur_ = nullptr;
 };
