@@ -18,6 +18,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <tbb/global_control.h>
+
 using namespace physketch;
 using namespace physketch::sketch;
 
@@ -81,7 +83,8 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  // The voxelizer is serial (a stroke is a sequence of stamps into one grid); --threads is recorded only.
+  // Long strokes are swept in parallel parts (sketch::voxelize); the result does not depend on it.
+  tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(std::max(1, threads)));
   const GridMapping map(Vec3(0, 0.5, 0), 1.0);
   Material wood;
   wood.name = "wood";

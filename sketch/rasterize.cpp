@@ -212,6 +212,17 @@ void CellMask::add(const Solid& solid, const GridMapping& m) {
   centreCell(solid, m, [&](const Vec3i& c) { set(c); });
 }
 
+void CellMask::merge(const CellMask& other) {
+  if (other.k0_ > other.k1_) return;
+  k0_ = std::min(k0_, other.k0_), k1_ = std::max(k1_, other.k1_);
+  j0_ = std::min(j0_, other.j0_), j1_ = std::max(j1_, other.j1_);
+  for (int k = other.k0_; k <= other.k1_; ++k) {
+    std::uint64_t* w = row(other.j0_, k);
+    const std::uint64_t* o = other.row(other.j0_, k);
+    for (int q = 0; q < (other.j1_ - other.j0_ + 1) * kStride; ++q) w[q] |= o[q];
+  }
+}
+
 std::int64_t CellMask::count() const {
   std::int64_t n = 0;
   for (int k = k0_; k <= k1_; ++k)

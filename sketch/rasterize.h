@@ -62,6 +62,8 @@ class CellMask {
         }
       }
   }
+  // Marks every cell `other` marks.
+  void merge(const CellMask& other);
   // Number of marked cells.
   std::int64_t count() const;
 

@@ -6,6 +6,12 @@
 #include <memory>
 #include <queue>
 #include <unordered_set>
+#include <utility>
+
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include "core/error.h"
 #include "sketch/mesh_stamp.h"
@@ -288,6 +294,30 @@ class Builder {
     return out;
   }
 
+  // The cells of all stamps of a stroke into mask_. A long stroke is cut into parts
+  // swept in parallel into masks of their own and ORed together: a union, so the
+  // result is the same bit for bit however many parts or threads there are.
+  void sweep(const Stroke& s, const std::vector<Stamp>& stamps) {
+    constexpr std::size_t kStampsPerPart = 1024;  // below this a part costs more than it saves
+    const auto threads = std::min(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism),
+                                  static_cast<std::size_t>(tbb::info::default_concurrency()));
+    const std::size_t parts = std::max<std::size_t>(1, std::min(threads, stamps.size() / kStampsPerPart));
+    if (!mask_) mask_ = std::make_unique<CellMask>();
+    mask_->clear();
+    while (partMasks_.size() + 1 < parts) partMasks_.push_back(std::make_unique<CellMask>());
+    auto sweepPart = [&](std::size_t part) {
+      CellMask& m = part == 0 ? *mask_ : *partMasks_[part - 1];
+      for (std::size_t i = stamps.size() * part / parts; i < stamps.size() * (part + 1) / parts; ++i)
+        m.add(brushSolid(s, stamps[i].position, stamps[i].pressure, stamps[i].direction, h_), sk_.mapping);
+    };
+    if (parts == 1) return sweepPart(0);
+    tbb::parallel_for(std::size_t(0), parts, sweepPart);
+    for (std::size_t p = 1; p < parts; ++p) {
+      mask_->merge(*partMasks_[p - 1]);
+      partMasks_[p - 1]->clear();
+    }
+  }
+
   void apply(const Operation& op) {
     std::vector<Vec3i> cells;
     switch (op.kind) {
@@ -309,12 +339,9 @@ class Builder {
         cur_->material = mat;
         // Consecutive stamps overlap almost entirely: the stroke's swept cells are
         // gathered in a bit mask and applied once each, in z, y, x order.
-        if (!mask_) mask_ = std::make_unique<CellMask>();
-        mask_->clear();
-        for (const Stamp& st : stampsOf(s)) {
-          mask_->add(brushSolid(s, st.position, st.pressure, st.direction, h_), sk_.mapping);
-          cur_->stamps += op.mirror.axis >= 0 ? 2 : 1;
-        }
+        const std::vector<Stamp> stamps = stampsOf(s);
+        sweep(s, stamps);
+        cur_->stamps += static_cast<std::int64_t>(stamps.size()) * (op.mirror.axis >= 0 ? 2 : 1);
         if (mat >= 0) reserveProtos(mask_->count() * (op.mirror.axis >= 0 ? 2 : 1));
         if (mat >= 0 && op.mirror.axis < 0)  // the common case, a word of free cells at a time
           mask_->forEachCellNotIn(occ_, [&](const Vec3i& c) { takeFree(c); });
@@ -449,38 +476,64 @@ class Builder {
     }
     // Particles grouped by body (in body order), in creation order within a body:
     // each body takes the runs of its operations in the order they were applied.
-    std::vector<std::vector<const OpRun*>> runsOfBody(names.size());
-    for (const OpRun& run : opRuns_) runsOfBody[static_cast<std::size_t>(bodyOfOp[static_cast<std::size_t>(run.op)])].push_back(&run);
-    std::size_t total = 0;
-    for (const std::int32_t l : protoCell_) total += l >= 0;
-    ParticleArrays out;
-    out.resize(total);  // at rest, inverse mass 0: static while sketched (Phys-Sketch §4)
-    std::vector<Vec3i> cells(total);
-    std::vector<std::int64_t> start(names.size() + 1, 0);
-    std::size_t j = 0;
+    // The runs are cut into pieces; counting the live particles of every piece fixes
+    // where each piece writes, so the pieces are written in parallel and the result
+    // does not depend on the threads. (A fresh output array costs a page fault per
+    // 4 KiB, which two threads take twice as fast.)
+    constexpr std::int32_t kPiece = 1 << 14;
+    struct Piece {
+      int op;
+      std::int32_t first, end;  // particles [first, end) of protoCell_
+      std::size_t out = 0;      // live particles, then their first output index
+    };
+    std::vector<Piece> pieces;
+    std::vector<std::size_t> firstPiece(names.size() + 1, 0);  // the pieces of body b: [firstPiece[b], firstPiece[b+1])
     for (std::size_t b = 0; b < names.size(); ++b) {
-      start[b] = static_cast<std::int64_t>(j);
-      for (const OpRun* run : runsOfBody[b]) {
-        auto& sum = sk_.operations[static_cast<std::size_t>(run->op)];
-        for (std::int32_t i = run->first; i < run->end; ++i) {
-          const std::int32_t l = protoCell_[static_cast<std::size_t>(i)];
-          if (l < 0) continue;  // removed
-          const Vec3i c = GridMapping::cellOf(l);
-          const Vec3 q = sk_.mapping.toWorld(c);  // Eq. 5: the particle sits at its voxel centre
-          out.x[j] = static_cast<float>(q.x());
-          out.y[j] = static_cast<float>(q.y());
-          out.z[j] = static_cast<float>(q.z());
-          out.stroke[j] = run->op;
-          out.material[j] = sum.material;
-          cells[j] = c;
-          // M with the final indices (removed particles' cells are empty already).
-          if (i != static_cast<std::int32_t>(j)) sk_.grid.set(c, static_cast<std::int32_t>(j));
-          ++sum.remaining;
-          ++j;
-        }
-      }
+      firstPiece[b] = pieces.size();
+      for (const OpRun& run : opRuns_)
+        if (bodyOfOp[static_cast<std::size_t>(run.op)] == static_cast<int>(b))
+          for (std::int32_t f = run.first; f < run.end; f += kPiece) pieces.push_back({run.op, f, std::min(run.end, f + kPiece)});
     }
-    start[names.size()] = static_cast<std::int64_t>(j);
+    firstPiece[names.size()] = pieces.size();
+    tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t p) {
+      for (std::int32_t i = pieces[p].first; i < pieces[p].end; ++i) pieces[p].out += protoCell_[static_cast<std::size_t>(i)] >= 0;
+    });
+    std::size_t total = 0;
+    for (Piece& pc : pieces) {
+      sk_.operations[static_cast<std::size_t>(pc.op)].remaining += static_cast<std::int32_t>(pc.out);
+      total += std::exchange(pc.out, total);
+    }
+    // At rest, inverse mass 0: static while sketched (Phys-Sketch §4); the values of ParticleArrays::resize.
+    ParticleArrays out;
+    std::vector<Vec3i> cells;
+    tbb::parallel_invoke([&] { out.x.resize(total), out.vx.resize(total), out.invMass.resize(total), out.stroke.resize(total); },
+                         [&] { out.y.resize(total), out.vy.resize(total), out.body.resize(total, -1), out.material.resize(total); },
+                         [&] { out.z.resize(total), out.vz.resize(total), cells.resize(total); });
+    tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t p) {
+      const Piece& pc = pieces[p];
+      const std::int16_t material = sk_.operations[static_cast<std::size_t>(pc.op)].material;
+      std::size_t j = pc.out;
+      for (std::int32_t i = pc.first; i < pc.end; ++i) {
+        const std::int32_t l = protoCell_[static_cast<std::size_t>(i)];
+        if (l < 0) continue;  // removed
+        const Vec3i c = GridMapping::cellOf(l);
+        const Vec3 q = sk_.mapping.toWorld(c);  // Eq. 5: the particle sits at its voxel centre
+        out.x[j] = static_cast<float>(q.x());
+        out.y[j] = static_cast<float>(q.y());
+        out.z[j] = static_cast<float>(q.z());
+        out.stroke[j] = pc.op;
+        out.material[j] = material;
+        cells[j] = c;
+        // M with the final indices (removed particles' cells are empty already).
+        if (i != static_cast<std::int32_t>(j)) sk_.grid.set(c, static_cast<std::int32_t>(j));
+        ++j;
+      }
+    });
+    std::vector<std::int64_t> start(names.size() + 1, static_cast<std::int64_t>(total));
+    for (std::size_t b = 0; b < names.size(); ++b)
+      if (firstPiece[b] < pieces.size()) start[b] = static_cast<std::int64_t>(pieces[firstPiece[b]].out);
+    for (std::size_t b = names.size(); b-- > 0;)  // a body without pieces starts where the next one does
+      if (firstPiece[b] == firstPiece[b + 1]) start[b] = start[b + 1];
     std::vector<int> newBody(names.size(), -1);
     for (std::size_t b = 0; b < names.size(); ++b) {
       const std::int64_t c = start[b + 1] - start[b];
@@ -565,6 +618,7 @@ class Builder {
   const std::vector<Material>& materials_;
   std::map<std::string, StampMesh> meshes_;  // stamp meshes by path, loaded once
   std::unique_ptr<CellMask> mask_;           // cells the current stroke has covered (made on the first stroke)
+  std::vector<std::unique_ptr<CellMask>> partMasks_;  // the other parts of a stroke swept in parallel
   Sketch sk_;
   double h_;
   // Particles while sketching: grid cell, creating operation, material (the SoA arrays are built at the end).
