@@ -9,7 +9,6 @@
 #include <utility>
 
 #include <tbb/global_control.h>
-#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
@@ -299,8 +298,7 @@ class Builder {
   // result is the same bit for bit however many parts or threads there are.
   void sweep(const Stroke& s, const std::vector<Stamp>& stamps) {
     constexpr std::size_t kStampsPerPart = 1024;  // below this a part costs more than it saves
-    const auto threads = std::min(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism),
-                                  static_cast<std::size_t>(tbb::info::default_concurrency()));
+    const std::size_t threads = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
     const std::size_t parts = std::max<std::size_t>(1, std::min(threads, stamps.size() / kStampsPerPart));
     if (!mask_) mask_ = std::make_unique<CellMask>();
     mask_->clear();
