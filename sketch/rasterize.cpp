@@ -3,10 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
 
-#if defined(__x86_64__) || defined(__i386__)
-#include <immintrin.h>
-#endif
+#include "sketch/raster_kernels.h"
 
 namespace physketch::sketch {
 namespace {
@@ -61,7 +60,7 @@ void alignedRange(const Solid& solid, const GridMapping& m, const CellBounds& cb
 // Each row is a line through the cell centres; its chord is found in closed form.
 template <class PlaneFn>
 void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb, PlaneFn&& plane) {
-  int c0[detail::kChordPad], c1[detail::kChordPad];
+  int c0[kernels::kChordPad], c1[kernels::kChordPad];
   if (gridAligned(solid)) {
     // The same chord on every row of a rectangle of rows.
     const Vec3 half = solid.shape == SolidShape::kCube ? Vec3(solid.a, solid.a, solid.a) : Vec3(solid.a, solid.b, solid.c);
@@ -81,13 +80,14 @@ void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb
   const Vec3& g = cb.g;
   const double r2 = cb.r * cb.r;
   const bool sphere = solid.shape == SolidShape::kSphere;
-  static const auto chords = detail::hasAvx2() ? detail::sphereChordsAvx2 : detail::sphereChordsScalar;
+  static const bool avx2 = kernels::hasAvx2();
+  const auto sphereChords = avx2 ? kernels::sphereChordsAvx2 : kernels::sphereChordsScalar;
+  const auto convexChords = avx2 ? kernels::convexChordsAvx2 : kernels::convexChordsScalar;
   const double ra2 = (solid.a / h) * (solid.a / h);
-  // Other shapes: row (j, k) is the line origin(j, k) + t * (h, 0, 0), so t is the cell
-  // index i. In the solid's local frame the origin is affine in (j, k): three vectors.
-  const Mat3 Rt = solid.rotation.transpose();
-  const Vec3 o00 = Rt * (m.toWorld(Vec3i(0, 0, 0)) - solid.centre);
-  const Vec3 dj = Rt * Vec3(0, h, 0), dk = Rt * Vec3(0, 0, h), d = Rt * Vec3(h, 0, 0);
+  // Other shapes: row (j, k) is a line through cell centres, affine in (j, k) in the
+  // solid's local frame; its chord is found in closed form.
+  std::optional<kernels::ConvexRows> rows;
+  if (!sphere) rows.emplace(solid, m);
   for (int k = cb.lo[2]; k <= cb.hi[2]; ++k) {
     // Only the rows within the bounding sphere's disc on plane k are visited (one more
     // on each side, so rounding in that bound never drops a row the exact test keeps).
@@ -99,19 +99,10 @@ void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb
     const int jhi = std::min(cb.hi[1], toInt(std::floor(g.y() + s)) + 1);
     if (jlo > jhi) continue;
     const int n = jhi - jlo + 1;
-    if (sphere) {  // the common brush: a whole plane of chords at once
-      chords(g.x(), g.y(), ek, r2, ra2, jlo, n, c0, c1);
-    } else {
-      for (int t = 0; t < n; ++t) {
-        const int j = jlo + t;
-        const double ej = j - g.y();
-        double t0, t1;
-        c0[t] = 1, c1[t] = 0;
-        if (ej * ej + ek * ek > r2) continue;  // the row misses the bounding sphere
-        if (!solid.lineIntervalLocal(o00 + double(j) * dj + double(k) * dk, d, t0, t1)) continue;
-        c0[t] = toInt(std::ceil(t0)), c1[t] = toInt(std::floor(t1));
-      }
-    }
+    if (sphere)  // the common brush
+      sphereChords(g.x(), g.y(), ek, r2, ra2, jlo, n, c0, c1);
+    else
+      convexChords(*rows, k, jlo, n, c0, c1);
     plane(k, jlo, n, c0, c1);
   }
 }
@@ -190,14 +181,14 @@ void CellMask::clear() {
 }
 
 inline void CellMask::markRow(int j, int k, int i0, int i1) {
-  detail::markPlaneScalar(row(j, k), 1, &i0, &i1, i0, i1);
+  kernels::markPlaneScalar(row(j, k), 1, &i0, &i1, i0, i1);
 }
 
 void CellMask::add(const Solid& solid, const GridMapping& m) {
   const CellBounds cb(solid, m);
   bool any = false;
   if (solid.convex()) {
-    static const auto mark = detail::hasAvx2() ? detail::markPlaneAvx2 : detail::markPlaneScalar;
+    static const auto mark = kernels::hasAvx2() ? kernels::markPlaneAvx2 : kernels::markPlaneScalar;
     forEachPlane(solid, m, cb, [&](int k, int j0, int n, const int* c0, const int* c1) {
       any |= mark(row(j0, k), n, c0, c1, cb.lo[0], cb.hi[0]);
     });
@@ -268,93 +259,4 @@ void StampDiff::stamp(const Solid& solid, const GridMapping& m, std::vector<Vec3
   std::swap(prev_, next_);
 }
 
-// --- the sphere chord kernel ---------------------------------------------------
-
-namespace detail {
-
-void sphereChordsScalar(double gx, double gy, double ek, double r2, double ra2, int j0, int n, int* lo, int* hi) {
-  const double ek2 = ek * ek;
-  for (int t = 0; t < n; ++t) {
-    const double ej = double(j0 + t) - gy;
-    const double ej2 = ej * ej;
-    const double w2 = (ra2 - ej2) - ek2;
-    const bool ok = !(ej2 + ek2 > r2) && w2 >= 0;
-    const double w = std::sqrt(std::max(w2, 0.0));
-    lo[t] = ok ? toInt(std::ceil(gx - w)) : 1;
-    hi[t] = ok ? toInt(std::floor(gx + w)) : 0;
-  }
-}
-
-bool markPlaneScalar(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo, int hi) {
-  bool any = false;
-  for (int t = 0; t < n; ++t) {
-    const int i0 = std::max(lo, c0[t]), i1 = std::min(hi, c1[t]);
-    if (i0 > i1) continue;
-    any = true;
-    std::uint64_t* w = rows + 4 * t;
-    for (int q = 0; q < 3; ++q) {
-      const int a = std::max(i0 - 64 * q, 0), b = std::min(i1 - 64 * q, 63);  // bits a..b of word q
-      const std::uint64_t run = (~std::uint64_t(0) >> (63 - std::max(b - a, 0))) << std::min(a, 63);
-      w[q] |= a <= b ? run : 0;
-    }
-  }
-  return any;
-}
-
-#if defined(__x86_64__) || defined(__i386__)
-__attribute__((target("avx2"))) void sphereChordsAvx2(double gx, double gy, double ek, double r2, double ra2, int j0,
-                                                      int n, int* lo, int* hi) {
-  const __m256d vgx = _mm256_set1_pd(gx), vgy = _mm256_set1_pd(gy), vek2 = _mm256_set1_pd(ek * ek);
-  const __m256d vr2 = _mm256_set1_pd(r2), vra2 = _mm256_set1_pd(ra2), zero = _mm256_setzero_pd();
-  const __m256d one = _mm256_set1_pd(1.0), lim = _mm256_set1_pd(1e9), nlim = _mm256_set1_pd(-1e9);
-  // Lanes past n compute rows that are not asked for; the arrays are padded for them.
-  for (int t = 0; t < n; t += 4) {
-    const __m256d j = _mm256_add_pd(_mm256_set1_pd(double(j0 + t)), _mm256_setr_pd(0, 1, 2, 3));
-    const __m256d ej = _mm256_sub_pd(j, vgy);
-    const __m256d ej2 = _mm256_mul_pd(ej, ej);
-    const __m256d w2 = _mm256_sub_pd(_mm256_sub_pd(vra2, ej2), vek2);
-    const __m256d ok =
-        _mm256_and_pd(_mm256_cmp_pd(_mm256_add_pd(ej2, vek2), vr2, _CMP_LE_OQ), _mm256_cmp_pd(w2, zero, _CMP_GE_OQ));
-    const __m256d w = _mm256_sqrt_pd(_mm256_max_pd(w2, zero));
-    const __m256d a = _mm256_blendv_pd(one, _mm256_ceil_pd(_mm256_sub_pd(vgx, w)), ok);
-    const __m256d b = _mm256_blendv_pd(zero, _mm256_floor_pd(_mm256_add_pd(vgx, w)), ok);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(lo + t), _mm256_cvttpd_epi32(_mm256_min_pd(_mm256_max_pd(a, nlim), lim)));
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(hi + t), _mm256_cvttpd_epi32(_mm256_min_pd(_mm256_max_pd(b, nlim), lim)));
-  }
-}
-__attribute__((target("avx2"))) bool markPlaneAvx2(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo,
-                                                   int hi) {
-  // Row t is the aligned words rows[4t .. 4t+3]: one vector load/OR/store per row
-  // (the fourth lane, padding, is ORed with zero).
-  const __m256i q64 = _mm256_setr_epi64x(0, 64, 128, 192), one = _mm256_set1_epi64x(1);
-  bool any = false;
-  for (int t = 0; t < n; ++t) {
-    const int i0 = std::max(lo, c0[t]), i1 = std::min(hi, c1[t]);
-    if (i0 > i1) continue;
-    any = true;
-    const __m256i a = _mm256_sub_epi64(_mm256_set1_epi64x(i0), q64);
-    const __m256i b = _mm256_sub_epi64(_mm256_set1_epi64x(i1 + 1), q64);
-    // Bits below x in each lane: 0 for x <= 0, all for x >= 64 (sllv gives 0 there, minus 1).
-    const __m256i belowA =
-        _mm256_andnot_si256(_mm256_cmpgt_epi64(one, a), _mm256_sub_epi64(_mm256_sllv_epi64(one, a), one));
-    const __m256i belowB =
-        _mm256_andnot_si256(_mm256_cmpgt_epi64(one, b), _mm256_sub_epi64(_mm256_sllv_epi64(one, b), one));
-    const __m256i run = _mm256_andnot_si256(belowA, belowB);
-    __m256i* w = reinterpret_cast<__m256i*>(rows + 4 * t);
-    _mm256_store_si256(w, _mm256_or_si256(_mm256_load_si256(w), run));
-  }
-  return any;
-}
-bool hasAvx2() { return __builtin_cpu_supports("avx2"); }
-#else
-bool markPlaneAvx2(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo, int hi) {
-  return markPlaneScalar(rows, n, c0, c1, lo, hi);
-}
-void sphereChordsAvx2(double gx, double gy, double ek, double r2, double ra2, int j0, int n, int* lo, int* hi) {
-  sphereChordsScalar(gx, gy, ek, r2, ra2, j0, n, lo, hi);
-}
-bool hasAvx2() { return false; }
-#endif
-
-}  // namespace detail
 }  // namespace physketch::sketch

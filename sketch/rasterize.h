@@ -111,25 +111,4 @@ class StampDiff {
   Rows prev_, next_;
 };
 
-namespace detail {
-
-// The sphere brush's inner loop, exposed so tests can hold its two forms to each other.
-// For the rows j0 .. j0+n-1 (n <= kGridSize) of a plane at distance ek (cells) from the
-// centre (gx, gy): lo[t]..hi[t] are the cells of row j0+t whose centres are inside,
-// ceil(gx - w)..floor(gx + w) with w = sqrt(ra2 - (j-gy)^2 - ek^2), lo > hi when the
-// row misses the sphere (or its bounding radius^2 r2); values are clamped to +-1e9.
-// Arrays hold at least kChordPad entries.
-constexpr int kChordPad = kGridSize + 5;
-void sphereChordsScalar(double gx, double gy, double ek, double r2, double ra2, int j0, int n, int* lo, int* hi);
-// The same four rows at a time with AVX2 (bit-identical: every operation is exactly
-// rounded IEEE arithmetic); call it only where hasAvx2().
-void sphereChordsAvx2(double gx, double gy, double ek, double r2, double ra2, int j0, int n, int* lo, int* hi);
-// ORs the runs c0[t]..c1[t], clamped to lo..hi, into rows t = 0..n-1 of a CellMask
-// plane (consecutive rows of CellMask::kStride words, 32-byte aligned); returns
-// whether any run was non-empty.
-bool markPlaneScalar(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo, int hi);
-bool markPlaneAvx2(std::uint64_t* rows, int n, const int* c0, const int* c1, int lo, int hi);
-bool hasAvx2();
-
-}  // namespace detail
 }  // namespace physketch::sketch

@@ -32,13 +32,6 @@ struct Solid {
   double volume() const;
   // True for every shape but the torus: a line meets a convex solid in one interval.
   bool convex() const { return shape != SolidShape::kTorus; }
-  // For a convex solid: the parameter interval [t0, t1] where origin + t*dir is inside.
-  // Returns false when the line misses the solid.
-  bool lineInterval(const Vec3& origin, const Vec3& dir, double& t0, double& t1) const {
-    return lineIntervalLocal(rotation.transpose() * (origin - centre), rotation.transpose() * dir, t0, t1);
-  }
-  // The same with origin and direction already in the local frame.
-  bool lineIntervalLocal(const Vec3& o, const Vec3& d, double& t0, double& t1) const;
 };
 
 // Rotation whose local z axis is the unit vector `axis` (x and y chosen deterministically).

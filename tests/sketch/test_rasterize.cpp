@@ -8,6 +8,7 @@
 
 #include <tbb/global_control.h>
 
+#include "sketch/raster_kernels.h"
 #include "sketch/rasterize.h"
 #include "sketch/voxelize.h"
 
@@ -113,21 +114,39 @@ TEST(CellMask, HoldsTheUnionOfItsStamps) {
 // operations only), including rows at exact integer distances and brushes far
 // larger than the grid.
 TEST(RasterizeKernels, Avx2MatchesScalar) {
-  if (!detail::hasAvx2()) GTEST_SKIP() << "no AVX2 on this CPU: the scalar kernels run";
+  if (!kernels::hasAvx2()) GTEST_SKIP() << "no AVX2 on this CPU: the scalar kernels run";
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  int a0[detail::kChordPad], a1[detail::kChordPad], b0[detail::kChordPad], b1[detail::kChordPad];
+  int a0[kernels::kChordPad], a1[kernels::kChordPad], b0[kernels::kChordPad], b1[kernels::kChordPad];
   for (int n = 0; n < 20000; ++n) {
     const bool exact = n % 4 == 0;  // integer centre and radius: chords end exactly on cell centres
     const double gx = exact ? double(rng() % 151) : 160 * u(rng) - 5, gy = exact ? double(rng() % 151) : 160 * u(rng) - 5;
     const double ra = exact ? double(rng() % 20) : (n % 97 == 0 ? 1e10 * u(rng) : 25 * u(rng));
     const double ek = exact ? double(int(rng() % 9) - 4) : 2 * ra * u(rng) - ra;
     const int j0 = int(rng() % 151), len = 1 + int(rng() % (151 - j0));
-    detail::sphereChordsScalar(gx, gy, ek, ra * ra, ra * ra, j0, len, a0, a1);
-    detail::sphereChordsAvx2(gx, gy, ek, ra * ra, ra * ra, j0, len, b0, b1);
+    kernels::sphereChordsScalar(gx, gy, ek, ra * ra, ra * ra, j0, len, a0, a1);
+    kernels::sphereChordsAvx2(gx, gy, ek, ra * ra, ra * ra, j0, len, b0, b1);
     for (int t = 0; t < len; ++t) {
       ASSERT_EQ(a0[t], b0[t]) << "case " << n << " row " << t;
       ASSERT_EQ(a1[t], b1[t]) << "case " << n << " row " << t;
+    }
+  }
+  // Boxes, ellipsoids, cylinders and capsules at any orientation, grid-aligned ones
+  // included (rows parallel to faces or to the axis take the "flat" branches).
+  for (int n = 0; n < 3000; ++n) {
+    Solid s = randomSolid(rng);
+    if (s.shape == SolidShape::kSphere || s.shape == SolidShape::kTorus) continue;
+    if (n % 3 == 0) s.rotation = frameFromAxis(Vec3::Unit(static_cast<int>(rng() % 3)));
+    const kernels::ConvexRows rows(s, kMap);
+    const Vec3 g = kMap.toGrid(s.centre);
+    for (int k = std::max(0, int(g.z()) - 12); k <= std::min(kGridSize - 1, int(g.z()) + 12); ++k) {
+      const int j0 = std::max(0, int(g.y()) - 12), len = std::min(kGridSize - j0, 25);
+      kernels::convexChordsScalar(rows, k, j0, len, a0, a1);
+      kernels::convexChordsAvx2(rows, k, j0, len, b0, b1);
+      for (int t = 0; t < len; ++t) {
+        ASSERT_EQ(a0[t], b0[t]) << "solid " << n << " shape " << int(s.shape) << " plane " << k << " row " << t;
+        ASSERT_EQ(a1[t], b1[t]) << "solid " << n << " shape " << int(s.shape) << " plane " << k << " row " << t;
+      }
     }
   }
   // Runs across every word boundary, clamped at both ends, and empty runs.
@@ -139,8 +158,8 @@ TEST(RasterizeKernels, Avx2MatchesScalar) {
       c1[t] = c0[t] + int(rng() % 90) - 5;
     }
     const int lo = int(rng() % 40), hi = 110 + int(rng() % 41);
-    const bool anyS = detail::markPlaneScalar(s, 8, c0, c1, lo, hi);
-    const bool anyV = detail::markPlaneAvx2(v, 8, c0, c1, lo, hi);
+    const bool anyS = kernels::markPlaneScalar(s, 8, c0, c1, lo, hi);
+    const bool anyV = kernels::markPlaneAvx2(v, 8, c0, c1, lo, hi);
     ASSERT_EQ(anyS, anyV);
     for (int w = 0; w < 32; ++w) ASSERT_EQ(s[w], v[w]) << "case " << n << " word " << w;
     if (n % 50 == 0) std::fill(s, s + 32, 0), std::fill(v, v + 32, 0);
