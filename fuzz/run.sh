@@ -18,8 +18,9 @@ bin=fuzz/out/fuzz_parsers
 clang++-14 -std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
   -I. -I/usr/include/eigen3 \
   fuzz/fuzz_parsers.cpp core/error.cpp core/records.cpp core/scene.cpp core/material.cpp core/particles.cpp \
-  sketch/grid.cpp sketch/solids.cpp sketch/strokes.cpp sketch/voxelize.cpp sketch/mesh_stamp.cpp \
-  -frounding-math -lgmp -lmpfr -o "$bin"
+  sketch/grid.cpp sketch/solids.cpp sketch/strokes.cpp sketch/raster_kernels.cpp sketch/rasterize.cpp \
+  sketch/voxelize.cpp sketch/mesh_stamp.cpp \
+  -frounding-math -lgmp -lmpfr -ltbb -o "$bin"
 # Seed corpus: the bundled example files (first byte 0 = strokes, 1 = scene).
 for f in scenes/*.strokes; do { printf '\0'; tail -n +2 "$f"; } > "fuzz/corpus/$(basename "$f").seed"; done
 for f in scenes/*.scene; do { printf '\1'; tail -n +2 "$f"; } > "fuzz/corpus/$(basename "$f").seed"; done

@@ -198,6 +198,10 @@ int printPlan(const std::string& scenePath) {
 
 int runScene(const RunOptions& opt) {
   const double tStart = nowSeconds();
+  // One thread limit for the whole run: voxelizing (long strokes are swept in
+  // parallel) as well as the solver and the meshing.
+  const int threads = opt.threads > 0 ? opt.threads : tbb::info::default_concurrency();
+  tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
   Prepared p;
   if (const int rc = withExitCodes([&] {
         p = prepare(opt.scene);
@@ -208,8 +212,6 @@ int runScene(const RunOptions& opt) {
   const double tPrepared = nowSeconds();
 
   return withExitCodes([&] {
-    const int threads = opt.threads > 0 ? opt.threads : tbb::info::default_concurrency();
-    tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
     const SceneDesc& sc = p.scene;
     const sketch::Sketch& sk = *p.sketch;
     const int frames = opt.frames > 0 ? opt.frames : sc.frameCount();
