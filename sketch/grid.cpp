@@ -56,7 +56,8 @@ std::int64_t OccupancyGrid::occupied() const {
 }
 
 bool OccupancyGrid::operator==(const OccupancyGrid& other) const {
-  return std::memcmp(cells_.get(), other.cells_.get(), static_cast<std::size_t>(kGridCells) * sizeof(std::int32_t)) == 0;
+  const std::size_t bytes = static_cast<std::size_t>(kGridCells) * sizeof(std::int32_t);
+  return std::memcmp(cells_.get(), other.cells_.get(), bytes) == 0;
 }
 
 }  // namespace physketch::sketch

@@ -9,11 +9,6 @@
 #endif
 
 namespace physketch::sketch::kernels {
-namespace {
-// A double (a cell index computed in floating point) as an int; clamped first so
-// that the huge values of a brush far larger than the grid convert safely.
-inline int toInt(double x) { return static_cast<int>(std::min(std::max(x, -1e9), 1e9)); }
-}  // namespace
 
 // --- the sphere ------------------------------------------------------------------
 
@@ -65,13 +60,15 @@ ConvexRows::ConvexRows(const Solid& solid, const GridMapping& m) {
     case SolidShape::kCylinder: shape = Shape::kCylinder, r2 = solid.a * solid.a, half[2] = solid.b; break;
     case SolidShape::kCapsule: shape = Shape::kCapsule, r2 = solid.a * solid.a, half[2] = solid.b; break;
     case SolidShape::kSphere:
-    case SolidShape::kTorus: throw std::logic_error("ConvexRows: the sphere and the torus have rasterizers of their own");
+    case SolidShape::kTorus:
+      throw std::logic_error("ConvexRows: the sphere and the torus have rasterizers of their own");
   }
   for (int i = 0; i < 3; ++i) {
     flatD[i] = std::abs(d[i]) < 1e-300;
     invD[i] = flatD[i] ? 0.0 : 1.0 / d[i];
   }
-  A = shape == Shape::kEllipsoid ? (w[0] * d[0] * d[0] + w[1] * d[1] * d[1]) + w[2] * d[2] * d[2] : d[0] * d[0] + d[1] * d[1];
+  A = shape == Shape::kEllipsoid ? (w[0] * d[0] * d[0] + w[1] * d[1] * d[1]) + w[2] * d[2] * d[2]
+                                 : d[0] * d[0] + d[1] * d[1];
   flatA = A < 1e-300;
   invA = flatA ? 0.0 : 1.0 / A;
   A3 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
@@ -151,7 +148,6 @@ inline void convexChord(const ConvexRows& c, const double o[3], double& t0, doub
   }
 }
 
-inline int clampToInt(double x) { return static_cast<int>(vmin(vmax(x, -1e9), 1e9)); }
 
 }  // namespace
 
@@ -162,7 +158,7 @@ void convexChordsScalar(const ConvexRows& c, int k, int j0, int n, int* lo, int*
     const double o[3] = {ob[0] + j * c.dj[0], ob[1] + j * c.dj[1], ob[2] + j * c.dj[2]};
     double t0, t1;
     convexChord(c, o, t0, t1);
-    lo[t] = clampToInt(std::ceil(t0)), hi[t] = clampToInt(std::floor(t1));
+    lo[t] = toInt(std::ceil(t0)), hi[t] = toInt(std::floor(t1));
   }
 }
 
@@ -286,7 +282,9 @@ PHYSKETCH_AVX2 void convexChordV(const ConvexRows& c, const V o[3], V& t0, V& t1
   }
 }
 
-PHYSKETCH_AVX2 __m128i clampToIntV(V x) { return _mm256_cvttpd_epi32(_mm256_min_pd(_mm256_max_pd(x, set1(-1e9)), set1(1e9))); }
+PHYSKETCH_AVX2 __m128i toIntV(V x) {
+  return _mm256_cvttpd_epi32(_mm256_min_pd(_mm256_max_pd(x, set1(-1e9)), set1(1e9)));
+}
 
 #undef PHYSKETCH_AVX2
 }  // namespace
@@ -302,8 +300,8 @@ __attribute__((target("avx2"))) void convexChordsAvx2(const ConvexRows& c, int k
                     _mm256_add_pd(ob[2], _mm256_mul_pd(j, set1(c.dj[2])))};
     V t0, t1;
     convexChordV(c, o, t0, t1);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(lo + t), clampToIntV(_mm256_ceil_pd(t0)));
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(hi + t), clampToIntV(_mm256_floor_pd(t1)));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(lo + t), toIntV(_mm256_ceil_pd(t0)));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(hi + t), toIntV(_mm256_floor_pd(t1)));
   }
 }
 #else

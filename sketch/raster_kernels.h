@@ -5,6 +5,7 @@
 // them to it) and a sketch does not depend on the CPU it was made on.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include "core/math.h"
@@ -18,6 +19,10 @@ constexpr int kChordPad = kGridSize + 5;
 
 // True when the CPU runs the AVX2 forms.
 bool hasAvx2();
+
+// A double (a cell index computed in floating point) as an int; clamped first so
+// that the huge values of a brush far larger than the grid convert safely.
+inline int toInt(double x) { return static_cast<int>(std::min(std::max(x, -1e9), 1e9)); }
 
 // The sphere: for the rows j0 .. j0+n-1 (n <= kGridSize) of a plane at distance ek
 // (cells) from the centre (gx, gy): lo[t]..hi[t] are the cells of row j0+t whose

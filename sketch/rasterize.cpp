@@ -10,9 +10,7 @@
 namespace physketch::sketch {
 namespace {
 
-// A double (a cell index computed in floating point) as an int; clamped first so
-// that the huge values of a brush far larger than the grid convert safely.
-inline int toInt(double x) { return static_cast<int>(std::min(std::max(x, -1e9), 1e9)); }
+using kernels::toInt;
 
 // The grid cells (clamped to the grid) of the bounding sphere of a solid, in cells.
 struct CellBounds {
@@ -29,8 +27,8 @@ struct CellBounds {
 };
 
 // A box whose frame is a signed permutation of the grid axes (a cube brush with
-// the default axis, an unrotated box primitive): which world axis each local axis
-// lies on. Its cells are a product of three index ranges.
+// the default axis, an unrotated box primitive): its cells are a product of three
+// index ranges.
 bool gridAligned(const Solid& solid) {
   if (solid.shape != SolidShape::kBox && solid.shape != SolidShape::kCube) return false;
   for (int i = 0; i < 9; ++i) {
@@ -63,7 +61,8 @@ void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb
   int c0[kernels::kChordPad], c1[kernels::kChordPad];
   if (gridAligned(solid)) {
     // The same chord on every row of a rectangle of rows.
-    const Vec3 half = solid.shape == SolidShape::kCube ? Vec3(solid.a, solid.a, solid.a) : Vec3(solid.a, solid.b, solid.c);
+    const Vec3 half =
+        solid.shape == SolidShape::kCube ? Vec3(solid.a, solid.a, solid.a) : Vec3(solid.a, solid.b, solid.c);
     int a[3], b[3];
     for (int e = 0; e < 3; ++e) {
       int local = 0;  // the local axis lying on world axis e

@@ -19,12 +19,11 @@ namespace physketch::sketch {
 // the grid are skipped (Alg. 1: "if p in M"). `out` is cleared first.
 void rasterize(const Solid& solid, const GridMapping& mapping, std::vector<Vec3i>& out);
 
-// The cells one operation covers, one bit per cell of the 151^3 grid (a row of 151
-// cells in 3 words of 64 bits, padded to 4 so each row is one aligned 32-byte
-// vector: 713 KiB). A stroke is thousands of stamps that
-// overlap almost entirely: each stamp only ORs its row runs into the mask (a few
-// word operations per row, no lookup per cell), and the operation then applies
-// every covered cell once, in z, y, x order.
+// A set of cells of the 151^3 grid, one bit per cell (a row of 151 cells in 3 words
+// of 64 bits, padded to 4 so each row is one aligned 32-byte vector: 713 KiB).
+// A stroke is thousands of stamps that overlap almost entirely: each stamp only ORs
+// its row runs into the mask (a few word operations per row, no lookup per cell),
+// and the operation then applies every covered cell once, in z, y, x order.
 class CellMask {
  public:
   CellMask();
