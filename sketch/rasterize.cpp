@@ -52,6 +52,20 @@ void alignedRange(const Solid& solid, const GridMapping& m, const CellBounds& cb
   while (b >= cb.lo[e] && !inside(b)) --b;
 }
 
+// For a grid-aligned box: its cells are those of the index ranges a[e]..b[e] (an
+// empty range when a > b). Returns false for any other solid.
+bool alignedBox(const Solid& solid, const GridMapping& m, const CellBounds& cb, int a[3], int b[3]) {
+  if (!gridAligned(solid)) return false;
+  const Vec3 half =
+      solid.shape == SolidShape::kCube ? Vec3(solid.a, solid.a, solid.a) : Vec3(solid.a, solid.b, solid.c);
+  for (int e = 0; e < 3; ++e) {
+    int local = 0;  // the local axis lying on world axis e
+    while (solid.rotation(e, local) == 0.0) ++local;
+    alignedRange(solid, m, cb, e, half[local], a[e], b[e]);
+  }
+  return true;
+}
+
 // Calls plane(k, j0, n, c0, c1) for each plane k a convex solid may meet, with the
 // rows j0 .. j0+n-1 of it (within the grid): c0[t]..c1[t] are the cells of row j0+t
 // whose centres are inside (c0 > c1 when none), not yet clamped to cb.lo[0]..cb.hi[0].
@@ -59,16 +73,9 @@ void alignedRange(const Solid& solid, const GridMapping& m, const CellBounds& cb
 template <class PlaneFn>
 void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb, PlaneFn&& plane) {
   int c0[kernels::kChordPad], c1[kernels::kChordPad];
-  if (gridAligned(solid)) {
+  int a[3], b[3];
+  if (alignedBox(solid, m, cb, a, b)) {
     // The same chord on every row of a rectangle of rows.
-    const Vec3 half =
-        solid.shape == SolidShape::kCube ? Vec3(solid.a, solid.a, solid.a) : Vec3(solid.a, solid.b, solid.c);
-    int a[3], b[3];
-    for (int e = 0; e < 3; ++e) {
-      int local = 0;  // the local axis lying on world axis e
-      while (solid.rotation(e, local) == 0.0) ++local;
-      alignedRange(solid, m, cb, e, half[local], a[e], b[e]);
-    }
     if (a[0] > b[0] || a[1] > b[1]) return;
     std::fill(c0, c0 + (b[1] - a[1] + 1), a[0]);
     std::fill(c1, c1 + (b[1] - a[1] + 1), b[0]);
@@ -177,6 +184,7 @@ void CellMask::clear() {
   for (int k = k0_; k <= k1_; ++k) std::memset(row(j0_, k), 0, words * sizeof(std::uint64_t));
   k0_ = j0_ = kGridSize;
   k1_ = j1_ = -1;
+  std::fill(lastBox_, lastBox_ + 6, 0), lastBox_[0] = 1;  // an empty box
 }
 
 inline void CellMask::markRow(int j, int k, int i0, int i1) {
@@ -186,6 +194,13 @@ inline void CellMask::markRow(int j, int k, int i0, int i1) {
 void CellMask::add(const Solid& solid, const GridMapping& m) {
   const CellBounds cb(solid, m);
   bool any = false;
+  int a[3], b[3];
+  if (alignedBox(solid, m, cb, a, b) && a[0] <= b[0] && a[1] <= b[1] && a[2] <= b[2]) {
+    // A grid-aligned box is three index ranges. While a stroke moves by less than a
+    // cell per stamp they are often the previous stamp's: nothing new to mark.
+    if (std::equal(a, a + 3, lastBox_) && std::equal(b, b + 3, lastBox_ + 3)) return;
+    std::copy(a, a + 3, lastBox_), std::copy(b, b + 3, lastBox_ + 3);
+  }
   if (solid.convex()) {
     static const auto mark = kernels::hasAvx2() ? kernels::markPlaneAvx2 : kernels::markPlaneScalar;
     forEachPlane(solid, m, cb, [&](int k, int j0, int n, const int* c0, const int* c1) {

@@ -72,7 +72,10 @@ class CellMask {
     grow(c);
     row(c.y(), c.z())[c.x() >> 6] |= std::uint64_t(1) << (c.x() & 63);
   }
-  void reset(const Vec3i& c) { row(c.y(), c.z())[c.x() >> 6] &= ~(std::uint64_t(1) << (c.x() & 63)); }
+  void reset(const Vec3i& c) {
+    row(c.y(), c.z())[c.x() >> 6] &= ~(std::uint64_t(1) << (c.x() & 63));
+    lastBox_[0] = 1, lastBox_[3] = 0;  // the last box may have lost a cell
+  }
 
   static constexpr int kWords = (kGridSize + 63) / 64;  // words a row uses
   static constexpr int kStride = 4;                      // words a row takes
@@ -87,6 +90,7 @@ class CellMask {
   std::vector<std::uint64_t> bits_;
   std::uint64_t* base_;  // the first 32-byte aligned word of bits_
   int k0_, k1_, j0_, j1_;  // bounds of the rows marked since the last clear (empty: k0_ > k1_)
+  int lastBox_[6] = {1, 0, 0, 0, 0, 0};  // a grid-aligned box whose cells are all marked: lo[3], hi[3]
 };
 
 // The previous stamp of a stroke, as row intervals: each stamp hands on only the
