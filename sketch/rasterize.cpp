@@ -66,6 +66,17 @@ bool alignedBox(const Solid& solid, const GridMapping& m, const CellBounds& cb, 
   return true;
 }
 
+// forEachPlane() for a grid-aligned box of index ranges a..b: the same chord on
+// every row of a rectangle of rows.
+template <class PlaneFn>
+void forEachAlignedPlane(const int a[3], const int b[3], PlaneFn&& plane) {
+  if (a[0] > b[0] || a[1] > b[1]) return;
+  int c0[kernels::kChordPad], c1[kernels::kChordPad];
+  std::fill(c0, c0 + (b[1] - a[1] + 1), a[0]);
+  std::fill(c1, c1 + (b[1] - a[1] + 1), b[0]);
+  for (int k = a[2]; k <= b[2]; ++k) plane(k, a[1], b[1] - a[1] + 1, c0, c1);
+}
+
 // Calls plane(k, j0, n, c0, c1) for each plane k a convex solid may meet, with the
 // rows j0 .. j0+n-1 of it (within the grid): c0[t]..c1[t] are the cells of row j0+t
 // whose centres are inside (c0 > c1 when none), not yet clamped to cb.lo[0]..cb.hi[0].
@@ -74,14 +85,7 @@ template <class PlaneFn>
 void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb, PlaneFn&& plane) {
   int c0[kernels::kChordPad], c1[kernels::kChordPad];
   int a[3], b[3];
-  if (alignedBox(solid, m, cb, a, b)) {
-    // The same chord on every row of a rectangle of rows.
-    if (a[0] > b[0] || a[1] > b[1]) return;
-    std::fill(c0, c0 + (b[1] - a[1] + 1), a[0]);
-    std::fill(c1, c1 + (b[1] - a[1] + 1), b[0]);
-    for (int k = a[2]; k <= b[2]; ++k) plane(k, a[1], b[1] - a[1] + 1, c0, c1);
-    return;
-  }
+  if (alignedBox(solid, m, cb, a, b)) return forEachAlignedPlane(a, b, plane);
   const double h = m.voxelSize();
   const Vec3& g = cb.g;
   const double r2 = cb.r * cb.r;
@@ -194,18 +198,20 @@ inline void CellMask::markRow(int j, int k, int i0, int i1) {
 void CellMask::add(const Solid& solid, const GridMapping& m) {
   const CellBounds cb(solid, m);
   bool any = false;
+  static const auto mark = kernels::hasAvx2() ? kernels::markPlaneAvx2 : kernels::markPlaneScalar;
+  auto markPlane = [&](int k, int j0, int n, const int* c0, const int* c1) {
+    any |= mark(row(j0, k), n, c0, c1, cb.lo[0], cb.hi[0]);
+  };
   int a[3], b[3];
-  if (alignedBox(solid, m, cb, a, b) && a[0] <= b[0] && a[1] <= b[1] && a[2] <= b[2]) {
+  if (alignedBox(solid, m, cb, a, b)) {
     // A grid-aligned box is three index ranges. While a stroke moves by less than a
     // cell per stamp they are often the previous stamp's: nothing new to mark.
-    if (std::equal(a, a + 3, lastBox_) && std::equal(b, b + 3, lastBox_ + 3)) return;
-    std::copy(a, a + 3, lastBox_), std::copy(b, b + 3, lastBox_ + 3);
-  }
-  if (solid.convex()) {
-    static const auto mark = kernels::hasAvx2() ? kernels::markPlaneAvx2 : kernels::markPlaneScalar;
-    forEachPlane(solid, m, cb, [&](int k, int j0, int n, const int* c0, const int* c1) {
-      any |= mark(row(j0, k), n, c0, c1, cb.lo[0], cb.hi[0]);
-    });
+    const bool empty = a[0] > b[0] || a[1] > b[1] || a[2] > b[2];
+    if (!empty && std::equal(a, a + 3, lastBox_) && std::equal(b, b + 3, lastBox_ + 3)) return;
+    if (!empty) std::copy(a, a + 3, lastBox_), std::copy(b, b + 3, lastBox_ + 3);
+    forEachAlignedPlane(a, b, markPlane);
+  } else if (solid.convex()) {
+    forEachPlane(solid, m, cb, markPlane);
   } else {
     any = forEachRow(solid, m, [&](int j, int k, int i0, int i1) { markRow(j, k, i0, i1); });
   }

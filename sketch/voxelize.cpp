@@ -507,6 +507,7 @@ class Builder {
     tbb::parallel_invoke([&] { out.x.resize(total), out.vx.resize(total), out.invMass.resize(total), out.stroke.resize(total); },
                          [&] { out.y.resize(total), out.vy.resize(total), out.body.resize(total, -1), out.material.resize(total); },
                          [&] { out.z.resize(total), out.vz.resize(total), cells.resize(total); });
+    out.resize(total);  // sizes any array the lines above do not name (none now; a no-op for the rest)
     tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t p) {
       const Piece& pc = pieces[p];
       const std::int16_t material = sk_.operations[static_cast<std::size_t>(pc.op)].material;
@@ -619,7 +620,6 @@ class Builder {
   std::vector<std::unique_ptr<CellMask>> partMasks_;  // the other parts of a stroke swept in parallel
   Sketch sk_;
   double h_;
-  // Particles while sketching: grid cell, creating operation, material (the SoA arrays are built at the end).
   // Particles while sketching, in creation order: the linear grid cell of each, -1
   // once removed. The particles one operation created are consecutive: a run.
   std::vector<std::int32_t> protoCell_;
