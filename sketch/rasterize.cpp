@@ -83,9 +83,9 @@ void forEachAlignedPlane(const int a[3], const int b[3], PlaneFn&& plane) {
 // Each row is a line through the cell centres; its chord is found in closed form.
 template <class PlaneFn>
 void forEachPlane(const Solid& solid, const GridMapping& m, const CellBounds& cb, PlaneFn&& plane) {
-  int c0[kernels::kChordPad], c1[kernels::kChordPad];
   int a[3], b[3];
   if (alignedBox(solid, m, cb, a, b)) return forEachAlignedPlane(a, b, plane);
+  int c0[kernels::kChordPad], c1[kernels::kChordPad];
   const double h = m.voxelSize();
   const Vec3& g = cb.g;
   const double r2 = cb.r * cb.r;
