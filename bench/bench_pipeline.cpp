@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
     renderer.drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), sc.workspaceSize, {0.5f, 0.5f, 0.5f});
     for (std::size_t b = 0; b < bodies.size(); ++b)
       renderer.drawMesh(handles[b], world.pose(static_cast<int>(b)).model(),
-                        sc.materials[static_cast<std::size_t>(bodies[b].material)].color);
+                        sc.materials[static_cast<std::size_t>(sk->particles.material[std::size_t(bodies[b].first)])].color);
     const render::Image img = renderer.endFrame();
     const double t1 = nowSeconds();
     render::writePng(tmp.string(), img);

@@ -1,7 +1,13 @@
-// Stability guard: finds the first particle whose state is not finite, moves
-// faster than a bound, or sits deeper inside the ground than a bound, and
-// records it with the pass that ran last and the knob to change. The record
-// lives in the world's data; a tripped world refuses to step (never a silent reset).
+// Stability guard: the record of the first particle whose state is not finite,
+// moves faster than a bound, or (solver-specific) sits where it must not, with the
+// pass that produced it and the knob to change. The record lives in the world's
+// data; a tripped world refuses to step (never a silent reset).
+//
+// The checks here are the ones every solver shares (NaN/Inf, speed). What a solver
+// owns (its ground, its colliders, MPM's J) it checks itself and reports with the
+// same record. Solvers check once per step; when that check trips they replay the
+// step from its saved start with a check after every pass, so the record names the
+// pass that produced the bad value (`--validate` checks after every pass always).
 #pragma once
 
 #include <cstdint>
@@ -14,30 +20,30 @@ namespace physketch {
 enum class GuardKind { kNone, kNaN, kExplosion, kPenetration };
 const char* toString(GuardKind kind);
 
-struct GuardLimits {
-  double maxSpeed = 100.0;        // m/s; faster is an explosion
-  double groundY = 0.0;           // m; ground plane height
-  double maxPenetration = 0.0;    // m; deeper below groundY + radius is a penetration (<= 0 disables)
-  double particleRadius = 0.0;    // m
-};
-
 struct GuardRecord {
   GuardKind kind = GuardKind::kNone;
-  std::string pass;       // pass that ran last before the check
-  std::int64_t step = -1; // solver step (0-based)
+  std::string pass;         // pass whose output first failed the check
+  std::int64_t step = -1;   // solver step (0-based)
+  int substep = -1;         // substep within the step (0-based), -1 for per-step passes
   std::int32_t particle = -1;
-  std::int32_t body = -1;
-  double value = 0.0;     // offending value (speed in m/s, depth in m; NaN for kNaN)
-  double bound = 0.0;     // the bound it crossed
-  std::string hint;       // the knob to change
+  std::int32_t body = -1;   // group of the particle, -1 if none
+  std::int32_t stroke = -1; // operation that created it
+  std::string material;     // its material's name
+  double value = 0.0;       // offending value (speed in m/s, depth in m; NaN for kNaN)
+  double bound = 0.0;       // the bound it crossed
+  std::string hint;         // the knob to change
 
   bool tripped() const { return kind != GuardKind::kNone; }
   std::string message() const;
 };
 
-// Checks particles in id order and returns the first offender (kind kNone if all pass).
+// The checks every solver shares, over particles in id order; returns the first
+// offender (kind kNone if all pass) with its particle, body, stroke, value, bound and
+// hint filled in (pass, step, substep and material are the caller's to fill).
+//  - NaN/Inf in position or velocity, for every particle still in the simulation;
+//  - speed above maxSpeed, for particles the solver moves (not prescribed ones:
+//    their motion is the input's).
 // Deterministic: the same state gives the same record for any thread count.
-GuardRecord checkParticles(const ParticleArrays& p, const GuardLimits& limits, const std::string& pass,
-                           std::int64_t step);
+GuardRecord checkParticles(const ParticleArrays& p, double maxSpeed);
 
 }  // namespace physketch

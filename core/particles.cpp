@@ -3,16 +3,15 @@
 namespace physketch {
 
 void ParticleArrays::reserve(std::size_t n) {
-  for (auto* a : {&x, &y, &z, &vx, &vy, &vz, &invMass}) a->reserve(n);
-  body.reserve(n);
+  for (auto* a : {&x, &y, &z, &vx, &vy, &vz, &mass}) a->reserve(n);
+  phase.reserve(n);
   stroke.reserve(n);
   material.reserve(n);
 }
 
 void ParticleArrays::resize(std::size_t n) {
-  for (auto* a : {&x, &y, &z, &vx, &vy, &vz}) a->resize(n, 0.0f);
-  invMass.resize(n, 0.0f);
-  body.resize(n, -1);
+  for (auto* a : {&x, &y, &z, &vx, &vy, &vz, &mass}) a->resize(n, 0.0f);
+  phase.resize(n, phase::make(-1, phase::kPrescribed));
   stroke.resize(n, -1);
   material.resize(n, 0);
 }
@@ -25,11 +24,29 @@ std::int32_t ParticleArrays::push(float px, float py, float pz, std::int32_t str
   vx.push_back(0.0f);
   vy.push_back(0.0f);
   vz.push_back(0.0f);
-  invMass.push_back(0.0f);  // static while being sketched (Phys-Sketch §4)
-  body.push_back(-1);
+  mass.push_back(0.0f);
+  phase.push_back(phase::make(-1, phase::kPrescribed));  // static while being sketched (Phys-Sketch §4)
   stroke.push_back(strokeId);
   material.push_back(materialId);
   return id;
+}
+
+Mat4f BodyPose::model() const {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  const Mat3 R = rotation.toRotationMatrix();
+  m.topLeftCorner<3, 3>() = R;
+  m.topRightCorner<3, 1>() = centre - R * restCentre;
+  return m.cast<float>();
+}
+
+const char* toString(BodyMode mode) {
+  switch (mode) {
+    case BodyMode::kDynamic: return "dynamic";
+    case BodyMode::kKinematic: return "kinematic";
+    case BodyMode::kFixed: return "fixed";
+    case BodyMode::kEmpty: return "empty";
+  }
+  return "?";
 }
 
 }  // namespace physketch

@@ -25,14 +25,16 @@ namespace physketch::pbd {
 void matchRigid(const BodyView& b, Quat& q, Vec3& c) {
   double mass = 0.0;
   Vec3 mp = Vec3::Zero();
-  for (std::int32_t i = 0; i < b.n; ++i) {
+  for (std::int32_t k = 0; k < b.n; ++k) {
+    const std::size_t i = b.at(k);
     const double m = b.mass[i];
     mass += m;
     mp += m * Vec3(b.px[i], b.py[i], b.pz[i]);
   }
   c = mp / mass;
   Mat3 A = Mat3::Zero();
-  for (std::int32_t i = 0; i < b.n; ++i) {
+  for (std::int32_t k = 0; k < b.n; ++k) {
+    const std::size_t i = b.at(k);
     const double m = b.mass[i];
     const Vec3 d = Vec3(b.px[i], b.py[i], b.pz[i]) - c;
     const Vec3 r(b.rx[i], b.ry[i], b.rz[i]);
@@ -47,7 +49,8 @@ namespace physketch::pbd {
 
 Mat3 restInertia(const BodyView& b, double spacing) {
   Mat3 I = Mat3::Zero();
-  for (std::int32_t i = 0; i < b.n; ++i) {
+  for (std::int32_t k = 0; k < b.n; ++k) {
+    const std::size_t i = b.at(k);
     const double m = b.mass[i];
     const Vec3 r(b.rx[i], b.ry[i], b.rz[i]);
     I += m * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
@@ -56,13 +59,19 @@ Mat3 restInertia(const BodyView& b, double spacing) {
   return I;
 }
 
-void applyPointCorrection(RigidPose& b, const Vec3& p, const Vec3& dir, double magnitude) {
+double generalizedInverseMass(const RigidPose& b, const Vec3& p, const Vec3& n) {
+  const Mat3 R = b.q.toRotationMatrix();
+  const Vec3 rn = (p - b.c).cross(n);
+  return b.invMass + rn.dot(R * b.invInertiaRest * R.transpose() * rn);
+}
+
+double applyPointCorrection(RigidPose& b, const Vec3& p, const Vec3& dir, double magnitude) {
   const Mat3 R = b.q.toRotationMatrix();
   const Mat3 invI = R * b.invInertiaRest * R.transpose();
   const Vec3 r = p - b.c;
   const Vec3 rn = r.cross(dir);
   const double w = b.invMass + rn.dot(invI * rn);
-  if (!(w > 0.0)) return;
+  if (!(w > 0.0)) return 0.0;
   const double lambda = magnitude / w;  // position impulse (kg m)
   b.c += (lambda * b.invMass) * dir;
   const Vec3 dtheta = invI * (lambda * rn);
@@ -71,6 +80,7 @@ void applyPointCorrection(RigidPose& b, const Vec3& p, const Vec3& dir, double m
   Quat qn = b.q;
   qn.coeffs() += 0.5 * (dq * b.q).coeffs();
   b.q = qn.normalized();
+  return lambda;
 }
 
 }  // namespace physketch::pbd

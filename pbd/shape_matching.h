@@ -16,9 +16,11 @@ namespace physketch::pbd {
 // reflection. Returns the updated unit quaternion.
 Quat extractRotation(const Mat3& A, Quat q, int maxIterations = 20);
 
-// Rest shape of one body in the solver's arrays (all pointers index particles 0..n-1 of the body).
+// Rest shape of one body in the solver's arrays. Element k of the body is array
+// element index[k] when `index` is set (a body's member list), else element k.
 struct BodyView {
   std::int32_t n = 0;
+  const std::int32_t* index = nullptr;
   const float* px = nullptr;  // current (predicted) positions (m)
   const float* py = nullptr;
   const float* pz = nullptr;
@@ -26,6 +28,7 @@ struct BodyView {
   const float* ry = nullptr;
   const float* rz = nullptr;
   const float* mass = nullptr;  // particle masses (kg)
+  std::size_t at(std::int32_t k) const { return static_cast<std::size_t>(index ? index[k] : k); }
 };
 
 // Optimal rigid transform (Müller 2005 Eq. 5-7): c = sum m p / sum m,
@@ -51,7 +54,11 @@ Mat3 restInertia(const BodyView& body, double spacing);
 // w = 1/M + (r x n)^T I^-1 (r x n) splits it between translation and rotation
 // (Müller et al. 2020, "Detailed rigid body simulation with extended position
 // based dynamics", Eq. 2-9). Moves the point by exactly `magnitude` along dir to
-// first order.
-void applyPointCorrection(RigidPose& body, const Vec3& p, const Vec3& dir, double magnitude);
+// first order. Returns the position impulse lambda = magnitude / w (kg m).
+double applyPointCorrection(RigidPose& body, const Vec3& p, const Vec3& dir, double magnitude);
+
+// The generalized inverse mass w = 1/M + (r x n)^T I^-1 (r x n) of a body at world
+// point p along unit n (1/kg): a position impulse lambda moves p by lambda * w along n.
+double generalizedInverseMass(const RigidPose& body, const Vec3& p, const Vec3& n);
 
 }  // namespace physketch::pbd

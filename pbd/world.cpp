@@ -2,23 +2,35 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/lattice.h"
 #include "pbd/shape_matching.h"
 
 namespace physketch::pbd {
+
+const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
+    {"integrate", Cadence::kPerSubstep, "dynamic bodies: v += g h, gyroscopic w update, c += v h, q += h/2 [w,0] q"},
+    {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
+    {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
+    {"update", Cadence::kPerSubstep, "velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
+    {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
+    {"guard", Cadence::kPerStep, "first NaN, explosion or ground penetration"},
+};
+
 namespace {
 
-// Per-particle passes split into fixed chunks; below this size they run serially
+// Per-particle loops split into fixed chunks; below this size they run serially
 // (threads cost more than they save on small scenes). Results do not depend on
 // the split: every particle is written by exactly one task.
 constexpr std::size_t kChunk = 4096;
 
 template <class F>
-void forParticles(std::size_t n, F&& f) {
+void forRange(std::size_t n, F&& f) {
   if (n <= kChunk) {
     f(std::size_t(0), n);
     return;
@@ -26,6 +38,54 @@ void forParticles(std::size_t n, F&& f) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kChunk),
                     [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); },
                     tbb::simple_partitioner());
+}
+
+// Runs f(k) for k in [0, n): bodies are independent, each is solved serially inside.
+template <class F>
+void forBodies(std::size_t n, F&& f) {
+  if (n == 1) {
+    f(std::size_t(0));
+  } else if (n > 1) {
+    tbb::parallel_for(std::size_t(0), n, f);
+  }
+}
+
+// q <- exp(dtheta / 2) q: the rotation by the vector dtheta (rad, world axes), exactly,
+// so that update()'s w = 2 log(q q_prev^-1) / h gives back the w that integrate used.
+Quat rotateBy(const Quat& q, const Vec3& dtheta) {
+  const double a = dtheta.norm();
+  if (a == 0.0) return q;
+  return (Quat(Eigen::AngleAxisd(a, dtheta / a)) * q).normalized();
+}
+
+// The rotation vector of a unit quaternion (the inverse of rotateBy from identity).
+Vec3 rotationVector(Quat dq) {
+  if (dq.w() < 0.0) dq.coeffs() = -dq.coeffs();
+  const double s = dq.vec().norm();
+  if (s == 0.0) return Vec3::Zero();
+  return (2.0 * std::atan2(s, dq.w()) / s) * dq.vec();
+}
+
+// Implicit gyroscopic step (Catto 2015, "Numerical methods", one Newton step on
+// f(w) = I (w - w0) + h w x I w = 0, in the body frame): an explicit w x I w term gains
+// energy for a spinning body; this one is stable and conserves |L| to O(h^2).
+Vec3 gyroscopicStep(const Mat3& I, const Vec3& w0, double h) {
+  const auto skew = [](const Vec3& v) {
+    Mat3 m;
+    m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+    return m;
+  };
+  const Vec3 f = h * w0.cross(I * w0);
+  const Mat3 J = I + h * (skew(w0) * I - skew(I * w0));
+  return w0 - J.lu().solve(f);
+}
+
+void hashBytes(std::uint64_t& h, const void* data, std::size_t n) {
+  const auto* b = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < n; ++i) {
+    h ^= b[i];
+    h *= 1099511628211ull;  // FNV-1a
+  }
 }
 
 }  // namespace
@@ -41,319 +101,449 @@ PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius) {
   return p;
 }
 
-Mat4f BodyPose::model() const {
-  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
-  const Mat3 R = rotation.toRotationMatrix();
-  m.topLeftCorner<3, 3>() = R;
-  m.topRightCorner<3, 1>() = centre - R * restCentre;
-  return m.cast<float>();
-}
-
-PbdWorld::PbdWorld(ParticleArrays particles, std::vector<BodyRange> bodies, std::vector<Material> materials,
+PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodies, std::vector<Material> materials,
                    const PbdParams& params)
     : params_(params), parts_(std::move(particles)), materials_(std::move(materials)) {
   if (!(params_.dt > 0) || params_.substeps < 1 || params_.iterations < 1 || !(params_.particleRadius > 0))
     throw RuntimeError("PbdWorld: dt, substeps, iterations and particle radius must be positive");
   const std::size_t n = parts_.size();
-  px_ = parts_.x;
-  py_ = parts_.y;
-  pz_ = parts_.z;
-  mass_.assign(n, 0.0f);
   rx_.assign(n, 0.0f);
   ry_.assign(n, 0.0f);
   rz_.assign(n, 0.0f);
-  alive_.assign(n, 1);
+  const double spacing = 2.0 * params_.particleRadius;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto m = static_cast<std::size_t>(parts_.material[i]);
+    if (m >= materials_.size()) throw RuntimeError("PbdWorld: particle " + std::to_string(i) + " has an unknown material");
+    parts_.mass[i] = static_cast<float>(materials_[m].density * spacing * spacing * spacing);  // one voxel per particle
+  }
   for (const BodyRange& br : bodies) {
     if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
-      throw RuntimeError("PbdWorld: body " + std::to_string(bodies_.size()) + " has an invalid particle range");
-    bodies_.push_back(br);
-    appendBodyState(BodyMode::kDynamic);
+      throw RuntimeError("PbdWorld: body " + std::to_string(members_.size()) + " has an invalid particle range");
+    std::vector<std::int32_t> ids(static_cast<std::size_t>(br.count));
+    for (std::int32_t k = 0; k < br.count; ++k) ids[std::size_t(k)] = br.first + k;
+    appendBody(std::move(ids), br.init, br.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic);
   }
-  passIntegrate_ = profile_.add("integrate");
-  passKinematic_ = profile_.add("kinematic");
-  passShape_ = profile_.add("shape_match");
-  passContact_ = profile_.add("rigid_contact");
-  passUpdate_ = profile_.add("update");
-  passGuard_ = profile_.add("guard");
+  writeParticles();
 }
 
-void PbdWorld::appendBodyState(BodyMode mode) {
-  rot_.push_back(Quat::Identity());
-  centre_.push_back(Vec3::Zero());
+void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode) {
+  const std::size_t b = members_.size();
+  members_.push_back(std::move(members));
+  motion_.emplace_back();
   restCentre_.push_back(Vec3::Zero());
   invMass_.push_back(0.0);
-  invInertia_.push_back(Mat3::Zero());
-  friction_.push_back(0.0);
+  inertiaRest_.push_back(Mat3::Zero());
+  invInertiaRest_.push_back(Mat3::Zero());
+  staticFriction_.push_back(0.0);
+  dynamicFriction_.push_back(0.0);
   reach_.push_back(0.0);
-  mode_.push_back(mode);
-  rigid_.push_back(1);
-  kinStart_.push_back(Vec3::Zero());
-  kinTarget_.push_back(Vec3::Zero());
-  const std::size_t b = bodies_.size() - 1;
-  const BodyRange& br = bodies_[b];
+  mode_.push_back(BodyMode::kDynamic);
   // Rest shape = the particles' current positions; the pose starts at identity.
   Vec3 c = Vec3::Zero();
   double m = 0.0;
-  for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-    // Per-particle material: one body may mix materials (a solid object with a soft part).
-    const Material& mat = materials_.at(static_cast<std::size_t>(parts_.material[i]));
-    const double spacing = 2.0 * params_.particleRadius;
-    const double mi = mat.density * spacing * spacing * spacing;  // one voxel per particle
-    mass_[i] = static_cast<float>(mi);
-    parts_.body[i] = static_cast<std::int32_t>(b);
-    c += mi * Vec3(parts_.x[i], parts_.y[i], parts_.z[i]);
+  for (std::int32_t i : members_[b]) {
+    const double mi = parts_.mass[std::size_t(i)];
+    c += mi * Vec3(parts_.x[std::size_t(i)], parts_.y[std::size_t(i)], parts_.z[std::size_t(i)]);
     m += mi;
-    rigid_[b] = rigid_[b] && mat.kind == MaterialKind::kRigid;
   }
   c /= m;
-  for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-    rx_[i] = static_cast<float>(parts_.x[i] - c.x());
-    ry_[i] = static_cast<float>(parts_.y[i] - c.y());
-    rz_[i] = static_cast<float>(parts_.z[i] - c.z());
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    rx_[k] = static_cast<float>(parts_.x[k] - c.x());
+    ry_[k] = static_cast<float>(parts_.y[k] - c.y());
+    rz_[k] = static_cast<float>(parts_.z[k] - c.z());
   }
-  centre_[b] = restCentre_[b] = kinStart_[b] = kinTarget_[b] = c;
+  Motion& mo = motion_[b];
+  mo.c = mo.cPrev = mo.kinStart = mo.kinTarget = restCentre_[b] = c;
   refreshMassProperties(b);
   setMode(static_cast<int>(b), mode);
+  if (mode_[b] == BodyMode::kDynamic) {
+    mo.v = init.velocity;
+    mo.w = init.spin;
+  }
 }
 
-// Mass, inertia, friction and reach of a body from its live particles' rest offsets.
+// Mass, inertia, friction and reach of a body from its members' rest offsets.
 void PbdWorld::refreshMassProperties(std::size_t b) {
-  const BodyRange& br = bodies_[b];
-  double m = 0.0, friction = 0.0, reach = 0.0;
-  for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-    if (!alive_[i]) continue;
-    m += mass_[i];
-    friction += mass_[i] * materials_[static_cast<std::size_t>(parts_.material[i])].friction;
-    reach = std::max(reach, Vec3(rx_[i], ry_[i], rz_[i]).norm());
+  const auto& mem = members_[b];
+  double m = 0.0, mus = 0.0, muk = 0.0, reach = 0.0;
+  for (std::int32_t i : mem) {
+    const auto k = std::size_t(i);
+    const double mi = parts_.mass[k];
+    const Material& mat = materials_[static_cast<std::size_t>(parts_.material[k])];
+    m += mi;
+    mus += mi * mat.friction;
+    muk += mi * mat.friction;
+    reach = std::max(reach, Vec3(rx_[k], ry_[k], rz_[k]).norm());
   }
-  if (m <= 0.0) {
+  if (mem.empty() || !(m > 0.0)) {
     mode_[b] = BodyMode::kEmpty;
     return;
   }
-  const std::size_t f = static_cast<std::size_t>(br.first);
-  BodyView v{br.count, &px_[f], &py_[f], &pz_[f], &rx_[f], &ry_[f], &rz_[f], &mass_[f]};
+  BodyView v{static_cast<std::int32_t>(mem.size()), mem.data(), parts_.x.data(), parts_.y.data(), parts_.z.data(),
+             rx_.data(), ry_.data(), rz_.data(), parts_.mass.data()};
   invMass_[b] = 1.0 / m;
-  invInertia_[b] = restInertia(v, 2.0 * params_.particleRadius).inverse();
-  friction_[b] = friction / m;  // mass-weighted mean over the body's materials
+  inertiaRest_[b] = restInertia(v, 2.0 * params_.particleRadius);
+  invInertiaRest_[b] = inertiaRest_[b].inverse();
+  staticFriction_[b] = mus / m;
+  dynamicFriction_[b] = muk / m;
   reach_[b] = reach + params_.particleRadius;
 }
 
-int PbdWorld::addBody(const ParticleArrays& p, bool kinematic) {
+double PbdWorld::bodyMass(int body) const {
+  const double im = invMass_.at(std::size_t(body));
+  return im > 0.0 ? 1.0 / im : 0.0;
+}
+
+Mat3 PbdWorld::bodyInertiaRest(int body) const { return inertiaRest_.at(std::size_t(body)); }
+
+int PbdWorld::addBody(const ParticleArrays& p, const BodyInit& init, bool kinematic) {
   if (p.size() == 0) throw RuntimeError("PbdWorld::addBody: a body needs particles");
-  const auto first = static_cast<std::int32_t>(parts_.size());
+  const double spacing = 2.0 * params_.particleRadius;
+  std::vector<std::int32_t> ids;
+  ids.reserve(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) {
     if (p.material[i] < 0 || static_cast<std::size_t>(p.material[i]) >= materials_.size())
       throw RuntimeError("PbdWorld::addBody: unknown material index");
-    parts_.push(p.x[i], p.y[i], p.z[i], p.stroke[i], p.material[i]);
-    px_.push_back(p.x[i]);
-    py_.push_back(p.y[i]);
-    pz_.push_back(p.z[i]);
-    mass_.push_back(0.0f);
+    const std::int32_t id = parts_.push(p.x[i], p.y[i], p.z[i], p.stroke[i], p.material[i]);
+    parts_.mass.back() =
+        static_cast<float>(materials_[static_cast<std::size_t>(p.material[i])].density * spacing * spacing * spacing);
     rx_.push_back(0.0f);
     ry_.push_back(0.0f);
     rz_.push_back(0.0f);
-    alive_.push_back(1);
+    ids.push_back(id);
   }
-  BodyRange br;
-  br.first = first;
-  br.count = static_cast<std::int32_t>(p.size());
-  br.material = p.material[0];
-  br.stroke = p.stroke[0];
-  bodies_.push_back(br);
-  appendBodyState(kinematic ? BodyMode::kKinematic : BodyMode::kDynamic);
-  return static_cast<int>(bodies_.size() - 1);
+  const BodyMode mode = kinematic ? BodyMode::kKinematic : init.fixed ? BodyMode::kFixed : BodyMode::kDynamic;
+  appendBody(std::move(ids), init, mode);
+  return static_cast<int>(members_.size() - 1);
 }
 
 void PbdWorld::setMode(int body, BodyMode mode) {
   const auto b = static_cast<std::size_t>(body);
-  if (mode_.at(b) == BodyMode::kEmpty) return;
+  if (mode_.at(b) == BodyMode::kEmpty || mode == BodyMode::kEmpty) return;
   mode_[b] = mode;
-  const BodyRange& br = bodies_[b];
-  // Kinematic particles have infinite mass: the dynamic passes leave them alone.
-  for (std::int32_t i = br.first; i < br.first + br.count; ++i)
-    parts_.invMass[i] = (mode == BodyMode::kDynamic && alive_[i]) ? 1.0f / mass_[i] : 0.0f;
-  kinStart_[b] = kinTarget_[b] = centre_[b];
+  // Prescribed particles have infinite mass: the dynamic passes leave them alone.
+  const std::int32_t group = static_cast<std::int32_t>(b);
+  const std::uint32_t flags = mode == BodyMode::kDynamic ? 0u : phase::kPrescribed;
+  for (std::int32_t i : members_[b]) parts_.phase[std::size_t(i)] = phase::make(group, flags);
+  Motion& mo = motion_[b];
+  mo.kinStart = mo.kinTarget = mo.c;
+  if (mode == BodyMode::kFixed) mo.v = mo.w = Vec3::Zero();
+  if (mode == BodyMode::kKinematic) mo.w = Vec3::Zero();  // carried bodies keep their rotation
 }
 
 void PbdWorld::setKinematicTarget(int body, const Vec3& centre) {
   const auto b = static_cast<std::size_t>(body);
   if (mode_.at(b) != BodyMode::kKinematic) throw RuntimeError("PbdWorld::setKinematicTarget: body is not kinematic");
-  kinTarget_[b] = centre;
+  motion_[b].kinTarget = centre;
+}
+
+// Moves a body's rest frame to its members' centre of mass, keeping every particle where it is.
+void PbdWorld::recentre(std::size_t b) {
+  double m = 0.0;
+  Vec3 cr = Vec3::Zero();
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    m += parts_.mass[k];
+    cr += double(parts_.mass[k]) * Vec3(rx_[k], ry_[k], rz_[k]);
+  }
+  if (!(m > 0.0)) return;
+  cr /= m;
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    rx_[k] = static_cast<float>(rx_[k] - cr.x());
+    ry_[k] = static_cast<float>(ry_[k] - cr.y());
+    rz_[k] = static_cast<float>(rz_[k] - cr.z());
+  }
+  Motion& mo = motion_[b];
+  const Vec3 shift = mo.q.toRotationMatrix() * cr;
+  // The new centre of mass moves with the rigid velocity field at its place.
+  mo.v += mo.w.cross(shift);
+  mo.c += shift;
+  mo.cPrev += motion_[b].qPrev.toRotationMatrix() * cr;
+  mo.kinStart += shift;
+  mo.kinTarget += shift;
+  restCentre_[b] += cr;
+}
+
+// The 26-connected pieces of a body in its rest lattice (rest offsets are whole
+// multiples of the particle spacing apart), largest first; ties by smallest id.
+std::vector<std::vector<std::int32_t>> PbdWorld::pieces(std::size_t b) const {
+  const auto& mem = members_[b];
+  const double inv = 1.0 / (2.0 * params_.particleRadius);
+  // Offsets from the first member are whole spacings (up to float rounding, far below half a spacing).
+  const auto f = std::size_t(mem.front());
+  std::vector<Vec3i> cells(mem.size());
+  for (std::size_t k = 0; k < mem.size(); ++k) {
+    const auto i = std::size_t(mem[k]);
+    cells[k] = Vec3i(int(std::lround((double(rx_[i]) - rx_[f]) * inv)), int(std::lround((double(ry_[i]) - ry_[f]) * inv)),
+                     int(std::lround((double(rz_[i]) - rz_[f]) * inv)));
+  }
+  int count = 0;
+  const std::vector<std::int32_t> label = componentLabels26(cells, &count);
+  std::vector<std::vector<std::int32_t>> out(static_cast<std::size_t>(count));
+  for (std::size_t k = 0; k < mem.size(); ++k) out[std::size_t(label[k])].push_back(mem[k]);
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& c) { return a.size() > c.size(); });
+  return out;
 }
 
 std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids) {
   std::vector<int> changed;
   for (std::int32_t i : ids) {
-    if (i < 0 || static_cast<std::size_t>(i) >= parts_.size() || !alive_[i]) continue;
-    alive_[i] = 0;
-    const int b = parts_.body[i];
-    parts_.invMass[i] = 0.0f;
-    parts_.vx[i] = parts_.vy[i] = parts_.vz[i] = 0.0f;
-    parts_.body[i] = -1;
-    mass_[i] = 0.0f;
+    if (i < 0 || static_cast<std::size_t>(i) >= parts_.size() || !alive(i)) continue;
+    const auto k = std::size_t(i);
+    const int b = parts_.group(k);
+    parts_.phase[k] = phase::make(-1, phase::kRemoved | phase::kPrescribed);
+    parts_.vx[k] = parts_.vy[k] = parts_.vz[k] = 0.0f;
     if (b >= 0 && std::find(changed.begin(), changed.end(), b) == changed.end()) changed.push_back(b);
   }
   std::sort(changed.begin(), changed.end());
+  std::vector<int> out = changed;
   for (int b : changed) {
-    // The rest frame moves to the remaining particles' centre of mass.
     const auto bb = static_cast<std::size_t>(b);
-    const BodyRange& br = bodies_[bb];
-    double m = 0.0;
-    Vec3 cr = Vec3::Zero();
-    for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-      m += mass_[i];
-      cr += double(mass_[i]) * Vec3(rx_[i], ry_[i], rz_[i]);
+    auto& mem = members_[bb];
+    mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
+    if (mem.empty()) {
+      refreshMassProperties(bb);
+      continue;
     }
-    if (m > 0.0) {
-      cr /= m;
-      for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-        rx_[i] = static_cast<float>(rx_[i] - cr.x());
-        ry_[i] = static_cast<float>(ry_[i] - cr.y());
-        rz_[i] = static_cast<float>(rz_[i] - cr.z());
-      }
-      centre_[bb] += rot_[bb].toRotationMatrix() * cr;
-      restCentre_[bb] += cr;
-      kinStart_[bb] = kinTarget_[bb] = centre_[bb];
-    }
+    // A cut that disconnects the body leaves one rigid body per piece: each keeps the
+    // body's pose and rigid velocity field, with its own mass, centre and inertia.
+    auto parts = pieces(bb);
+    const Motion before = motion_[bb];
+    const Vec3 restBefore = restCentre_[bb];
+    const BodyMode mode = mode_[bb];
+    mem = std::move(parts[0]);
+    recentre(bb);
     refreshMassProperties(bb);
+    for (std::size_t k = 1; k < parts.size(); ++k) {
+      const std::size_t nb = members_.size();
+      members_.push_back(std::move(parts[k]));
+      motion_.push_back(before);  // offsets are still relative to the old rest centre
+      restCentre_.push_back(restBefore);
+      invMass_.push_back(0.0);
+      inertiaRest_.push_back(Mat3::Zero());
+      invInertiaRest_.push_back(Mat3::Zero());
+      staticFriction_.push_back(0.0);
+      dynamicFriction_.push_back(0.0);
+      reach_.push_back(0.0);
+      mode_.push_back(mode);
+      recentre(nb);
+      refreshMassProperties(nb);
+      const Vec3 v = motion_[nb].v, w = motion_[nb].w;
+      // A carried body keeps only its largest piece on the brush; the others fall.
+      setMode(static_cast<int>(nb), mode == BodyMode::kKinematic ? BodyMode::kDynamic : mode);
+      motion_[nb].v = v;
+      motion_[nb].w = w;
+      out.push_back(static_cast<int>(nb));
+    }
+    setMode(b, mode);
   }
-  return changed;
+  std::sort(out.begin(), out.end());
+  return out;
 }
 
 BodyPose PbdWorld::pose(int body) const {
+  const Motion& mo = motion_.at(static_cast<std::size_t>(body));
   BodyPose p;
-  p.rotation = rot_.at(static_cast<std::size_t>(body));
-  p.centre = centre_[static_cast<std::size_t>(body)];
+  p.rotation = mo.q;
+  p.centre = mo.c;
   p.restCentre = restCentre_[static_cast<std::size_t>(body)];
   return p;
 }
 
-std::vector<PassInfo> PbdWorld::plan() const {
-  std::vector<PassInfo> out;
-  if (parts_.size() == 0) return out;
-  const long s = params_.substeps, it = params_.iterations;
-  out.push_back({"integrate", "substeps = " + std::to_string(s), s});
-  if (std::count(mode_.begin(), mode_.end(), BodyMode::kKinematic) > 0)
-    out.push_back({"kinematic", "substeps = " + std::to_string(s), s});
-  if (std::count(mode_.begin(), mode_.end(), BodyMode::kDynamic) > 0) {
-    out.push_back({"shape_match", "substeps = " + std::to_string(s), s});
-    out.push_back({"rigid_contact", "substeps, up to " + std::to_string(it) + " sweeps each", s});
+// --- the step -------------------------------------------------------------------
+
+std::vector<bool> PbdWorld::work() const {
+  std::vector<bool> on(static_cast<std::size_t>(PbdPass::kCount), false);
+  const auto count = [&](BodyMode m) { return std::count(mode_.begin(), mode_.end(), m); };
+  const bool dynamic = count(BodyMode::kDynamic) > 0, kinematic = count(BodyMode::kKinematic) > 0;
+  const bool any = parts_.size() > 0;
+  on[int(PbdPass::kIntegrate)] = dynamic;
+  on[int(PbdPass::kKinematic)] = kinematic;
+  on[int(PbdPass::kRigidContact)] = dynamic;
+  on[int(PbdPass::kUpdate)] = dynamic || kinematic;
+  on[int(PbdPass::kWriteParticles)] = dynamic || kinematic;
+  on[int(PbdPass::kGuard)] = any;
+  return on;
+}
+
+std::string PbdWorld::reason(PbdPass pass) const {
+  const auto count = [&](BodyMode m) { return long(std::count(mode_.begin(), mode_.end(), m)); };
+  const long dyn = count(BodyMode::kDynamic), kin = count(BodyMode::kKinematic);
+  switch (pass) {
+    case PbdPass::kIntegrate:
+    case PbdPass::kRigidContact: return std::to_string(dyn) + " dynamic rigid bodies";
+    case PbdPass::kKinematic: return std::to_string(kin) + " bodies held or carried by a stroke";
+    case PbdPass::kUpdate:
+    case PbdPass::kWriteParticles: return std::to_string(dyn + kin) + " moving bodies";
+    case PbdPass::kGuard: return std::to_string(parts_.size()) + " particles";
+    case PbdPass::kCount: break;
   }
-  out.push_back({"update", "substeps = " + std::to_string(s), s});
-  out.push_back({"guard", "once", 1});
+  return "";
+}
+
+std::vector<PlanEntry> PbdWorld::plan() const {
+  std::vector<PlanEntry> out;
+  const std::vector<bool> on = work();
+  const long s = params_.substeps;
+  for (int k = 0; k < int(PbdPass::kCount); ++k) {
+    if (!on[std::size_t(k)]) continue;
+    const PassSpec& spec = kPbdPasses[k];
+    PlanEntry e;
+    e.pass = k;
+    e.name = spec.name;
+    e.does = spec.does;
+    e.perStep = spec.cadence == Cadence::kPerSubstep ? s : 1;
+    e.runs = spec.cadence == Cadence::kPerSubstep ? "substeps = " + std::to_string(s) : "once";
+    if (PbdPass(k) == PbdPass::kRigidContact)
+      e.runs += ", up to " + std::to_string(params_.iterations) + " sweeps each";
+    e.reason = reason(PbdPass(k));
+    out.push_back(std::move(e));
+  }
   return out;
 }
 
-void PbdWorld::integrate(float h) {
-  const float gx = static_cast<float>(params_.gravity.x()), gy = static_cast<float>(params_.gravity.y()),
-              gz = static_cast<float>(params_.gravity.z());
-  forParticles(parts_.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      if (parts_.invMass[i] == 0.0f) {
-        px_[i] = parts_.x[i];
-        py_[i] = parts_.y[i];
-        pz_[i] = parts_.z[i];
-        continue;
-      }
-      parts_.vx[i] += gx * h;
-      parts_.vy[i] += gy * h;
-      parts_.vz[i] += gz * h;
-      px_[i] = parts_.x[i] + parts_.vx[i] * h;
-      py_[i] = parts_.y[i] + parts_.vy[i] * h;
-      pz_[i] = parts_.z[i] + parts_.vz[i] * h;
-    }
-  });
-}
-
-void PbdWorld::shapeMatch() {
-  auto solve = [&](std::size_t k) {
-    const std::size_t b = static_cast<std::size_t>(active_[k]);
-    const BodyRange& br = bodies_[b];
-    const std::size_t f = static_cast<std::size_t>(br.first);
-    BodyView v{br.count, &px_[f], &py_[f], &pz_[f], &rx_[f], &ry_[f], &rz_[f], &mass_[f]};
-    matchRigid(v, rot_[b], centre_[b]);  // goal positions R q_i + c are written by rigid_contact
-  };
-  if (active_.size() == 1) {
-    solve(0);
-  } else {
-    tbb::parallel_for(std::size_t(0), active_.size(), solve);
+template <class F>
+bool PbdWorld::runPass(PbdPass pass, int substep, bool check, F&& f) {
+  {
+    ScopedPass t(profile_, pass);
+    f();
   }
+  if (!check) return true;
+  // Penetration is checked where it must have been resolved: after the contact pass
+  // (and at the end of the step), not after integrate, where a landing body is
+  // routinely inside the ground until rigid_contact lifts it.
+  const bool penetration = pass == PbdPass::kRigidContact || pass == PbdPass::kWriteParticles;
+  GuardRecord r = checkImplied(pass != PbdPass::kWriteParticles, penetration);
+  if (!r.tripped()) return true;
+  r.pass = kPbdPasses[int(pass)].name;
+  r.step = steps_;
+  r.substep = kPbdPasses[int(pass)].cadence == Cadence::kPerSubstep ? substep : -1;
+  guard_ = std::move(r);
+  return false;
 }
 
-void PbdWorld::rigidContact() {
+bool PbdWorld::runStep(bool checkEachPass) {
+  const std::vector<bool> on = work();
+  const double h = params_.dt / params_.substeps;
+  const auto runs = [&](PbdPass p) { return bool(on[std::size_t(p)]); };
+  for (int s = 0; s < params_.substeps; ++s) {
+    if (runs(PbdPass::kIntegrate) && !runPass(PbdPass::kIntegrate, s, checkEachPass, [&] { integrate(h); })) return false;
+    if (runs(PbdPass::kKinematic) && !runPass(PbdPass::kKinematic, s, checkEachPass, [&] { kinematic(s); }))
+      return false;
+    if (runs(PbdPass::kRigidContact) && !runPass(PbdPass::kRigidContact, s, checkEachPass, [&] { rigidContact(); }))
+      return false;
+    if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
+  }
+  if (runs(PbdPass::kWriteParticles) &&
+      !runPass(PbdPass::kWriteParticles, -1, checkEachPass, [&] { writeParticles(); }))
+    return false;
+  return true;
+}
+
+bool PbdWorld::step() {
+  if (guard_.tripped()) return false;
+  active_.clear();
+  for (std::size_t b = 0; b < mode_.size(); ++b)
+    if (mode_[b] == BodyMode::kDynamic) active_.push_back(static_cast<std::int32_t>(b));
+  if (validate_) {
+    runStep(true);
+  } else {
+    const std::vector<Motion> start = motion_;  // per body: cheap to keep
+    runStep(false);
+    if (work()[std::size_t(PbdPass::kGuard)]) {
+      GuardRecord r;
+      {
+        ScopedPass t(profile_, PbdPass::kGuard);
+        r = checkImplied(false, true);
+      }
+      if (r.tripped()) {
+        // Replay the step from its start with a check after every pass, so the record
+        // names the pass that produced the bad value (the step is deterministic).
+        motion_ = start;
+        if (runStep(true)) {  // cannot happen for a deterministic step; keep the first record
+          r.pass = "guard";
+          r.step = steps_;
+          guard_ = std::move(r);
+        }
+      }
+    }
+  }
+  for (Motion& mo : motion_) mo.kinStart = mo.kinTarget = mo.c;
+  if (!guard_.tripped()) {
+    ++steps_;
+    return true;
+  }
+  if (guard_.particle >= 0)
+    guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+  return false;
+}
+
+// The particle state the bodies imply (or, for write_particles, the particle arrays
+// themselves), checked against the shared bounds and the ground.
+GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
+  GuardRecord r;
+  if (!bodiesOnly) {
+    r = checkParticles(parts_, params_.maxSpeed);
+    if (r.tripped()) return r;
+  }
   const double floorY = params_.groundY + params_.particleRadius;
-  const Vec3 up = Vec3::UnitY();
-  auto solve = [&](std::size_t k) {
-    const std::size_t b = static_cast<std::size_t>(active_[k]);
-    const BodyRange& br = bodies_[b];
-    RigidPose pose{centre_[b], rot_[b], invMass_[b], invInertia_[b]};
-    const double mu = friction_[b];
-    // Bounding-sphere test: a body whose lowest possible particle is above the
-    // ground skips the sweeps (falling bodies cost one shape match per substep).
-    const int sweeps = pose.c.y() - reach_[b] > params_.groundY ? 0 : params_.iterations;
-    for (int it = 0; it < sweeps; ++it) {
-      // One correction per sweep for the whole contact patch, applied at its
-      // depth-weighted centroid: order-independent (a Gauss-Seidel pass over
-      // single particles tilts the body towards whichever contact comes first
-      // and makes a resting body creep). Exact for one corner and for a flat face.
-      const Mat3 R = pose.q.toRotationMatrix();
-      double wsum = 0.0, d2sum = 0.0;
-      Vec3 psum = Vec3::Zero(), ssum = Vec3::Zero();
-      for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-        if (!alive_[i]) continue;
-        const Vec3 p = R * Vec3(rx_[i], ry_[i], rz_[i]) + pose.c;
-        const double d = floorY - p.y();  // penetration depth (m)
-        if (d <= 0.0) continue;
-        wsum += d;
-        d2sum += d * d;
-        psum += d * p;
-        ssum += d * (p - Vec3(parts_.x[i], parts_.y[i], parts_.z[i]));  // motion over this substep
+  const double bound = params_.particleRadius;  // a dynamic particle's centre below the ground plane
+  const double maxSpeed2 = params_.maxSpeed * params_.maxSpeed;
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    const BodyMode m = mode_[b];
+    if (m == BodyMode::kEmpty || m == BodyMode::kFixed) continue;
+    const Motion& mo = motion_[b];
+    const Mat3 R = mo.q.toRotationMatrix();
+    for (std::int32_t i : members_[b]) {
+      const auto k = std::size_t(i);
+      const Vec3 r0 = R * Vec3(rx_[k], ry_[k], rz_[k]);
+      const Vec3 p = bodiesOnly ? Vec3(r0 + mo.c) : Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
+      const Vec3 v = bodiesOnly ? Vec3(mo.v + mo.w.cross(r0)) : Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
+      const auto fill = [&](GuardKind kind, double value, double bnd, const char* hint) {
+        r.kind = kind;
+        r.particle = i;
+        r.body = static_cast<std::int32_t>(b);
+        r.stroke = parts_.stroke[k];
+        r.value = value;
+        r.bound = bnd;
+        r.hint = hint;
+      };
+      if (!p.allFinite() || !v.allFinite()) {
+        fill(GuardKind::kNaN, std::nan(""), 0.0,
+             "A non-finite value usually comes from a degenerate constraint; lower 'dt' or raise 'substeps'.");
+        return r;
       }
-      if (wsum == 0.0) break;
-      const Vec3 pc = psum / wsum;     // contact point
-      const double depth = d2sum / wsum;
-      const Vec3 local = R.transpose() * (pc - pose.c);  // the contact point, fixed in the body
-      applyPointCorrection(pose, pc, up, depth);
-      // The normal correction rotates the body, which moves the contact point sideways too.
-      const Vec3 pcAfter = pose.q.toRotationMatrix() * local + pose.c;
-      // Static/kinetic friction at position level (Müller 2020 §3.5): undo the
-      // tangential motion of the contact over this substep, fully inside the
-      // friction cone mu*depth, else by mu*depth. mu_s = mu_k = material friction.
-      Vec3 slide = ssum / wsum + (pcAfter - pc);
-      slide.y() = 0.0;
-      const double len = slide.norm();
-      if (len > 0.0 && mu > 0.0) applyPointCorrection(pose, pcAfter, -slide / len, std::min(len, mu * depth));
+      if (m != BodyMode::kDynamic) continue;  // the input moves it: only NaN is the solver's
+      if (bodiesOnly && v.squaredNorm() > maxSpeed2) {
+        fill(GuardKind::kExplosion, v.norm(), params_.maxSpeed,
+             "Speed above the bound: raise 'substeps' or 'iterations', or lower 'dt'.");
+        return r;
+      }
+      if (penetration && floorY - p.y() > bound) {
+        fill(GuardKind::kPenetration, floorY - p.y(), bound,
+             "Particle deep in the ground: raise 'iterations' or 'substeps'.");
+        return r;
+      }
     }
-    centre_[b] = pose.c;
-    rot_[b] = pose.q;
-    const Mat3 R = pose.q.toRotationMatrix();
-    for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-      if (!alive_[i]) continue;
-      const Vec3 g = R * Vec3(rx_[i], ry_[i], rz_[i]) + pose.c;
-      px_[i] = static_cast<float>(g.x());
-      py_[i] = static_cast<float>(g.y());
-      pz_[i] = static_cast<float>(g.z());
-    }
-  };
-  if (active_.size() == 1) {
-    solve(0);
-  } else {
-    tbb::parallel_for(std::size_t(0), active_.size(), solve);
   }
+  return r;
 }
 
-void PbdWorld::update(float h) {
-  const float invH = 1.0f / h;
-  forParticles(parts_.size(), [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      if (!alive_[i]) continue;  // kinematic particles get their velocity from the prescribed motion
-      parts_.vx[i] = (px_[i] - parts_.x[i]) * invH;
-      parts_.vy[i] = (py_[i] - parts_.y[i]) * invH;
-      parts_.vz[i] = (pz_[i] - parts_.z[i]) * invH;
-      parts_.x[i] = px_[i];
-      parts_.y[i] = py_[i];
-      parts_.z[i] = pz_[i];
-    }
+void PbdWorld::integrate(double h) {
+  const Vec3 g = params_.gravity;
+  forBodies(active_.size(), [&](std::size_t k) {
+    const auto b = std::size_t(active_[k]);
+    Motion& mo = motion_[b];
+    mo.cPrev = mo.c;
+    mo.qPrev = mo.q;
+    mo.v += h * g;
+    // Free rotation keeps the angular momentum L = I w, not w: the gyroscopic term.
+    const Mat3 R = mo.q.toRotationMatrix();
+    mo.w = R * gyroscopicStep(inertiaRest_[b], R.transpose() * mo.w, h);
+    mo.c += h * mo.v;
+    mo.q = rotateBy(mo.q, h * mo.w);
   });
 }
 
@@ -361,62 +551,136 @@ void PbdWorld::kinematic(int substep) {
   // Kinematic bodies move from their pose at the start of the step to their target,
   // linearly over the substeps, keeping their rotation.
   const double a = double(substep + 1) / params_.substeps;
-  for (std::size_t b = 0; b < bodies_.size(); ++b) {
+  const double floorY = params_.groundY + params_.particleRadius;
+  for (std::size_t b = 0; b < members_.size(); ++b) {
     if (mode_[b] != BodyMode::kKinematic) continue;
-    centre_[b] = kinStart_[b] + a * (kinTarget_[b] - kinStart_[b]);
-    const Mat3 R = rot_[b].toRotationMatrix();
-    const BodyRange& br = bodies_[b];
+    Motion& mo = motion_[b];
+    mo.cPrev = mo.c;
+    mo.qPrev = mo.q;
+    mo.c = mo.kinStart + a * (mo.kinTarget - mo.kinStart);
     // The ground stops a carried body as it stops any other: a brush that dips below the
     // floor slides the body along it instead of pushing it through.
+    const Mat3 R = mo.q.toRotationMatrix();
     double lowest = 1e300;
-    for (std::int32_t i = br.first; i < br.first + br.count; ++i)
-      if (alive_[i]) lowest = std::min(lowest, (R * Vec3(rx_[i], ry_[i], rz_[i])).y());
-    const double floorY = params_.groundY + params_.particleRadius;
-    if (centre_[b].y() + lowest < floorY) {
-      const double lift = floorY - (centre_[b].y() + lowest);
-      centre_[b].y() += lift;
-      kinTarget_[b].y() = std::max(kinTarget_[b].y(), centre_[b].y());
+    for (std::int32_t i : members_[b]) {
+      const auto k = std::size_t(i);
+      lowest = std::min(lowest, (R * Vec3(rx_[k], ry_[k], rz_[k])).y());
     }
-    for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
-      if (!alive_[i]) continue;
-      const Vec3 g = R * Vec3(rx_[i], ry_[i], rz_[i]) + centre_[b];
-      px_[i] = static_cast<float>(g.x());
-      py_[i] = static_cast<float>(g.y());
-      pz_[i] = static_cast<float>(g.z());
+    if (mo.c.y() + lowest < floorY) {
+      mo.c.y() = floorY - lowest;
+      mo.kinTarget.y() = std::max(mo.kinTarget.y(), mo.c.y());
     }
   }
 }
 
-bool PbdWorld::step() {
-  if (guard_.tripped()) return false;
-  const float h = static_cast<float>(params_.dt / params_.substeps);
-  active_.clear();
-  bool anyKinematic = false;
-  for (std::size_t b = 0; b < bodies_.size(); ++b) {
-    if (mode_[b] == BodyMode::kDynamic && rigid_[b]) active_.push_back(static_cast<std::int32_t>(b));
-    anyKinematic = anyKinematic || mode_[b] == BodyMode::kKinematic;
-  }
-  for (int s = 0; s < params_.substeps; ++s) {
-    { ScopedPass t(profile_, passIntegrate_); integrate(h); }
-    if (anyKinematic) { ScopedPass t(profile_, passKinematic_); kinematic(s); }
-    if (!active_.empty()) {
-      { ScopedPass t(profile_, passShape_); shapeMatch(); }
-      { ScopedPass t(profile_, passContact_); rigidContact(); }
+void PbdWorld::rigidContact() {
+  const double floorY = params_.groundY + params_.particleRadius;
+  const Vec3 up = Vec3::UnitY();
+  forBodies(active_.size(), [&](std::size_t k) {
+    const auto b = std::size_t(active_[k]);
+    Motion& mo = motion_[b];
+    // Bounding-sphere test: a body whose lowest possible particle is above the
+    // ground skips the sweeps (falling bodies cost nothing here).
+    if (mo.c.y() - reach_[b] > floorY - params_.particleRadius) return;
+    RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
+    const double mus = staticFriction_[b], muk = dynamicFriction_[b];
+    const Mat3 Rprev = mo.qPrev.toRotationMatrix();
+    for (int it = 0; it < params_.iterations; ++it) {
+      // One correction per sweep for the whole contact patch, applied at its
+      // depth-weighted centroid: order-independent (a Gauss-Seidel pass over
+      // single particles tilts the body towards whichever contact comes first
+      // and makes a resting body creep). Exact for one corner and for a flat face.
+      const Mat3 R = pose.q.toRotationMatrix();
+      double wsum = 0.0, dmax = 0.0;
+      Vec3 psum = Vec3::Zero(), ssum = Vec3::Zero();
+      for (std::int32_t i : members_[b]) {
+        const auto j = std::size_t(i);
+        const Vec3 r(rx_[j], ry_[j], rz_[j]);
+        const Vec3 p = R * r + pose.c;
+        const double d = floorY - p.y();  // penetration depth (m)
+        if (d <= 0.0) continue;
+        wsum += d;
+        dmax = std::max(dmax, d);
+        psum += d * p;
+        ssum += d * (p - (Rprev * r + mo.cPrev));  // the point's motion over this substep
+      }
+      if (wsum == 0.0) break;
+      const Vec3 pc = psum / wsum;  // contact point
+      // Lift the patch by its deepest penetration, at its depth-weighted centroid: one
+      // sweep then resolves a landing (a mean depth left a third of it, which compounded
+      // into a guard trip at 1-2 iterations), and the centroid keeps the lift from
+      // tilting the body towards whichever particle is deepest.
+      const double depth = dmax;
+      const Vec3 local = R.transpose() * (pc - pose.c);  // the contact point, fixed in the body
+      const double lambdaN = applyPointCorrection(pose, pc, up, depth);
+      // The normal correction rotates the body, which moves the contact point sideways too.
+      const Vec3 pcAfter = pose.q.toRotationMatrix() * local + pose.c;
+      // Coulomb friction at position level (Müller 2020 §3.5), on impulses: undo the
+      // tangential motion of the contact over this substep fully when that takes an
+      // impulse within mu_s lambda_n (static), else apply mu_k lambda_n against it.
+      Vec3 slide = ssum / wsum + (pcAfter - pc);
+      slide.y() = 0.0;
+      const double len = slide.norm();
+      if (len > 0.0 && lambdaN > 0.0) {
+        const Vec3 t = -slide / len;
+        const double wt = generalizedInverseMass(pose, pcAfter, t);
+        const double full = len / wt;  // impulse that stops the contact point
+        const double lambdaT = full <= mus * lambdaN ? full : std::min(full, muk * lambdaN);
+        if (lambdaT > 0.0) applyPointCorrection(pose, pcAfter, t, lambdaT * wt);
+      }
     }
-    { ScopedPass t(profile_, passUpdate_); update(h); }
+    mo.c = pose.c;
+    mo.q = pose.q;
+  });
+}
+
+void PbdWorld::update(double h) {
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    Motion& mo = motion_[b];
+    if (mode_[b] == BodyMode::kDynamic) {
+      mo.v = (mo.c - mo.cPrev) / h;
+      mo.w = rotationVector(mo.q * mo.qPrev.conjugate()) / h;
+    } else if (mode_[b] == BodyMode::kKinematic) {
+      mo.v = (mo.c - mo.cPrev) / h;
+      mo.w = Vec3::Zero();
+    }
   }
-  for (std::size_t b = 0; b < bodies_.size(); ++b) kinStart_[b] = kinTarget_[b] = centre_[b];
-  {
-    ScopedPass t(profile_, passGuard_);
-    GuardLimits lim;
-    lim.maxSpeed = params_.maxSpeed;
-    lim.groundY = params_.groundY;
-    lim.particleRadius = params_.particleRadius;
-    lim.maxPenetration = params_.particleRadius;  // a centre below the ground plane
-    guard_ = checkParticles(parts_, lim, "update", steps_);
+}
+
+void PbdWorld::writeParticles() {
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    // Fixed bodies never move: written once, when the world starts.
+    if (mode_[b] == BodyMode::kEmpty || (mode_[b] == BodyMode::kFixed && steps_ > 0)) continue;
+    const Motion& mo = motion_[b];
+    const Mat3 R = mo.q.toRotationMatrix();
+    const auto& mem = members_[b];
+    forRange(mem.size(), [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t k = lo; k < hi; ++k) {
+        const auto i = std::size_t(mem[k]);
+        const Vec3 r = R * Vec3(rx_[i], ry_[i], rz_[i]);
+        const Vec3 p = r + mo.c, v = mo.v + mo.w.cross(r);
+        parts_.x[i] = static_cast<float>(p.x());
+        parts_.y[i] = static_cast<float>(p.y());
+        parts_.z[i] = static_cast<float>(p.z());
+        parts_.vx[i] = static_cast<float>(v.x());
+        parts_.vy[i] = static_cast<float>(v.y());
+        parts_.vz[i] = static_cast<float>(v.z());
+      }
+    });
   }
-  ++steps_;
-  return !guard_.tripped();
+}
+
+std::uint64_t PbdWorld::stateHash() const {
+  std::uint64_t h = 1469598103934665603ull;
+  for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
+    hashBytes(h, a->data(), a->size() * sizeof(float));
+  hashBytes(h, parts_.phase.data(), parts_.phase.size() * sizeof(std::uint32_t));
+  for (const Motion& mo : motion_) {
+    const double d[13] = {mo.c.x(), mo.c.y(), mo.c.z(), mo.q.w(), mo.q.x(), mo.q.y(), mo.q.z(),
+                          mo.v.x(), mo.v.y(), mo.v.z(), mo.w.x(), mo.w.y(), mo.w.z()};
+    hashBytes(h, d, sizeof d);
+  }
+  return h;
 }
 
 }  // namespace physketch::pbd

@@ -1,43 +1,41 @@
-// The PBD world: unified particle solver (v1: rigid bodies by shape matching on a
-// ground plane). One step is a fixed list of passes (Macklin et al. 2014,
-// "Unified particle physics", Alg. 1, restricted to what the scene contains):
+// The PBD world: unified particle solver (Macklin et al. 2014, "Unified particle
+// physics", Alg. 1), today rigid bodies on a ground plane. One step runs the passes
+// of kPbdPasses, in that order, each only when it has work (see plan()):
 //
 //   for each substep (h = dt / substeps):
-//     integrate      v += g h;  p = x + v h                          (predict)
+//     integrate      dynamic bodies: v += g h; w += h I^-1 (-w x I w) (gyroscopic);
+//                    c += v h; q += h/2 [w, 0] q                (Müller et al. 2020, Alg. 2)
 //     kinematic      bodies held or carried by a move stroke follow their path
-//     shape_match    per rigid body: (R, c) = best rigid fit of p     (Müller 2005)
-//     rigid_contact  per rigid body, `iterations` Gauss-Seidel sweeps over its
-//                    particles: each particle below ground + r gets an exact
-//                    rigid position correction (normal, then Coulomb friction)
-//                    through the body's mass and inertia (Müller 2020); then
-//                    p_i = R q_i + c
-//     update         v = (p - x) / h;  x = p
+//     rigid_contact  per body near the ground, `iterations` sweeps: one exact rigid
+//                    position correction at the contact patch's depth-weighted
+//                    centroid, then static/dynamic Coulomb friction (Müller 2020 §3.5)
+//     update         v = (c - c_prev) / h; w = 2 vec(q q_prev^-1) / h   (Müller 2020, Alg. 2)
+//   write_particles  x_i = R r_i + c, v_i = v + w x R r_i, once per step
 //   guard            first NaN / explosion / penetration, once per step
 //
-// Contact is solved at body level rather than per particle followed by shape
-// matching: shape matching spreads a particle's correction over the whole body,
-// so per-particle contact converges at a rate of (contact particles / body
-// particles) per iteration and a resting body sinks.
-// A pass with no items (no rigid body) is not in the plan.
+// Rigid bodies are integrated as bodies, in double precision: a particle-level
+// v = (p - x)/h in float32 loses gravity once the per-substep displacement drops
+// below the float spacing of the position (1000 substeps: g h^2 = 2.7e-9 m, while
+// positions near 0.5 m resolve 6e-8 m). Contact is solved at body level: shape
+// matching after per-particle projection converges at a rate of (contact particles /
+// body particles) per iteration and a resting body sinks.
 #pragma once
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
-#include "core/guard.h"
 #include "core/material.h"
 #include "core/math.h"
-#include "core/particles.h"
-#include "core/profile.h"
 #include "core/scene.h"
+#include "core/solver.h"
 
 namespace physketch::pbd {
 
 struct PbdParams {
   double dt = 1.0 / 60.0;     // s per step
   int substeps = 4;
-  int iterations = 4;         // per substep
+  int iterations = 4;         // contact sweeps per substep
   Vec3 gravity{0.0, -9.81, 0.0};
   double groundY = 0.0;       // m
   double particleRadius = 0.0;  // m; half the particle spacing
@@ -47,93 +45,94 @@ struct PbdParams {
 // The solver settings a scene file asks for; the radius is half the sketch's voxel size.
 PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius);
 
-// Pose of a rigid body: world = R (rest - restCentre) + centre.
-struct BodyPose {
-  Quat rotation = Quat::Identity();
-  Vec3 centre = Vec3::Zero();
-  Vec3 restCentre = Vec3::Zero();
-  Mat4f model() const;  // the 4x4 rest->world matrix, for rendering
-};
+// The passes of one step, in the order they run (the pass table: kPbdPasses[k] describes pass k).
+enum class PbdPass : int { kIntegrate, kKinematic, kRigidContact, kUpdate, kWriteParticles, kGuard, kCount };
+extern const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)];
 
-// How a body moves: by the solver, along a prescribed path (grabbed by a move
-// stroke, or held while it is being drawn), or not at all (all particles removed).
-enum class BodyMode { kDynamic, kKinematic, kEmpty };
-
-struct PassInfo {
-  std::string name;
-  std::string runs;  // how often per step, e.g. "substeps x iterations = 16"
-  long perStep = 0;
-};
-
-class PbdWorld {
+class PbdWorld final : public Solver {
  public:
-  // particles: positions at rest (velocities are kept); bodies: contiguous ranges.
-  // Masses come from material density and the particle spacing (2 r)^3.
-  PbdWorld(ParticleArrays particles, std::vector<BodyRange> bodies, std::vector<Material> materials,
+  // particles: positions at rest (velocities ignored; bodies start with their BodyInit);
+  // bodies: contiguous ranges. Masses come from material density and the particle spacing (2 r)^3.
+  PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodies, std::vector<Material> materials,
            const PbdParams& params);
 
-  // Advances one step of dt. Returns false (and does nothing) once the guard has tripped.
-  bool step();
+  const char* name() const override { return "pbd"; }
+  bool step() override;
+  std::vector<PlanEntry> plan() const override;
+  const Profile& profile() const override { return profile_; }
+  const GuardRecord& guard() const override { return guard_; }
+  void setValidate(bool on) override { validate_ = on; }
 
-  // --- changes while the simulation runs (sketching after play) -------------
-  // Appends a body made of `particles` (positions at rest, stroke and material set);
-  // returns its index. A kinematic body stays where it is until released.
-  int addBody(const ParticleArrays& particles, bool kinematic);
-  // Switches a body between dynamic and kinematic. A released body keeps the
-  // velocity of its prescribed motion.
-  void setMode(int body, BodyMode mode);
-  BodyMode mode(int body) const { return mode_.at(static_cast<std::size_t>(body)); }
-  // Where a kinematic body's centre of mass must be at the end of the next step.
-  void setKinematicTarget(int body, const Vec3& centre);
-  // Removes particles from the simulation; their bodies are rebuilt from the rest.
-  // Returns the bodies that changed, in ascending order.
-  std::vector<int> removeParticles(const std::vector<std::int32_t>& ids);
-  bool alive(std::int32_t particle) const { return alive_[static_cast<std::size_t>(particle)] != 0; }
+  const ParticleArrays& particles() const override { return parts_; }
+  int bodyCount() const override { return static_cast<int>(members_.size()); }
+  const std::vector<std::int32_t>& bodyParticles(int body) const override { return members_.at(std::size_t(body)); }
+  BodyPose pose(int body) const override;
+  BodyMode mode(int body) const override { return mode_.at(static_cast<std::size_t>(body)); }
+  Vec3 velocity(int body) const override { return motion_.at(std::size_t(body)).v; }
+  Vec3 angularVelocity(int body) const override { return motion_.at(std::size_t(body)).w; }
+  std::int64_t stepCount() const override { return steps_; }
+  double dt() const override { return params_.dt; }
+  std::uint64_t stateHash() const override;
 
-  const ParticleArrays& particles() const { return parts_; }
-  const std::vector<BodyRange>& bodies() const { return bodies_; }
-  BodyPose pose(int body) const;
+  int addBody(const ParticleArrays& particles, const BodyInit& init, bool kinematic) override;
+  void setMode(int body, BodyMode mode) override;
+  void setKinematicTarget(int body, const Vec3& centre) override;
+  std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
+
   const PbdParams& params() const { return params_; }
-  std::int64_t stepCount() const { return steps_; }
-  double time() const { return double(steps_) * params_.dt; }
-
-  std::vector<PassInfo> plan() const;
-  const Profile& profile() const { return profile_; }
-  Profile& profile() { return profile_; }
-  const GuardRecord& guard() const { return guard_; }
+  // Total mass (kg) and rest-frame inertia tensor (kg m^2) of a body.
+  double bodyMass(int body) const;
+  Mat3 bodyInertiaRest(int body) const;
 
  private:
-  void integrate(float h);
+  // What a step changes for one body; saved at the start of each step so a tripped
+  // guard can replay the step pass by pass.
+  struct Motion {
+    Vec3 c = Vec3::Zero();      // centre of mass (m)
+    Quat q = Quat::Identity();  // rest -> world rotation
+    Vec3 v = Vec3::Zero();      // m/s
+    Vec3 w = Vec3::Zero();      // rad/s, world frame
+    Vec3 cPrev = Vec3::Zero();  // pose at the start of the substep
+    Quat qPrev = Quat::Identity();
+    Vec3 kinStart = Vec3::Zero(), kinTarget = Vec3::Zero();  // kinematic centre at the start / end of the step
+  };
+  // Which passes have work in the current state (the plan and the step both read it).
+  std::vector<bool> work() const;
+  std::string reason(PbdPass pass) const;
+  bool runStep(bool checkEachPass);
+  template <class F>
+  bool runPass(PbdPass pass, int substep, bool check, F&& f);
+  GuardRecord checkImplied(bool bodiesOnly, bool penetration) const;
+
+  void integrate(double h);
   void kinematic(int substep);
-  void shapeMatch();
   void rigidContact();
-  void appendBodyState(BodyMode mode);
+  void update(double h);
+  void writeParticles();
+
+  void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode);
   void refreshMassProperties(std::size_t body);
-  void update(float h);
+  void recentre(std::size_t body);
+  std::vector<std::vector<std::int32_t>> pieces(std::size_t body) const;
 
   PbdParams params_;
   ParticleArrays parts_;
-  std::vector<BodyRange> bodies_;
   std::vector<Material> materials_;
-  // Solver-owned particle arrays (same indexing as parts_).
-  std::vector<float> px_, py_, pz_;  // predicted positions (m); written by integrate/contact/shape_match
-  std::vector<float> mass_;          // kg
-  std::vector<float> rx_, ry_, rz_;  // rest offsets from the body's rest centre of mass (m)
-  std::vector<std::uint8_t> alive_;  // 0 once removed by a remove stroke after play
+  // Per particle (same ids as parts_): rest offset from its body's rest centre of mass (m).
+  std::vector<float> rx_, ry_, rz_;
   // Per body.
-  std::vector<Quat> rot_;
-  std::vector<Vec3> centre_, restCentre_;
-  std::vector<double> invMass_;      // 1/kg, whole body
-  std::vector<Mat3> invInertia_;     // rest-frame inverse inertia
-  std::vector<double> friction_;     // Coulomb coefficient against the ground
-  std::vector<double> reach_;        // m, max |rest offset| + particle radius: no contact while c.y - reach > ground
+  std::vector<std::vector<std::int32_t>> members_;  // particle ids, ascending
+  std::vector<Motion> motion_;
+  std::vector<Vec3> restCentre_;
+  std::vector<double> invMass_;             // 1/kg, whole body
+  std::vector<Mat3> inertiaRest_, invInertiaRest_;  // rest frame (kg m^2 and inverse)
+  std::vector<double> staticFriction_, dynamicFriction_;  // mass-weighted means over the body's materials
+  std::vector<double> reach_;               // m, max |rest offset| + particle radius
   std::vector<BodyMode> mode_;
-  std::vector<std::uint8_t> rigid_;   // all of the body's materials are rigid
-  std::vector<Vec3> kinStart_, kinTarget_;  // kinematic centre at the start / end of the step
-  std::vector<std::int32_t> active_;  // dynamic rigid bodies this step (shape_match, rigid_contact)
+  std::vector<std::int32_t> active_;        // dynamic bodies this step
   std::int64_t steps_ = 0;
-  Profile profile_;
-  int passIntegrate_, passKinematic_, passShape_, passContact_, passUpdate_, passGuard_;
+  bool validate_ = false;
+  Profile profile_{kPbdPasses};
   GuardRecord guard_;
 };
 

@@ -501,11 +501,11 @@ class Builder {
       sk_.operations[static_cast<std::size_t>(pc.op)].remaining += static_cast<std::int32_t>(pc.out);
       total += std::exchange(pc.out, total);
     }
-    // At rest, inverse mass 0: static while sketched (Phys-Sketch §4); the values of ParticleArrays::resize.
+    // At rest and prescribed: static while sketched (Phys-Sketch §4); the values of ParticleArrays::resize.
     ParticleArrays out;
     std::vector<Vec3i> cells;
-    tbb::parallel_invoke([&] { out.x.resize(total), out.vx.resize(total), out.invMass.resize(total), out.stroke.resize(total); },
-                         [&] { out.y.resize(total), out.vy.resize(total), out.body.resize(total, -1), out.material.resize(total); },
+    tbb::parallel_invoke([&] { out.x.resize(total), out.vx.resize(total), out.mass.resize(total), out.stroke.resize(total); },
+                         [&] { out.y.resize(total), out.vy.resize(total), out.phase.resize(total, phase::make(-1, phase::kPrescribed)), out.material.resize(total); },
                          [&] { out.z.resize(total), out.vz.resize(total), cells.resize(total); });
     out.resize(total);  // sizes any array the lines above do not name (none now; a no-op for the rest)
     tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t p) {
@@ -541,7 +541,6 @@ class Builder {
       BodyRange r;
       r.first = static_cast<std::int32_t>(start[b]);
       r.count = static_cast<std::int32_t>(c);
-      r.material = out.material[static_cast<std::size_t>(start[b])];
       r.stroke = out.stroke[static_cast<std::size_t>(start[b])];
       sk_.bodies.push_back(r);
       sk_.bodyNames.push_back(names[b]);

@@ -17,6 +17,7 @@ struct RunOptions {
   int frames = -1;     // -1: duration * fps + 1
   int threads = 0;     // 0: all cores
   bool quiet = false;
+  bool validate = false;  // check the solver's state after every pass, not once per step
 };
 
 int runScene(const RunOptions& options);

@@ -32,6 +32,8 @@ int main(int argc, char** argv) {
   runCmd->add_option("--threads,-j", run.threads, "Worker threads (default: all cores); results do not depend on it")
       ->check(CLI::Range(1, 1024));
   runCmd->add_flag("--quiet,-q", run.quiet, "No progress line on stderr");
+  runCmd->add_flag("--validate", run.validate,
+                   "Check the solver's state after every pass (not once per step): slower, names the pass at once");
 
   std::string planScene;
   auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, and how often");

@@ -7,9 +7,9 @@ namespace physketch::app {
 
 using sketch::RuntimeOp;
 
-RuntimeDriver::RuntimeDriver(const sketch::Sketch& sketch, pbd::PbdWorld& world)
+RuntimeDriver::RuntimeDriver(const sketch::Sketch& sketch, Solver& solver)
     : sketch_(sketch),
-      world_(world),
+      solver_(solver),
       restCells_(sketch.cells),
       stats_(sketch.runtime.size()),
       nextRemoval_(sketch.runtime.size(), 0),
@@ -31,9 +31,9 @@ std::vector<std::int32_t> RuntimeDriver::particlesInCells(const std::vector<Vec3
   std::unordered_set<std::int64_t> set;
   for (const auto& c : cells) set.insert(sketch::GridMapping::linear(c));
   std::vector<std::int32_t> out;
-  const auto& p = world_.particles();
+  const auto& p = solver_.particles();
   for (std::size_t i = 0; i < p.size(); ++i) {
-    if (!world_.alive(static_cast<std::int32_t>(i))) continue;
+    if (!solver_.alive(static_cast<std::int32_t>(i))) continue;
     const Vec3i c = sketch_.mapping.discretize(Vec3(p.x[i], p.y[i], p.z[i]));
     if (sketch::GridMapping::inGrid(c) && set.count(sketch::GridMapping::linear(c)))
       out.push_back(static_cast<std::int32_t>(i));
@@ -42,7 +42,7 @@ std::vector<std::int32_t> RuntimeDriver::particlesInCells(const std::vector<Vec3
 }
 
 std::vector<int> RuntimeDriver::beforeStep() {
-  const double t0 = world_.time(), dt = world_.params().dt, t1 = t0 + dt;
+  const double t0 = solver_.time(), dt = solver_.dt(), t1 = t0 + dt;
   std::vector<int> reshaped;
   for (std::size_t k = 0; k < sketch_.runtime.size(); ++k) {
     const RuntimeOp& op = sketch_.runtime[k];
@@ -52,13 +52,13 @@ std::vector<int> RuntimeDriver::beforeStep() {
       case RuntimeOp::Kind::kCreate:
         if (!st.started) {
           // Static while being drawn (Phys-Sketch §4): kinematic until the stroke ends.
-          st.body = world_.addBody(op.particles, /*kinematic=*/op.end >= t1);
+          st.body = solver_.addBody(op.particles, BodyInit{}, /*kinematic=*/op.end >= t1);
           restCells_.insert(restCells_.end(), op.cells.begin(), op.cells.end());
           reshaped.push_back(st.body);
           st.started = true;
           st.finished = op.end < t1;
         } else if (op.end < t1) {
-          world_.setMode(st.body, pbd::BodyMode::kDynamic);
+          solver_.setMode(st.body, BodyMode::kDynamic);
           st.finished = true;
         }
         break;
@@ -72,7 +72,7 @@ std::vector<int> RuntimeDriver::beforeStep() {
         }
         const auto ids = particlesInCells(cells);
         st.removed += static_cast<std::int64_t>(ids.size());
-        for (int b : world_.removeParticles(ids)) reshaped.push_back(b);
+        for (int b : solver_.removeParticles(ids)) reshaped.push_back(b);
         st.finished = nextRemoval_[k] == op.removals.size();
         break;
       }
@@ -81,24 +81,27 @@ std::vector<int> RuntimeDriver::beforeStep() {
           // Grab the bodies of the particles under the brush at its first sample.
           st.started = true;
           for (std::int32_t i : particlesInCells(op.grab)) {
-            const int b = world_.particles().body[static_cast<std::size_t>(i)];
+            const int b = solver_.particles().group(static_cast<std::size_t>(i));
             if (b >= 0 && std::find(st.grabbed.begin(), st.grabbed.end(), b) == st.grabbed.end()) st.grabbed.push_back(b);
           }
           std::sort(st.grabbed.begin(), st.grabbed.end());
           for (int b : st.grabbed) {
-            world_.setMode(b, pbd::BodyMode::kKinematic);
-            grabCentre_[k].push_back(world_.pose(b).centre);
+            st.modes.push_back(solver_.mode(b));
+            solver_.setMode(b, BodyMode::kKinematic);
+            grabCentre_[k].push_back(solver_.pose(b).centre);
           }
         }
         if (t0 >= op.end) {
           // Released: the bodies keep the velocity of the brush's last motion.
-          for (int b : st.grabbed) world_.setMode(b, pbd::BodyMode::kDynamic);
+          // A fixed body put down stays fixed where the brush left it.
+          for (std::size_t g = 0; g < st.grabbed.size(); ++g)
+            solver_.setMode(st.grabbed[g], st.modes[g] == BodyMode::kFixed ? BodyMode::kFixed : BodyMode::kDynamic);
           st.finished = true;
           break;
         }
         for (std::size_t g = 0; g < st.grabbed.size(); ++g)
-          if (world_.mode(st.grabbed[g]) == pbd::BodyMode::kKinematic)  // not emptied by a remove meanwhile
-            world_.setKinematicTarget(st.grabbed[g],
+          if (solver_.mode(st.grabbed[g]) == BodyMode::kKinematic)  // not emptied by a remove meanwhile
+            solver_.setKinematicTarget(st.grabbed[g],
                                     grabCentre_[k][g] + brushAt(op, std::min(t1, op.end)) - brushAt(op, op.start));
         break;
     }

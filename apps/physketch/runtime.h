@@ -1,12 +1,12 @@
 // Sketching while the simulation runs (Phys-Sketch lets the user keep sketching
-// while bodies move): applies the sketch's RuntimeOps to the PBD world at the
-// steps they fall in. Lives in the app because it is the one place that knows
-// both the sketch and the solver.
+// while bodies move): applies the sketch's RuntimeOps to the solver at the steps
+// they fall in. Lives in the app because it is the one place that knows both the
+// sketch and the solver; it talks to the solver only through core/solver.h.
 #pragma once
 
 #include <vector>
 
-#include "pbd/world.h"
+#include "core/solver.h"
 #include "sketch/voxelize.h"
 
 namespace physketch::app {
@@ -17,17 +17,18 @@ class RuntimeDriver {
     bool started = false, finished = false;
     int body = -1;               // create: the body it made
     std::vector<int> grabbed;    // move: bodies it carries
+    std::vector<BodyMode> modes; // move: each grabbed body's mode before it was grabbed
     std::int64_t removed = 0;    // remove: particles it removed
   };
 
-  // `sketch` must outlive the driver; the world starts with the sketch's particles.
-  RuntimeDriver(const sketch::Sketch& sketch, pbd::PbdWorld& world);
+  // `sketch` and `solver` must outlive the driver; the solver starts with the sketch's particles.
+  RuntimeDriver(const sketch::Sketch& sketch, Solver& solver);
 
   // Applies everything that happens during the next step, [t, t + dt) with t the
-  // world's time. Returns the bodies created or reshaped (they need new meshes).
+  // solver's time. Returns the bodies created or reshaped (they need new meshes).
   std::vector<int> beforeStep();
 
-  // Rest cell of every world particle (sketch cells, then the cells of runtime creates).
+  // Rest cell of every particle (sketch cells, then the cells of runtime creates).
   const std::vector<Vec3i>& restCells() const { return restCells_; }
   const std::vector<OpStats>& stats() const { return stats_; }
 
@@ -36,7 +37,7 @@ class RuntimeDriver {
   std::vector<std::int32_t> particlesInCells(const std::vector<Vec3i>& cells) const;
 
   const sketch::Sketch& sketch_;
-  pbd::PbdWorld& world_;
+  Solver& solver_;
   std::vector<Vec3i> restCells_;
   std::vector<OpStats> stats_;
   std::vector<std::size_t> nextRemoval_;

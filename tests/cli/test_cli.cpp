@@ -2,10 +2,15 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <png.h>
+
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+
+#include <nlohmann/json.hpp>
 
 namespace fs = std::filesystem;
 
@@ -44,6 +49,26 @@ std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
+struct Rgba {
+  int width = 0, height = 0;
+  std::vector<unsigned char> px;
+};
+
+Rgba readPng(const fs::path& path) {
+  png_image img{};
+  img.version = PNG_IMAGE_VERSION;
+  Rgba out;
+  if (!png_image_begin_read_from_file(&img, path.c_str())) return out;
+  img.format = PNG_FORMAT_RGBA;
+  out.px.resize(PNG_IMAGE_SIZE(img));
+  if (!png_image_finish_read(&img, nullptr, out.px.data(), 0, nullptr)) return Rgba{};
+  out.width = int(img.width);
+  out.height = int(img.height);
+  return out;
+}
+
+nlohmann::json readJson(const fs::path& p) { return nlohmann::json::parse(slurp(p)); }
+
 }  // namespace
 
 TEST(Cli, HelloSceneWritesFramesAndReport) {
@@ -52,23 +77,51 @@ TEST(Cli, HelloSceneWritesFramesAndReport) {
   const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
   const Result r = runCli("run '" + scene + "' --out '" + out.string() + "' --frames 4 --threads 2", dir);
   ASSERT_EQ(r.code, 0) << r.err;
+  std::vector<Rgba> frames;
   for (int i = 0; i < 4; ++i) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%04d.png", i);
     const fs::path f = out / "frames" / name;
     ASSERT_TRUE(fs::exists(f)) << f;
-    EXPECT_GT(fs::file_size(f), 1000u);
-    std::ifstream in(f, std::ios::binary);
-    char sig[8];
-    in.read(sig, 8);
-    EXPECT_EQ(std::string(sig + 1, 3), "PNG");
+    frames.push_back(readPng(f));
+    ASSERT_EQ(frames.back().width, 640) << f;  // decodes, at the scene's image size
+    ASSERT_EQ(frames.back().height, 480) << f;
   }
   EXPECT_FALSE(fs::exists(out / "frames" / "frame_0004.png"));
-  const std::string rep = slurp(out / "report.json");
-  EXPECT_NE(rep.find("\"status\": \"ok\""), std::string::npos) << rep;
-  EXPECT_NE(rep.find("\"per_operation\""), std::string::npos);
-  EXPECT_NE(rep.find("\"shape_match\""), std::string::npos);
-  EXPECT_NE(rep.find("\"written\": 4"), std::string::npos);
+  // The bodies show: hello's materials are lit versions of wood (0.72 0.50 0.30) and
+  // friends; the background (0.92 0.94 0.97) and ground are grey. At least 1 % of the
+  // image is far from every grey, and the frames change as the bodies fall.
+  int coloured = 0;
+  for (std::size_t i = 0; i + 3 < frames[0].px.size(); i += 4) {
+    const int cr = frames[0].px[i], cg = frames[0].px[i + 1], cb = frames[0].px[i + 2];
+    coloured += std::max({cr, cg, cb}) - std::min({cr, cg, cb}) > 40;
+  }
+  EXPECT_GT(coloured, 640 * 480 / 100);
+  EXPECT_NE(frames[0].px, frames[3].px);
+  const nlohmann::json rep = readJson(out / "report.json");
+  EXPECT_EQ(rep["status"], "ok");
+  EXPECT_FALSE(rep["sketch"]["per_operation"].empty());
+  std::vector<std::string> passes;
+  for (const auto& e : rep["passes"]) passes.push_back(e["pass"]);
+  EXPECT_NE(std::find(passes.begin(), passes.end(), "rigid_contact"), passes.end());
+  EXPECT_EQ(rep["frames"]["written"], 4);
+  // Per-frame body poses: one entry per frame, one pose per body. All three bodies are
+  // drawn in the air and fall from rest, so between frames 0 and 1 their centres drop by the integrator's
+  // exact discrete free fall g h^2 n(n+1)/2 (n substeps of h in 1/30 s: 6.1 mm for
+  // hello's 2 steps x 4 substeps), to double rounding.
+  ASSERT_EQ(rep["poses"].size(), 4u);
+  const auto& p0 = rep["poses"][0]["bodies"];
+  const auto& p1 = rep["poses"][1]["bodies"];
+  ASSERT_EQ(p0.size(), rep["bodies"].size());
+  const double h = rep["solver"]["dt"].get<double>() / rep["solver"]["substeps"].get<double>();
+  const double n = std::round(1.0 / 30.0 / h);
+  int falling = 0;
+  for (std::size_t b = 0; b < p0.size(); ++b) {
+    const double drop = p0[b][1].get<double>() - p1[b][1].get<double>();
+    falling += std::abs(drop - 9.81 * h * h * n * (n + 1) / 2) < 1e-9;
+  }
+  EXPECT_EQ(falling, int(p0.size()));
+  EXPECT_EQ(p0.size(), 3u);
   // A shorter run into the same folder leaves no stale frames behind.
   ASSERT_EQ(runCli("run '" + scene + "' --out '" + out.string() + "' --frames 2 -q", dir).code, 0);
   EXPECT_TRUE(fs::exists(out / "frames" / "frame_0001.png"));
@@ -80,16 +133,33 @@ TEST(Cli, FramesAreBitIdenticalForOneAndTwoThreads) {
   const fs::path dir = freshDir("threads");
   const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
   for (int t : {1, 2})
-    ASSERT_EQ(runCli("run '" + scene + "' -q --frames 12 --threads " + std::to_string(t) + " --out '" +
+    ASSERT_EQ(runCli("run '" + scene + "' -q --frames 31 --threads " + std::to_string(t) + " --out '" +
                          (dir / ("t" + std::to_string(t))).string() + "'",
                      dir)
                   .code,
               0);
-  for (int i = 0; i < 12; i += 11) {  // frame 11 is t = 0.37 s: the bodies are falling and landing
-    char name[32];
-    std::snprintf(name, sizeof name, "frame_%04d.png", i);
-    EXPECT_EQ(slurp(dir / "t1" / "frames" / name), slurp(dir / "t2" / "frames" / name)) << name;
-  }
+  // The whole solver state of every frame (poses, bit-exact in the JSON's shortest
+  // round-trip form) and the last frame's pixels, when the bodies have landed and come
+  // to rest: any divergence between thread counts grows into them.
+  const nlohmann::json a = readJson(dir / "t1" / "report.json"), b = readJson(dir / "t2" / "report.json");
+  ASSERT_EQ(a["poses"].size(), 31u);
+  EXPECT_EQ(a["poses"], b["poses"]);
+  EXPECT_EQ(slurp(dir / "t1" / "frames" / "frame_0030.png"), slurp(dir / "t2" / "frames" / "frame_0030.png"));
+  fs::remove_all(dir);
+}
+
+TEST(Cli, ValidateModeGivesTheSameResult) {
+  // --validate checks after every pass; it must not change what the solver computes.
+  const fs::path dir = freshDir("validate");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/play.scene";
+  for (const char* v : {"", "--validate"})
+    ASSERT_EQ(runCli("run '" + scene + "' -q --frames 20 " + v + " --out '" + (dir / (std::string("o") + v)).string() + "'",
+                     dir)
+                  .code,
+              0);
+  const nlohmann::json a = readJson(dir / "o" / "report.json"), b = readJson(dir / "o--validate" / "report.json");
+  EXPECT_EQ(a["poses"], b["poses"]);
+  EXPECT_EQ(b["solver"]["validate"], true);
   fs::remove_all(dir);
 }
 
@@ -172,5 +242,12 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
   Result r = runCli("plan '" + scene + "'", dir);
   EXPECT_EQ(r.code, 0) << r.err;
+  // The plan of a scene that sketches after play names the pass those strokes switch on.
+  const std::string play = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/play.scene";
+  const std::string planOut = (dir / "plan.txt").string();
+  ASSERT_EQ(std::system((std::string(PHYSKETCH_CLI) + " plan '" + play + "' > '" + planOut + "'").c_str()), 0);
+  const std::string planText = slurp(planOut);
+  EXPECT_NE(planText.find("kinematic"), std::string::npos) << planText;
+  EXPECT_NE(planText.find("rigid_contact"), std::string::npos) << planText;
   fs::remove_all(dir);
 }

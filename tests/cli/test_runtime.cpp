@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "apps/physketch/runtime.h"
+#include "pbd/world.h"
 
 using namespace physketch;
 
@@ -51,17 +52,22 @@ TEST(Runtime, CreateAfterPlayIsStaticWhileDrawnThenFalls) {
   Sim r("primitive box wood 0  0 0.05 0  0.1 0.1 0.1\nplay 0.1\n"
         "stroke create sphere 0.08 wood\nsample 0.2 0 0.7 0.2\nsample 0.5 0.1 0.7 0.2\n");
   ASSERT_EQ(r.sketch.runtime.size(), 1u);
-  EXPECT_EQ(r.world.bodies().size(), 1u);
+  EXPECT_EQ(r.world.bodyCount(), 1);
   r.steps(11);  // t = 0.11: the body exists and is held
-  ASSERT_EQ(r.world.bodies().size(), 2u);
-  EXPECT_EQ(r.world.mode(1), pbd::BodyMode::kKinematic);
+  ASSERT_EQ(r.world.bodyCount(), 2);
+  EXPECT_EQ(r.world.mode(1), BodyMode::kKinematic);
   const Vec3 held = r.centre(1);
   r.steps(25);  // t = 0.36: still being drawn
   EXPECT_NEAR((r.centre(1) - held).norm(), 0.0, 1e-9);
-  r.steps(10);  // t = 0.46: released, falling
-  EXPECT_EQ(r.world.mode(1), pbd::BodyMode::kDynamic);
-  EXPECT_LT(r.centre(1).y(), held.y() - 0.001);
+  r.steps(4);  // t = 0.40: the step that starts at 0.40 is the first after the last sample
+  EXPECT_EQ(r.world.mode(1), BodyMode::kKinematic);
+  r.steps(6);  // t = 0.46: released at 0.40, falling
+  EXPECT_EQ(r.world.mode(1), BodyMode::kDynamic);
   EXPECT_TRUE(r.driver.stats()[0].finished);
+  // Free fall from rest for 6 steps of 2 substeps (h = 5 ms), the integrator's exact
+  // discrete solution: g h^2 n(n+1)/2 = 19.1 mm for n = 12. Tolerance: double rounding.
+  const double h = 0.005, n = 12;
+  EXPECT_NEAR(held.y() - r.centre(1).y(), 9.81 * h * h * n * (n + 1) / 2, 1e-9);
 }
 
 TEST(Runtime, MoveCarriesTheGrabbedBodyAlongTheBrushAndReleasesItWithItsVelocity) {
@@ -71,16 +77,16 @@ TEST(Runtime, MoveCarriesTheGrabbedBodyAlongTheBrushAndReleasesItWithItsVelocity
   r.steps(5);  // settle: t = 0.05
   const Vec3 c0 = r.centre(0), other0 = r.centre(1);
   r.steps(15);  // t = 0.2: grabbed at 0.1, carried for 0.1 s = 0.1 m
-  EXPECT_EQ(r.world.mode(0), pbd::BodyMode::kKinematic);
-  EXPECT_EQ(r.world.mode(1), pbd::BodyMode::kDynamic);  // the other box is not under the brush
+  EXPECT_EQ(r.world.mode(0), BodyMode::kKinematic);
+  EXPECT_EQ(r.world.mode(1), BodyMode::kDynamic);  // the other box is not under the brush
   EXPECT_NEAR(r.centre(0).y() - c0.y(), 0.1, 1e-6);
   EXPECT_NEAR(r.centre(0).x() - c0.x(), 0.0, 1e-9);
   r.steps(20);  // t = 0.4: at the top
   EXPECT_NEAR(r.centre(0).y() - c0.y(), 0.3, 1e-6);
   // Released with the brush velocity (1 m/s up): it keeps rising briefly, then falls back.
   r.steps(1);
-  EXPECT_EQ(r.world.mode(0), pbd::BodyMode::kDynamic);
-  const float vy = r.world.particles().vy[static_cast<std::size_t>(r.world.bodies()[0].first)];
+  EXPECT_EQ(r.world.mode(0), BodyMode::kDynamic);
+  const float vy = r.world.particles().vy[static_cast<std::size_t>(r.world.bodyParticles(0).front())];
   EXPECT_NEAR(vy, 1.0 - 9.81 * 0.01, 0.02);
   r.steps(100);
   EXPECT_NEAR(r.centre(0).y(), c0.y(), 1e-3);  // back on the ground
@@ -90,7 +96,7 @@ TEST(Runtime, MoveCarriesTheGrabbedBodyAlongTheBrushAndReleasesItWithItsVelocity
 TEST(Runtime, RemoveAfterPlayCutsTheBodyAndRebuildsItsMass) {
   Sim r("primitive box wood 0  0 0.05 0  0.3 0.1 0.1\nplay 0\n"
         "stroke remove cube 0.16\nsample 0.1 0.1 0.05 0\n");
-  const int before = r.world.bodies()[0].count;
+  const auto before = static_cast<std::int32_t>(r.world.bodyParticles(0).size());
   r.steps(5);
   const Vec3 c0 = r.centre(0);
   r.steps(10);  // the remove happens at t = 0.1
@@ -122,4 +128,23 @@ TEST(Runtime, AMoveBelowTheGroundSlidesTheBodyAlongItInsteadOfThroughIt) {
   EXPECT_NEAR(r.centre(0).y(), c0.y(), 1e-6);
   r.steps(30);
   EXPECT_EQ(r.world.guard().kind, GuardKind::kNone);
+}
+
+TEST(Runtime, ARemoveThatCutsABodyInTwoLeavesTwoBodiesAndAMoveCarriesOnlyOne) {
+  // Issue: after a remove stroke after play separated a body into two pieces, moving one
+  // piece carried the other through the air. A 0.3 m bar; a 6 cm cube brush cuts its
+  // middle through its whole height at t = 0.1; at t = 0.2 a move grabs the left piece
+  // and lifts it 0.1 m. The right piece must stay on the ground.
+  Sim r("primitive box wood 0  0 0.03 0  0.3 0.06 0.06\nplay 0\n"
+        "stroke remove cube 0.1\nsample 0.1 0 0.03 0\n"
+        "stroke move sphere 0.03\nsample 0.2 -0.12 0.03 0\nsample 0.3 -0.12 0.13 0\n");
+  r.steps(15);  // t = 0.15: cut
+  ASSERT_EQ(r.world.bodyCount(), 2);
+  const double y0 = r.centre(0).y();
+  int left = r.centre(0).x() < r.centre(1).x() ? 0 : 1, right = 1 - left;
+  EXPECT_NEAR(r.centre(left).x(), -0.1, 0.01);
+  EXPECT_NEAR(r.centre(right).x(), 0.1, 0.01);
+  r.steps(15);  // t = 0.30: the left piece is at the top of the move
+  EXPECT_NEAR(r.centre(left).y() - y0, 0.1, 1e-3);
+  EXPECT_NEAR(r.centre(right).y(), y0, 1e-3);
 }

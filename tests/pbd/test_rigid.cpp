@@ -1,5 +1,6 @@
-// PBD rigid bodies by shape matching: free fall against the integrator's exact
-// discrete solution, resting contact, rigidity, rotation extraction, determinism.
+// PBD rigid bodies: each test checks against an independent oracle (the exact
+// discrete solution of the integrator, a closed-form inertia, conservation laws, the
+// Coulomb sliding distance), with its tolerance and why it is that tight.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -17,11 +18,13 @@ namespace {
 
 constexpr double kSpacing = 0.01;  // m: particle diameter 2r
 constexpr double kRadius = 0.5 * kSpacing;
+constexpr double kDensity = 1000.0;
+const double kParticleMass = kDensity * kSpacing * kSpacing * kSpacing;
 
 std::vector<Material> rigidMaterial(double friction = 0.5) {
   Material m;
   m.name = "rigid";
-  m.density = 1000.0;
+  m.density = kDensity;
   m.friction = friction;
   return {m};
 }
@@ -57,6 +60,22 @@ BodyRange addTiltedBar(ParticleArrays& p, const Vec3& start, int len, double ang
   return b;
 }
 
+// A lattice ball of radius `cells` particle spacings around `centre`.
+BodyRange addBall(ParticleArrays& p, const Vec3& centre, int cells, int stroke = 0) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int k = -cells; k <= cells; ++k)
+    for (int j = -cells; j <= cells; ++j)
+      for (int i = -cells; i <= cells; ++i)
+        if (i * i + j * j + k * k <= cells * cells) {
+          const Vec3 x = centre + kSpacing * Vec3(i, j, k);
+          p.push(float(x.x()), float(x.y()), float(x.z()), stroke, 0);
+        }
+  b.count = static_cast<std::int32_t>(p.size()) - b.first;
+  b.stroke = stroke;
+  return b;
+}
+
 PbdParams params(int substeps, int iterations, double groundY = 0.0) {
   PbdParams p;
   p.dt = 1.0 / 60.0;
@@ -67,7 +86,15 @@ PbdParams params(int substeps, int iterations, double groundY = 0.0) {
   return p;
 }
 
+double minY(const ParticleArrays& p) {
+  double m = 1e300;
+  for (float y : p.y) m = std::min(m, double(y));
+  return m;
+}
+
 }  // namespace
+
+// --- shape-matching math, alone --------------------------------------------------
 
 TEST(ShapeMatching, ExtractRotationRecoversPolarFactor) {
   std::mt19937 rng(7);
@@ -93,6 +120,79 @@ TEST(ShapeMatching, FlatBodyKeepsWarmStartAboutFreeAxis) {
   EXPECT_LT((got.toRotationMatrix() - warm.toRotationMatrix()).norm(), 1e-9);
 }
 
+TEST(ShapeMatching, MatchRigidRecoversAKnownRigidMotion) {
+  // Rest offsets of an irregular 3D body; goal positions = R0 r + c0 exactly. The best
+  // rigid fit must return R0 and c0 (1e-6: float positions near 1 m carry 6e-8 m rounding).
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-0.1, 0.1);
+  const int n = 37;
+  std::vector<float> rx(n), ry(n), rz(n), px(n), py(n), pz(n), m(n);
+  Vec3 com = Vec3::Zero();
+  double mass = 0.0;
+  for (int i = 0; i < n; ++i) {
+    rx[i] = float(u(rng)), ry[i] = float(u(rng)), rz[i] = float(u(rng));
+    m[i] = float(1.0 + 0.5 * (i % 3));
+    com += double(m[i]) * Vec3(rx[i], ry[i], rz[i]);
+    mass += m[i];
+  }
+  com /= mass;
+  for (int i = 0; i < n; ++i) rx[i] -= float(com.x()), ry[i] -= float(com.y()), rz[i] -= float(com.z());
+  const Quat q0 = Quat(Eigen::AngleAxisd(1.1, Vec3(0.3, -0.8, 0.5).normalized()));
+  const Vec3 c0(0.4, 1.2, -0.7);
+  for (int i = 0; i < n; ++i) {
+    const Vec3 g = q0.toRotationMatrix() * Vec3(rx[i], ry[i], rz[i]) + c0;
+    px[i] = float(g.x()), py[i] = float(g.y()), pz[i] = float(g.z());
+  }
+  BodyView v{n, nullptr, px.data(), py.data(), pz.data(), rx.data(), ry.data(), rz.data(), m.data()};
+  Quat q = Quat::Identity();
+  Vec3 c;
+  matchRigid(v, q, c);
+  EXPECT_LT((c - c0).norm(), 1e-6);
+  EXPECT_LT((q.toRotationMatrix() - q0.toRotationMatrix()).norm(), 1e-5);
+}
+
+TEST(ShapeMatching, RestInertiaOfALatticeBoxIsTheSolidBoxInertia) {
+  // n^3 particles of mass m on a lattice of spacing s, each counted as a cube of edge s:
+  // the sum is exactly the inertia of the solid box of edges (nx s, ny s, nz s),
+  // I_xx = M (Ly^2 + Lz^2) / 12 (closed form), off-diagonals 0. Tolerance: rounding.
+  ParticleArrays p;
+  const BodyRange b = addBox(p, Vec3::Zero(), 4, 6, 9);
+  std::vector<float> rx(p.size()), ry(p.size()), rz(p.size()), m(p.size(), float(kParticleMass));
+  const Vec3 c = kSpacing * Vec3(1.5, 2.5, 4.0);
+  for (std::size_t i = 0; i < p.size(); ++i)
+    rx[i] = float(p.x[i] - c.x()), ry[i] = float(p.y[i] - c.y()), rz[i] = float(p.z[i] - c.z());
+  BodyView v{b.count, nullptr, p.x.data(), p.y.data(), p.z.data(), rx.data(), ry.data(), rz.data(), m.data()};
+  const Mat3 I = restInertia(v, kSpacing);
+  const double M = kParticleMass * b.count, Lx = 4 * kSpacing, Ly = 6 * kSpacing, Lz = 9 * kSpacing;
+  const Vec3 expect(M * (Ly * Ly + Lz * Lz) / 12, M * (Lx * Lx + Lz * Lz) / 12, M * (Lx * Lx + Ly * Ly) / 12);
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(I(a, a), expect[a], 1e-6 * expect[a]) << "axis " << a;
+  EXPECT_NEAR(I(0, 1), 0.0, 1e-6 * expect[0]);
+  EXPECT_NEAR(I(1, 2), 0.0, 1e-6 * expect[0]);
+}
+
+TEST(ShapeMatching, PointCorrectionSplitsIntoTranslationAndRotationAsTheClosedFormSays) {
+  // A body with isotropic inertia I, mass M; a correction d along n = x at a point
+  // r = (0, a, 0) from the centre. Closed form (Müller 2020 Eq. 2-9): w = 1/M + a^2/I,
+  // lambda = d / w; the centre moves lambda/M along x; the body turns by lambda a / I
+  // about -z. To first order the point moves by exactly d along x.
+  const double M = 2.0, I = 0.05, a = 0.3, d = 1e-4;
+  RigidPose b{Vec3(1, 2, 3), Quat::Identity(), 1.0 / M, Mat3::Identity() / I};
+  const Vec3 p = b.c + Vec3(0, a, 0);
+  applyPointCorrection(b, p, Vec3::UnitX(), d);
+  const double lambda = d / (1.0 / M + a * a / I);
+  EXPECT_NEAR(b.c.x() - 1.0, lambda / M, 1e-15);
+  EXPECT_NEAR(b.c.y() - 2.0, 0.0, 1e-15);
+  const Eigen::AngleAxisd aa(b.q);
+  // The quaternion update normalizes q + 1/2 [dtheta, 0] q: angle 2 atan(theta/2), which
+  // is theta - theta^3/12 (1.5e-12 here).
+  EXPECT_NEAR(aa.angle(), lambda * a / I, 2e-12);
+  EXPECT_NEAR(aa.axis().z(), -1.0, 1e-9);
+  const Vec3 moved = b.q.toRotationMatrix() * Vec3(0, a, 0) + b.c;
+  EXPECT_NEAR(moved.x() - p.x(), d, 1e-3 * d);  // first order: the error is O(angle^2)
+}
+
+// --- the world ----------------------------------------------------------------------
+
 TEST(RigidBody, FreeFallMatchesExactDiscreteSolution) {
   ParticleArrays p;
   const Vec3 corner(0.1, 1.5, -0.2);  // a workspace-sized drop: 1.2 m in 0.5 s
@@ -100,118 +200,320 @@ TEST(RigidBody, FreeFallMatchesExactDiscreteSolution) {
   const int substeps = 3;
   PbdWorld w(p, bodies, rigidMaterial(), params(substeps, 2, -100.0));
   const double g = 9.81, h = (1.0 / 60.0) / substeps;
-  double worst = 0.0;
   for (int step = 1; step <= 30; ++step) {
     ASSERT_TRUE(w.step());
     const long n = static_cast<long>(step) * substeps;
-    // Symplectic Euler: v_n = -g h n, y_n = y_0 - g h^2 n(n+1)/2.
+    // Symplectic Euler on the body: v_n = -g h n, y_n = y_0 - g h^2 n(n+1)/2. The body
+    // state is double; particles are its float32 image, so the tolerance is float
+    // rounding near 1.5 m (1.2e-7 m) and of the speed (5e-7 m/s), with margin.
     const double drop = g * h * h * double(n * (n + 1)) / 2.0;
     for (std::size_t i = 0; i < w.particles().size(); ++i) {
-      // Tolerance 1e-4 m (2 % of the particle radius). Positions are float32:
-      // near 1.5 m they resolve 0.12 um, and the PBD velocity v = (p - x)/h
-      // carries each rounding divided by h (1/180 s), so 90 substeps accumulate
-      // tens of um (measured 57 um). A broken integrator is off by millimetres.
-      worst = std::max(worst, std::abs(double(w.particles().y[i]) - (p.y[i] - drop)));
-      ASSERT_NEAR(w.particles().y[i], p.y[i] - drop, 1e-4) << "step " << step << " particle " << i;
-      ASSERT_NEAR(w.particles().x[i], p.x[i], 5e-5);
-      ASSERT_NEAR(w.particles().vy[i], -g * h * double(n), 2e-3);
+      ASSERT_NEAR(w.particles().y[i], p.y[i] - drop, 1e-6) << "step " << step << " particle " << i;
+      ASSERT_NEAR(w.particles().x[i], p.x[i], 1e-6);
+      ASSERT_NEAR(w.particles().vy[i], -g * h * double(n), 1e-5);
     }
   }
-  RecordProperty("max_error_m", std::to_string(worst));
+}
+
+TEST(RigidBody, FreeFallFitsGravityFromOneToAThousandSubsteps) {
+  // Issue: with float32 particle positions, v = (p - x)/h rounded the per-substep
+  // displacement away (1000 substeps: the ball never fell; 200: g = 8.6). Fit
+  // y = a + b t + c t^2 by least squares to a particle's height over 0.5 s, as a user
+  // would from report.json; g = -2c must be within 1 % at every substep count. (The
+  // integrator's exact solution -g/2 (t^2 + t h) is a parabola with a linear term, so
+  // the fit is exact up to float rounding of the output.)
+  for (int substeps : {1, 10, 200, 1000}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies{addBall(p, Vec3(0.0, 0.8, 0.0), 3)};
+    PbdWorld w(p, bodies, rigidMaterial(), params(substeps, 1, -100.0));
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+    for (int step = 0; step <= 30; ++step) {
+      if (step > 0) {
+        ASSERT_TRUE(w.step());
+      }
+      const double t = step / 60.0;
+      const Eigen::Vector3d row(1.0, t, t * t);
+      A += row * row.transpose();
+      rhs += row * double(w.particles().y[0]);
+    }
+    const double gFit = -2.0 * A.ldlt().solve(rhs)(2);
+    EXPECT_NEAR(gFit, 9.81, 0.01 * 9.81) << substeps << " substeps";
+  }
 }
 
 TEST(RigidBody, RestingBoxNeitherSinksNorDriftsOverTenSeconds) {
-  ParticleArrays p;
-  const Vec3 corner(0.0, kRadius, 0.0);  // bottom layer touching the ground exactly
-  std::vector<BodyRange> bodies{addBox(p, corner, 10, 10, 10)};
-  PbdWorld w(p, bodies, rigidMaterial(), params(4, 4));
-  for (int step = 0; step < 600; ++step) ASSERT_TRUE(w.step()) << w.guard().message();
-  double maxDev = 0.0;
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    maxDev = std::max(maxDev, std::abs(double(w.particles().y[i]) - p.y[i]));
-    maxDev = std::max(maxDev, std::abs(double(w.particles().x[i]) - p.x[i]));
-    maxDev = std::max(maxDev, std::abs(double(w.particles().z[i]) - p.z[i]));
+  for (int iterations : {1, 2, 4}) {
+    ParticleArrays p;
+    const Vec3 corner(0.0, kRadius, 0.0);  // bottom layer touching the ground exactly
+    std::vector<BodyRange> bodies{addBox(p, corner, 10, 10, 10)};
+    PbdWorld w(p, bodies, rigidMaterial(), params(4, iterations));
+    for (int step = 0; step < 600; ++step) ASSERT_TRUE(w.step()) << iterations << " iterations: " << w.guard().message();
+    double maxDev = 0.0;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      maxDev = std::max(maxDev, std::abs(double(w.particles().y[i]) - p.y[i]));
+      maxDev = std::max(maxDev, std::abs(double(w.particles().x[i]) - p.x[i]));
+      maxDev = std::max(maxDev, std::abs(double(w.particles().z[i]) - p.z[i]));
+    }
+    // 5 % of a radius: a body that sinks by one substep of gravity per step would be
+    // 600 * g h^2 = 2.5 mm down after 10 s, a drifting one moves sideways.
+    EXPECT_LT(maxDev, 0.05 * kRadius) << iterations << " iterations";
   }
-  EXPECT_LT(maxDev, 0.05 * kRadius);
 }
 
-TEST(RigidBody, TumblingBarStaysRigidAndComesToRestLyingDown) {
+TEST(RigidBody, LowIterationCountsLandABallWithoutTrippingTheGuard) {
+  // Issue: iterations 1 or 2 (documented range 1-1000) tripped the guard for a ball
+  // landing. Fewer sweeps may leave a little more penetration for a substep, but the
+  // run must go on and the ball must come to rest on the ground.
+  for (int iterations : {1, 2}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies{addBall(p, Vec3(0.0, 0.5, 0.0), 6)};
+    PbdWorld w(p, bodies, rigidMaterial(), params(4, iterations));
+    for (int step = 0; step < 120; ++step) ASSERT_TRUE(w.step()) << iterations << " iterations: " << w.guard().message();
+    EXPECT_NEAR(minY(w.particles()), kRadius, 0.2 * kRadius) << iterations << " iterations";
+    EXPECT_LT(w.velocity(0).norm(), 0.05) << iterations << " iterations";
+  }
+}
+
+TEST(RigidBody, FreeFlightConservesAngularMomentumAndEnergyToFirstOrder) {
+  // A spinning bar (unequal principal moments) in free flight: with no torque about the
+  // centre of mass, L = R I R^T w and the rotational energy stay constant. The step is
+  // symplectic Euler with an implicit gyroscopic term (first order), so over 1 s both
+  // drift by O(h): measured 1.6 % (L) and 2.8 % (E) at 8 substeps. The test holds the
+  // drift under 4 % at 8 substeps and checks it halves (< 0.6x) at 16, which is what a
+  // first-order integrator does; without the gyroscopic term (w kept constant) |L|
+  // drifts by tens of per cent and does not converge.
+  const auto drift = [](int substeps) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies{addTiltedBar(p, Vec3(0.0, 1.0, 0.0), 30, 0.4)};
+    bodies[0].init.spin = Vec3(2.0, 5.0, 1.0);
+    bodies[0].init.velocity = Vec3(0.3, 1.0, 0.0);
+    PbdWorld w(p, bodies, rigidMaterial(), params(substeps, 1, -100.0));
+    const auto L = [&] {
+      const Mat3 R = w.pose(0).rotation.toRotationMatrix();
+      return Vec3(R * w.bodyInertiaRest(0) * R.transpose() * w.angularVelocity(0));
+    };
+    const auto E = [&] { return 0.5 * w.angularVelocity(0).dot(L()); };
+    const Vec3 L0 = L();
+    const double E0 = E();
+    double dL = 0.0, dE = 0.0;
+    for (int step = 0; step < 60; ++step) {
+      EXPECT_TRUE(w.step());
+      dL = std::max(dL, (L() - L0).norm() / L0.norm());
+      dE = std::max(dE, std::abs(E() - E0) / E0);
+    }
+    // The centre of mass flies the parabola of its initial velocity (exact discrete solution).
+    const double h = 1.0 / (60.0 * substeps);
+    const long n = 60L * substeps;
+    EXPECT_NEAR(w.pose(0).centre.x() - w.pose(0).restCentre.x(), 0.3 * double(n) * h, 1e-9);
+    EXPECT_NEAR(w.pose(0).centre.y() - w.pose(0).restCentre.y(),
+                1.0 * double(n) * h - 9.81 * h * h * double(n * (n + 1)) / 2, 1e-9);
+    return std::make_pair(dL, dE);
+  };
+  const auto [dL8, dE8] = drift(8);
+  const auto [dL16, dE16] = drift(16);
+  std::printf("drift at 8 substeps: L %.4g, E %.4g; at 16: L %.4g, E %.4g\n", dL8, dE8, dL16, dE16);
+  EXPECT_LT(dL8, 0.04);
+  EXPECT_LT(dE8, 0.04);
+  EXPECT_LT(dL16, 0.6 * dL8);
+  EXPECT_LT(dE16, 0.6 * dE8);
+}
+
+TEST(RigidBody, TumblingBarComesToRestLyingDown) {
   ParticleArrays p;
   std::vector<BodyRange> bodies{addTiltedBar(p, Vec3(0.0, 0.05, 0.0), 40, 0.9)};
   PbdWorld w(p, bodies, rigidMaterial(0.8), params(4, 4));
-  // Rest distances from the centre of mass.
-  Vec3 c0 = Vec3::Zero();
-  for (std::size_t i = 0; i < p.size(); ++i) c0 += Vec3(p.x[i], p.y[i], p.z[i]);
-  c0 /= double(p.size());
-  std::vector<double> rest(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) rest[i] = (Vec3(p.x[i], p.y[i], p.z[i]) - c0).norm();
-  for (int step = 0; step < 240; ++step) {
-    ASSERT_TRUE(w.step()) << w.guard().message();
-    const auto& q = w.particles();
-    Vec3 c = Vec3::Zero();
-    for (std::size_t i = 0; i < q.size(); ++i) c += Vec3(q.x[i], q.y[i], q.z[i]);
-    c /= double(q.size());
-    for (std::size_t i = 0; i < q.size(); ++i) {
-      const double d = (Vec3(q.x[i], q.y[i], q.z[i]) - c).norm();
-      ASSERT_NEAR(d, rest[i], 0.01 * rest[i] + 1e-6) << "step " << step << " particle " << i;
-    }
-  }
+  for (int step = 0; step < 240; ++step) ASSERT_TRUE(w.step()) << w.guard().message();
   // After 4 s the bar has tipped over: its long axis is horizontal and it is at rest.
   const auto& q = w.particles();
-  double minY = 1e9, maxY = -1e9, maxSpeed = 0.0;
-  for (std::size_t i = 0; i < q.size(); ++i) {
-    minY = std::min(minY, double(q.y[i]));
-    maxY = std::max(maxY, double(q.y[i]));
-    maxSpeed = std::max(maxSpeed, Vec3(q.vx[i], q.vy[i], q.vz[i]).norm());
-  }
-  EXPECT_NEAR(minY, kRadius, 0.05 * kRadius);
-  EXPECT_LT(maxY - minY, 3.5 * kSpacing);  // 3 particles thick when lying flat, 40 long when upright
-  EXPECT_LT(maxSpeed, 0.01);
+  double lo = 1e9, hi = -1e9;
+  for (float y : q.y) lo = std::min(lo, double(y)), hi = std::max(hi, double(y));
+  EXPECT_NEAR(lo, kRadius, 0.05 * kRadius);
+  EXPECT_LT(hi - lo, 3.5 * kSpacing);  // 3 particles thick when lying flat, 40 long when upright
+  EXPECT_LT(w.velocity(0).norm(), 0.01);
+  EXPECT_LT(w.angularVelocity(0).norm(), 0.1);
 }
 
-TEST(RigidBody, SameResultForOneAndTwoThreadsBitwise) {
+TEST(RigidBody, SlidingBoxStopsAtTheCoulombDistance) {
+  // A box launched along the ground at v0 with friction mu stops after v0^2 / (2 mu g)
+  // (closed form for kinetic friction). Tolerance 5 %: friction acts at position level
+  // once per substep, and the first substep's contact is made while the box settles.
+  for (double mu : {0.3, 0.6}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, kRadius, 0.0), 6, 4, 6)};
+    const double v0 = 1.5;
+    bodies[0].init.velocity = Vec3(v0, 0.0, 0.0);
+    PbdWorld w(p, bodies, rigidMaterial(mu), params(8, 4));
+    const double x0 = w.pose(0).centre.x();
+    for (int step = 0; step < 120; ++step) ASSERT_TRUE(w.step()) << w.guard().message();
+    const double expect = v0 * v0 / (2.0 * mu * 9.81);
+    EXPECT_NEAR(w.pose(0).centre.x() - x0, expect, 0.05 * expect) << "mu " << mu;
+    EXPECT_LT(w.velocity(0).norm(), 1e-3) << "mu " << mu;
+  }
+}
+
+TEST(RigidBody, FixedBodyNeverMovesAndInitialSpinIsApplied) {
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), 3, 3, 3, 0), addBox(p, Vec3(0.2, 0.5, 0.0), 3, 3, 3, 1)};
+  bodies[0].init.fixed = true;
+  bodies[1].init.spin = Vec3(0.0, 3.0, 0.0);
+  PbdWorld w(p, bodies, rigidMaterial(), params(4, 4));
+  for (int step = 0; step < 6; ++step) ASSERT_TRUE(w.step());
+  for (std::int32_t i = 0; i < bodies[0].count; ++i) {
+    EXPECT_EQ(w.particles().y[std::size_t(i)], p.y[std::size_t(i)]);
+    EXPECT_EQ(w.particles().vy[std::size_t(i)], 0.0f);
+  }
+  // About y through the centre (a cube: a principal axis), w stays (0, 3, 0): 0.1 s -> 0.3 rad.
+  EXPECT_NEAR(Eigen::AngleAxisd(w.pose(1).rotation).angle(), 0.3, 1e-6);
+  EXPECT_EQ(w.mode(0), BodyMode::kFixed);
+}
+
+TEST(RigidBody, CuttingABodyInTwoLeavesTwoBodiesWithTheirOwnMass) {
+  // A 12-long bar; removing the two middle columns leaves two 5-long pieces. Each must
+  // become a body with its own centre (the middle of its particles) and mass.
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), 12, 2, 2)};
+  PbdWorld w(p, bodies, rigidMaterial(), params(2, 2, -100.0));
+  ASSERT_TRUE(w.step());
+  std::vector<std::int32_t> cut;
+  for (std::int32_t i = 0; i < bodies[0].count; ++i)
+    if (int(i % 12) == 5 || int(i % 12) == 6) cut.push_back(i);
+  const std::vector<int> changed = w.removeParticles(cut);
+  ASSERT_EQ(changed, (std::vector<int>{0, 1}));
+  ASSERT_EQ(w.bodyCount(), 2);
+  for (int b : {0, 1}) {
+    EXPECT_EQ(w.bodyParticles(b).size(), 20u);
+    EXPECT_NEAR(w.bodyMass(b), 20 * kParticleMass, 1e-6 * 20 * kParticleMass);  // float particle masses
+    Vec3 mean = Vec3::Zero();
+    for (std::int32_t i : w.bodyParticles(b))
+      mean += Vec3(w.particles().x[std::size_t(i)], w.particles().y[std::size_t(i)], w.particles().z[std::size_t(i)]);
+    mean /= 20.0;
+    EXPECT_LT((mean - w.pose(b).centre).norm(), 1e-6);
+  }
+  // Both pieces keep falling with the body's velocity.
+  EXPECT_NEAR(w.velocity(1).y(), w.velocity(0).y(), 1e-12);
+  ASSERT_TRUE(w.step());
+}
+
+TEST(RigidBody, SameStateForOneAndTwoThreadsBitwiseEveryStep) {
+  // Every pass that splits work: a big body (chunked particle writes), several bodies
+  // (bodies in parallel), contact, a cut after some steps. The whole state is compared
+  // through a hash of positions, velocities, phases and body poses at every step.
   ParticleArrays p;
   std::vector<BodyRange> bodies;
   bodies.push_back(addBox(p, Vec3(-0.3, 0.2, 0.0), 20, 20, 20, 0));  // 8000 particles: parallel chunks
   bodies.push_back(addTiltedBar(p, Vec3(0.2, 0.1, 0.0), 50, 0.7, 1));
   bodies.push_back(addBox(p, Vec3(0.0, 0.4, 0.3), 5, 5, 5, 2));
+  bodies[2].init.spin = Vec3(1.0, 2.0, 3.0);
   auto run = [&](int threads) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
     PbdWorld w(p, bodies, rigidMaterial(), params(4, 4));
-    std::vector<std::vector<float>> states;
+    std::vector<std::uint64_t> hashes;
     for (int s = 0; s < 60; ++s) {
+      if (s == 30) {
+        std::vector<std::int32_t> cut;
+        for (std::int32_t i = 0; i < 8000; ++i)
+          if (i % 20 == 10) cut.push_back(i);
+        w.removeParticles(cut);
+      }
       w.step();
-      states.push_back(w.particles().y);
-      states.push_back(w.particles().x);
+      hashes.push_back(w.stateHash());
     }
-    return states;
+    return hashes;
   };
   const auto one = run(1), two = run(2);
   ASSERT_EQ(one.size(), two.size());
-  for (std::size_t s = 0; s < one.size(); ++s) ASSERT_EQ(one[s], two[s]) << "diverged at record " << s;
+  for (std::size_t s = 0; s < one.size(); ++s) ASSERT_EQ(one[s], two[s]) << "diverged at step " << s;
 }
 
-TEST(RigidBody, PlanListsOnlyPassesWithWork) {
+TEST(RigidBody, StateHashSeesEveryPartOfTheState) {
+  // The determinism test relies on the hash: it must change when a velocity or a pose changes.
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0, 0.5, 0), 2, 2, 2)};
+  PbdWorld a(p, bodies, rigidMaterial(), params(1, 1)), b(p, bodies, rigidMaterial(), params(1, 1));
+  EXPECT_EQ(a.stateHash(), b.stateHash());
+  bodies[0].init.spin = Vec3(0, 1e-6, 0);
+  PbdWorld c(p, bodies, rigidMaterial(), params(1, 1));
+  EXPECT_NE(a.stateHash(), c.stateHash());
+}
+
+TEST(RigidBody, PlanIsWhatTheStepRuns) {
   ParticleArrays p;
   std::vector<BodyRange> bodies{addBox(p, Vec3(0, 0.1, 0), 2, 2, 2)};
   PbdWorld w(p, bodies, rigidMaterial(), params(2, 3));
   const auto plan = w.plan();
   std::vector<std::string> names;
   for (const auto& x : plan) names.push_back(x.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"integrate", "shape_match", "rigid_contact", "update", "guard"}));
-  EXPECT_EQ(plan[2].perStep, 2);  // once per substep
+  EXPECT_EQ(names, (std::vector<std::string>{"integrate", "rigid_contact", "update", "write_particles", "guard"}));
+  for (int s = 0; s < 5; ++s) ASSERT_TRUE(w.step());
+  // Every planned pass ran perStep times per step, and no other pass ran at all.
+  for (int k = 0; k < int(PbdPass::kCount); ++k) {
+    long expect = 0;
+    for (const auto& e : plan)
+      if (e.pass == k) expect = 5 * e.perStep;
+    EXPECT_EQ(w.profile().entries()[std::size_t(k)].calls, expect) << kPbdPasses[k].name;
+  }
   PbdWorld empty(ParticleArrays{}, {}, rigidMaterial(), params(2, 3));
   EXPECT_TRUE(empty.plan().empty());
+}
+
+TEST(RigidBody, KinematicPassIsPlannedAndRunWhileABodyIsCarried) {
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0, 0.3, 0), 2, 2, 2)};
+  PbdWorld w(p, bodies, rigidMaterial(), params(2, 1));
+  w.setMode(0, BodyMode::kKinematic);
+  w.setKinematicTarget(0, w.pose(0).centre + Vec3(0.1, 0, 0));
+  const auto plan = w.plan();
+  std::vector<std::string> names;
+  for (const auto& x : plan) names.push_back(x.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"kinematic", "update", "write_particles", "guard"}));
+  ASSERT_TRUE(w.step());
+  EXPECT_EQ(w.profile()[PbdPass::kKinematic].calls, 2);
+  EXPECT_EQ(w.profile()[PbdPass::kIntegrate].calls, 0);
+  EXPECT_NEAR(w.velocity(0).x(), 0.1 * 60.0, 1e-9);  // 0.1 m over one step of 1/60 s
+}
+
+TEST(RigidBody, GuardNamesThePassThatProducedTheBadValue) {
+  // Gravity NaN: the first pass whose output is not finite is 'integrate' in substep 0;
+  // the cheap once-per-step check trips, the step is replayed pass by pass and the
+  // record names that pass (not the pass that ran last). --validate finds the same.
+  for (bool validate : {false, true}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies{addBox(p, Vec3(0, 0.5, 0), 2, 2, 2)};
+    PbdParams prm = params(3, 1);
+    PbdWorld ok(p, bodies, rigidMaterial(), prm);
+    ASSERT_TRUE(ok.step());
+    prm.gravity = Vec3(0.0, std::nan(""), 0.0);
+    PbdWorld w(p, bodies, rigidMaterial(), prm);
+    w.setValidate(validate);
+    EXPECT_FALSE(w.step());
+    EXPECT_EQ(w.guard().kind, GuardKind::kNaN);
+    EXPECT_EQ(w.guard().pass, "integrate") << "validate " << validate;
+    EXPECT_EQ(w.guard().substep, 0);
+    EXPECT_EQ(w.guard().material, "rigid");
+    EXPECT_NE(w.guard().message().find("'integrate'"), std::string::npos);
+  }
+  // A body started a metre inside the ground: rigid_contact lifts it out in one substep,
+  // and the velocity that implies (1.005 m in 1/120 s = 121 m/s > 100 m/s) is first
+  // seen after 'update', which computes it.
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0, -1.0, 0), 2, 2, 2)};
+  PbdWorld w(p, bodies, rigidMaterial(), params(2, 1));
+  EXPECT_FALSE(w.step());
+  EXPECT_EQ(w.guard().kind, GuardKind::kExplosion);
+  EXPECT_EQ(w.guard().pass, "update");
+  EXPECT_EQ(w.guard().substep, 0);
 }
 
 TEST(RigidBody, GuardStopsTheWorldOnExplosion) {
   ParticleArrays p;
   std::vector<BodyRange> bodies{addBox(p, Vec3(0, 0.5, 0), 2, 2, 2)};
-  p.vx.assign(p.size(), 500.0f);  // faster than the 100 m/s bound
+  bodies[0].init.velocity = Vec3(500.0, 0.0, 0.0);  // faster than the 100 m/s bound
   PbdWorld w(p, bodies, rigidMaterial(), params(1, 1));
   EXPECT_FALSE(w.step());
   EXPECT_EQ(w.guard().kind, GuardKind::kExplosion);
   EXPECT_EQ(w.guard().particle, 0);
+  EXPECT_EQ(w.guard().pass, "integrate");
   const auto before = w.particles().x;
   EXPECT_FALSE(w.step());  // a tripped world does not step
   EXPECT_EQ(w.particles().x, before);

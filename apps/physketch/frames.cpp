@@ -1,0 +1,78 @@
+#include "apps/physketch/frames.h"
+
+#include <algorithm>
+#include <cstdio>
+
+#include "render/voxel_mesh.h"
+
+namespace physketch::app {
+
+std::string frameName(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "frame_%04d.png", index);
+  return buf;
+}
+
+FrameWriter::FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapping)
+    : scene_(scene), mapping_(mapping), renderer_(scene.width, scene.height) {
+  passMesh_ = profile_.add("mesh");
+  passDraw_ = profile_.add("draw");
+  passPng_ = profile_.add("png");
+}
+
+void FrameWriter::markReshaped(const std::vector<int>& bodies) { dirty_.insert(dirty_.end(), bodies.begin(), bodies.end()); }
+
+std::size_t FrameWriter::meshesLive() const {
+  std::size_t n = 0;
+  for (const auto& [b, parts] : meshes_) n += parts.size();
+  return n;
+}
+
+// (Re)builds the meshes of one body from its particles' rest cells: one mesh per
+// material (mixed-material bodies), all moving with the body's pose.
+void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restCells, int b) {
+  ScopedPass t(profile_, passMesh_);
+  // TODO(render): free the old GL meshes here once the renderer can (it leaks one set per re-mesh).
+  meshes_[b].clear();
+  std::map<std::int16_t, std::vector<Vec3i>> parts;
+  for (std::int32_t i : solver.bodyParticles(b))
+    parts[solver.particles().material[static_cast<std::size_t>(i)]].push_back(restCells[static_cast<std::size_t>(i)]);
+  const Vec3 origin = mapping_.toWorld(Vec3i(0, 0, 0));
+  for (const auto& [material, cells] : parts) {
+    render::TriangleMesh mesh = render::meshVoxels(cells, mapping_.voxelSize(), origin);
+    trianglesMeshed_ += mesh.triangleCount();
+    meshes_[b].push_back({renderer_.uploadMesh(mesh), material, mesh.triangleCount()});
+  }
+}
+
+void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCells, const std::string& path) {
+  // Bodies new since the last frame, then bodies reshaped since: each meshed once per frame at most.
+  for (; meshedBodies_ < solver.bodyCount(); ++meshedBodies_) dirty_.push_back(meshedBodies_);
+  std::sort(dirty_.begin(), dirty_.end());
+  dirty_.erase(std::unique(dirty_.begin(), dirty_.end()), dirty_.end());
+  for (int b : dirty_) meshBody(solver, restCells, b);
+  dirty_.clear();
+
+  render::Image img;
+  {
+    ScopedPass t(profile_, passDraw_);
+    const SceneDesc& sc = scene_;
+    renderer_.beginFrame(sc.camera, {0.92f, 0.94f, 0.97f});
+    renderer_.drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), std::max(sc.workspaceSize, 1e-3),
+                         {0.55f, 0.57f, 0.55f});
+    trianglesLastFrame_ = 0;
+    for (const auto& [b, parts] : meshes_) {
+      if (solver.mode(b) == BodyMode::kEmpty) continue;
+      const Mat4f model = solver.pose(b).model();
+      for (const MeshPart& m : parts) {
+        renderer_.drawMesh(m.handle, model, sc.materials[static_cast<std::size_t>(m.material)].color);
+        trianglesLastFrame_ += m.triangles;
+      }
+    }
+    img = renderer_.endFrame();
+  }
+  ScopedPass t(profile_, passPng_);
+  render::writePng(path, img);
+}
+
+}  // namespace physketch::app

@@ -1,0 +1,32 @@
+#include "apps/physketch/prepare.h"
+
+#include <fstream>
+
+#include "core/error.h"
+#include "pbd/world.h"
+
+namespace physketch::app {
+
+Prepared prepare(const std::string& scenePath) {
+  Prepared p;
+  p.scene = loadScene(scenePath);
+  // A stroke file that cannot be opened is the scene's error (its 'strokes' line).
+  if (!std::ifstream(p.scene.strokesPath))
+    throw InputError(p.scene.path, p.scene.strokesLine, "path", "cannot open stroke file '" + p.scene.strokesPath + "'");
+  p.strokes = sketch::loadStrokes(p.scene.strokesPath);
+  const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
+  p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials));
+  return p;
+}
+
+std::unique_ptr<Solver> makeSolver(const Prepared& p) {
+  const SceneDesc& sc = p.scene;
+  switch (sc.solver) {
+    case SolverKind::kPbd:
+      return std::make_unique<pbd::PbdWorld>(p.sketch->particles, p.sketch->bodies, sc.materials,
+                                             pbd::paramsFromScene(sc, 0.5 * p.sketch->mapping.voxelSize()));
+  }
+  throw RuntimeError("unknown solver");
+}
+
+}  // namespace physketch::app

@@ -1,0 +1,97 @@
+#include "apps/physketch/report.h"
+
+#include <map>
+
+namespace physketch::app {
+
+using nlohmann::json;
+
+json sketchJson(const Prepared& p) {
+  const SceneDesc& sc = p.scene;
+  const sketch::Sketch& sk = *p.sketch;
+  json ops = json::array();
+  for (const auto& o : sk.operations) {
+    json j = {{"id", o.id},           {"line", o.line},       {"what", o.what},   {"active", o.active},
+              {"created", o.created}, {"removed", o.removed}, {"moved", o.moved}, {"particles", o.remaining},
+              {"stamps", o.stamps},   {"after_play", o.afterPlay}};
+    j["material"] = o.material >= 0 ? json(sc.materials[static_cast<std::size_t>(o.material)].name) : json(nullptr);
+    j["body"] = o.body >= 0 ? json(sk.bodyNames[static_cast<std::size_t>(o.body)]) : json(nullptr);
+    ops.push_back(j);
+  }
+  std::map<std::string, std::int64_t> perMaterial;
+  for (const auto& m : sc.materials) perMaterial[m.name] = 0;
+  for (auto m : sk.particles.material) ++perMaterial[sc.materials[static_cast<std::size_t>(m)].name];
+  json bodies = json::array();
+  for (std::size_t b = 0; b < sk.bodies.size(); ++b)
+    bodies.push_back({{"name", sk.bodyNames[b]}, {"particles", sk.bodies[b].count}, {"first", sk.bodies[b].first}});
+  return {{"particles", sk.particles.size()},
+          {"cap", sketch::kMaxParticles},
+          {"play_time_s", p.strokes.playTime()},
+          {"per_operation", ops},
+          {"per_material", perMaterial},
+          {"bodies", bodies},
+          {"warnings", sk.warnings}};
+}
+
+json planJson(const std::vector<PlanEntry>& plan) {
+  json a = json::array();
+  for (const auto& p : plan)
+    a.push_back({{"pass", p.name}, {"runs", p.runs}, {"per_step", p.perStep}, {"reason", p.reason}});
+  return a;
+}
+
+json guardJson(const GuardRecord& g) {
+  return {{"kind", toString(g.kind)}, {"pass", g.pass},         {"step", g.step},   {"substep", g.substep},
+          {"particle", g.particle},   {"body", g.body},         {"stroke", g.stroke}, {"material", g.material},
+          {"value", g.value},         {"bound", g.bound},       {"hint", g.hint},   {"message", g.message()}};
+}
+
+json posesJson(const Solver& solver) {
+  json a = json::array();
+  for (int b = 0; b < solver.bodyCount(); ++b) {
+    const BodyPose p = solver.pose(b);
+    a.push_back({p.centre.x(), p.centre.y(), p.centre.z(), p.rotation.w(), p.rotation.x(), p.rotation.y(),
+                 p.rotation.z()});
+  }
+  return a;
+}
+
+json runtimeJson(const sketch::Sketch& sk, const RuntimeDriver& runtime) {
+  json rt = json::array();
+  for (std::size_t k = 0; k < sk.runtime.size(); ++k) {
+    const auto& op = sk.runtime[k];
+    const auto& st = runtime.stats()[k];
+    static const char* kKinds[] = {"create", "remove", "move"};
+    rt.push_back({{"op", op.op}, {"line", op.line}, {"kind", kKinds[static_cast<int>(op.kind)]},
+                  {"start_s", op.start}, {"end_s", op.end}, {"started", st.started}, {"finished", st.finished},
+                  {"body", st.body}, {"grabbed_bodies", st.grabbed}, {"removed_particles", st.removed}});
+  }
+  return rt;
+}
+
+json passesJson(const Profile& solver, const Profile* render, int written) {
+  const double perFrame = written > 1 ? 1.0 / (written - 1) : 0.0;  // frame 0 is the sketch: no steps
+  json passes = json::array();
+  for (const auto& e : solver.entries())
+    if (e.calls > 0)  // passes the scene did not need never ran: leave them out
+      passes.push_back({{"pass", e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
+                        {"ms_per_frame", e.seconds * 1e3 * perFrame}});
+  if (render) {
+    const double perWritten = written > 0 ? 1.0 / written : 0.0;
+    for (const auto& e : render->entries())
+      if (e.calls > 0)
+        passes.push_back({{"pass", "render." + e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
+                          {"ms_per_frame", e.seconds * 1e3 * perWritten}});
+  }
+  return passes;
+}
+
+double memoryEstimateMiB(std::size_t particles) {
+  const double perParticle = 4.0 * (3 + 3 + 1 + 1)  // ParticleArrays hot: x, v, mass, phase
+                             + 4.0 + 2.0             // stroke, material
+                             + 4.0 * 3 + 4.0         // solver: rest offsets, body member list
+                             + 12.0;                 // grid cell per particle
+  return (perParticle * double(particles) + 4.0 * double(sketch::kGridCells)) / (1024.0 * 1024.0);
+}
+
+}  // namespace physketch::app

@@ -1,0 +1,29 @@
+// report.json: what a run did, in a form users and tests can check without decoding
+// images (docs/formats.md, "Outputs").
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "apps/physketch/prepare.h"
+#include "apps/physketch/runtime.h"
+#include "core/solver.h"
+
+namespace physketch::app {
+
+// Provenance of the sketch: particles per operation, per material and per body, and lint warnings.
+nlohmann::json sketchJson(const Prepared& p);
+nlohmann::json planJson(const std::vector<PlanEntry>& plan);
+nlohmann::json guardJson(const GuardRecord& g);
+// Every body's pose at one frame: [cx, cy, cz, qw, qx, qy, qz] (m; unit quaternion, rest -> world).
+nlohmann::json posesJson(const Solver& solver);
+nlohmann::json runtimeJson(const sketch::Sketch& sk, const RuntimeDriver& runtime);
+// Time per pass: the solver's (per simulated frame) and the renderer's (per written frame).
+nlohmann::json passesJson(const Profile& solver, const Profile* render, int framesWritten);
+
+// Bytes the run will hold per particle in the PBD solver and the sketch, plus the 151^3 grid.
+double memoryEstimateMiB(std::size_t particles);
+
+}  // namespace physketch::app

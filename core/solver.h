@@ -1,0 +1,64 @@
+// The one interface the app drives a solver through (PBD today, MPM next): step,
+// plan, profile, guard, particles, body poses, and the changes sketching after play
+// makes. `runScene` and the RuntimeDriver name no concrete solver; adding a solver
+// is one more implementation of this class and one line in the app's factory.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/guard.h"
+#include "core/particles.h"
+#include "core/profile.h"
+
+namespace physketch {
+
+class Solver {
+ public:
+  virtual ~Solver() = default;
+
+  virtual const char* name() const = 0;
+  // Advances one step of dt. Returns false (and does nothing) once the guard has tripped.
+  virtual bool step() = 0;
+  // The passes one step runs in the current state, in order: exactly what step() runs.
+  virtual std::vector<PlanEntry> plan() const = 0;
+  virtual const Profile& profile() const = 0;
+  virtual const GuardRecord& guard() const = 0;
+  // Check after every pass, not only once per step (physketch run --validate).
+  virtual void setValidate(bool on) = 0;
+
+  virtual const ParticleArrays& particles() const = 0;
+  bool alive(std::int32_t i) const { return !phase::has(particles().phase[static_cast<std::size_t>(i)], phase::kRemoved); }
+  virtual int bodyCount() const = 0;
+  // The particles of a body, ascending ids (empty once all were removed).
+  virtual const std::vector<std::int32_t>& bodyParticles(int body) const = 0;
+  virtual BodyPose pose(int body) const = 0;
+  virtual BodyMode mode(int body) const = 0;
+  // Linear (m/s) and angular (rad/s) velocity of a body's centre of mass.
+  virtual Vec3 velocity(int body) const = 0;
+  virtual Vec3 angularVelocity(int body) const = 0;
+
+  virtual std::int64_t stepCount() const = 0;
+  virtual double dt() const = 0;
+  double time() const { return double(stepCount()) * dt(); }
+  // A hash of the whole state (positions, velocities, poses): equal states, equal hashes.
+  virtual std::uint64_t stateHash() const = 0;
+
+  // --- changes while the simulation runs (sketching after play) -------------
+  // Appends a body made of `particles` (positions at rest, stroke and material set);
+  // returns its index. A kinematic body stays where it is until released.
+  virtual int addBody(const ParticleArrays& particles, const BodyInit& init, bool kinematic) = 0;
+  // Switches a body between dynamic and kinematic. A released body keeps the
+  // velocity of its prescribed motion.
+  virtual void setMode(int body, BodyMode mode) = 0;
+  // Where a kinematic body's centre of mass must be at the end of the next step.
+  virtual void setKinematicTarget(int body, const Vec3& centre) = 0;
+  // Removes particles from the simulation. A body that loses particles is rebuilt
+  // from the rest (mass, centre, inertia), and a body the removal cuts into pieces
+  // (26-connected in its rest lattice) becomes one body per piece: the largest keeps
+  // the index, the others are appended. Returns every body changed or created, ascending.
+  virtual std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) = 0;
+};
+
+}  // namespace physketch
