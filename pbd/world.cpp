@@ -16,6 +16,7 @@ namespace physketch::pbd {
 const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"integrate", Cadence::kPerSubstep, "dynamic bodies: v += g h, gyroscopic w update, c += v h, q += h/2 [w,0] q"},
     {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
+    {"find_contacts", Cadence::kPerSubstep, "per dynamic body near the ground: its particles within a margin of it"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
     {"update", Cadence::kPerSubstep, "velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
@@ -123,6 +124,7 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     for (std::int32_t k = 0; k < br.count; ++k) ids[std::size_t(k)] = br.first + k;
     appendBody(std::move(ids), br.init, br.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic);
   }
+  contacts_.planes.push_back(Plane{Vec3::UnitY(), params_.groundY});
   writeParticles();
 }
 
@@ -138,6 +140,7 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
   dynamicFriction_.push_back(0.0);
   reach_.push_back(0.0);
   mode_.push_back(BodyMode::kDynamic);
+  groundCache_.emplace_back();
   // Rest shape = the particles' current positions; the pose starts at identity.
   Vec3 c = Vec3::Zero();
   double m = 0.0;
@@ -302,6 +305,7 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
   for (int b : changed) {
     const auto bb = static_cast<std::size_t>(b);
     auto& mem = members_[bb];
+    groundCache_[bb].valid = false;
     mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
     if (mem.empty()) {
       refreshMassProperties(bb);
@@ -328,6 +332,7 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
       dynamicFriction_.push_back(0.0);
       reach_.push_back(0.0);
       mode_.push_back(mode);
+      groundCache_.emplace_back();
       recentre(nb);
       refreshMassProperties(nb);
       const Vec3 v = motion_[nb].v, w = motion_[nb].w;
@@ -361,6 +366,7 @@ std::vector<bool> PbdWorld::work() const {
   const bool any = parts_.size() > 0;
   on[int(PbdPass::kIntegrate)] = dynamic;
   on[int(PbdPass::kKinematic)] = kinematic;
+  on[int(PbdPass::kFindContacts)] = dynamic;
   on[int(PbdPass::kRigidContact)] = dynamic;
   on[int(PbdPass::kUpdate)] = dynamic || kinematic;
   on[int(PbdPass::kWriteParticles)] = dynamic || kinematic;
@@ -373,6 +379,7 @@ std::string PbdWorld::reason(PbdPass pass) const {
   const long dyn = count(BodyMode::kDynamic), kin = count(BodyMode::kKinematic);
   switch (pass) {
     case PbdPass::kIntegrate:
+    case PbdPass::kFindContacts:
     case PbdPass::kRigidContact: return std::to_string(dyn) + " dynamic rigid bodies";
     case PbdPass::kKinematic: return std::to_string(kin) + " bodies held or carried by a stroke";
     case PbdPass::kUpdate:
@@ -432,6 +439,8 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (runs(PbdPass::kIntegrate) && !runPass(PbdPass::kIntegrate, s, checkEachPass, [&] { integrate(h); })) return false;
     if (runs(PbdPass::kKinematic) && !runPass(PbdPass::kKinematic, s, checkEachPass, [&] { kinematic(s); }))
       return false;
+    if (runs(PbdPass::kFindContacts) && !runPass(PbdPass::kFindContacts, s, checkEachPass, [&] { findContacts(); }))
+      return false;
     if (runs(PbdPass::kRigidContact) && !runPass(PbdPass::kRigidContact, s, checkEachPass, [&] { rigidContact(); }))
       return false;
     if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
@@ -451,6 +460,7 @@ bool PbdWorld::step() {
     runStep(true);
   } else {
     const std::vector<Motion> start = motion_;  // per body: cheap to keep
+    const std::vector<GroundCache> cacheStart = groundCache_;
     runStep(false);
     if (work()[std::size_t(PbdPass::kGuard)]) {
       GuardRecord r;
@@ -462,6 +472,7 @@ bool PbdWorld::step() {
         // Replay the step from its start with a check after every pass, so the record
         // names the pass that produced the bad value (the step is deterministic).
         motion_ = start;
+        groundCache_ = cacheStart;
         if (runStep(true)) {  // cannot happen for a deterministic step; keep the first record
           r.pass = "guard";
           r.step = steps_;
@@ -484,12 +495,17 @@ bool PbdWorld::step() {
 // themselves), checked against the shared bounds and the ground.
 GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
   GuardRecord r;
-  if (!bodiesOnly) {
-    r = checkParticles(parts_, params_.maxSpeed);
-    if (r.tripped()) return r;
-  }
   const double floorY = params_.groundY + params_.particleRadius;
   const double bound = params_.particleRadius;  // a dynamic particle's centre below the ground plane
+  if (!bodiesOnly) {
+    r = checkParticles(parts_, params_.maxSpeed);
+    if (r.tripped() || !penetration) return r;
+    // Cheap test first (a vectorized minimum over every particle); the scan below finds
+    // the first dynamic offender only when some particle is that deep.
+    float lowest = 3.4e38f;
+    for (float y : parts_.y) lowest = y < lowest ? y : lowest;
+    if (!(double(lowest) < floorY - bound)) return r;
+  }
   const double maxSpeed2 = params_.maxSpeed * params_.maxSpeed;
   for (std::size_t b = 0; b < members_.size(); ++b) {
     const BodyMode m = mode_[b];
@@ -498,9 +514,16 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
     const Mat3 R = mo.q.toRotationMatrix();
     for (std::int32_t i : members_[b]) {
       const auto k = std::size_t(i);
-      const Vec3 r0 = R * Vec3(rx_[k], ry_[k], rz_[k]);
-      const Vec3 p = bodiesOnly ? Vec3(r0 + mo.c) : Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
-      const Vec3 v = bodiesOnly ? Vec3(mo.v + mo.w.cross(r0)) : Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
+      Vec3 p, v;
+      if (bodiesOnly) {
+        const Vec3 r0 = R * Vec3(rx_[k], ry_[k], rz_[k]);
+        p = r0 + mo.c;
+        v = mo.v + mo.w.cross(r0);
+      } else {
+        if (!penetration) continue;  // the particle arrays passed checkParticles already
+        p = Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
+        v = Vec3::Zero();
+      }
       const auto fill = [&](GuardKind kind, double value, double bnd, const char* hint) {
         r.kind = kind;
         r.particle = i;
@@ -573,15 +596,71 @@ void PbdWorld::kinematic(int substep) {
   }
 }
 
-void PbdWorld::rigidContact() {
-  const double floorY = params_.groundY + params_.particleRadius;
-  const Vec3 up = Vec3::UnitY();
+// Candidates for the ground: a body whose bounding sphere is above it has none (falling
+// bodies cost one test here); otherwise its particles within a margin of the plane. The
+// margin covers what the sweeps can bring down: one particle spacing, twice the deepest
+// penetration now (a lift at the patch centroid can tilt the body by about that much at
+// its far end) and the rotation over a substep, plus an allowance of kReuse that lets
+// the next substeps reuse the list while the body has moved (rotation x reach + height
+// change) less than half of it. A particle that still ends below is found by the next
+// full scan.
+void PbdWorld::findContacts() {
+  BodyPlaneContacts& bp = contacts_.bodyPlane;
+  contacts_.clearFound();
+  const double r = params_.particleRadius, h = params_.dt / params_.substeps;
+  const double reuse = 4.0 * r;
+  const Plane& ground = contacts_.planes[0];
+  const double floorY = ground.offset + r;
   forBodies(active_.size(), [&](std::size_t k) {
     const auto b = std::size_t(active_[k]);
+    const Motion& mo = motion_[b];
+    GroundCache& cache = groundCache_[b];
+    if (mo.c.y() - reach_[b] > floorY + 2.0 * r) {
+      cache.valid = false;
+      return;
+    }
+    if (cache.valid) {
+      const double turned = 2.0 * std::acos(std::min(1.0, std::abs(mo.q.dot(cache.q)))) * reach_[b];
+      if (turned + std::abs(mo.c.y() - cache.cy) < 0.5 * reuse) return;
+    }
+    const Mat3 R = mo.q.toRotationMatrix();
+    const auto& mem = members_[b];
+    std::vector<double> ys(mem.size());
+    double lowest = 1e300;
+    for (std::size_t m = 0; m < ys.size(); ++m) {
+      const auto i = std::size_t(mem[m]);
+      ys[m] = R.row(1).dot(Vec3(rx_[i], ry_[i], rz_[i])) + mo.c.y();
+      lowest = std::min(lowest, ys[m]);
+    }
+    const double margin = 2.0 * r + 2.0 * std::max(0.0, floorY - lowest) + mo.w.norm() * reach_[b] * h + reuse;
+    cache.candidates.clear();
+    for (std::size_t m = 0; m < ys.size(); ++m)
+      if (ys[m] < floorY + margin) cache.candidates.push_back(mem[m]);
+    cache.valid = true;
+    cache.q = mo.q;
+    cache.cy = mo.c.y();
+  });
+  for (std::size_t k = 0; k < active_.size(); ++k) {
+    const GroundCache& cache = groundCache_[std::size_t(active_[k])];
+    if (!cache.valid || cache.candidates.empty()) continue;
+    bp.body.push_back(active_[k]);
+    bp.plane.push_back(0);
+    bp.first.push_back(static_cast<std::int32_t>(bp.candidates.size()));
+    bp.count.push_back(static_cast<std::int32_t>(cache.candidates.size()));
+    bp.candidates.insert(bp.candidates.end(), cache.candidates.begin(), cache.candidates.end());
+  }
+}
+
+void PbdWorld::rigidContact() {
+  const BodyPlaneContacts& bp = contacts_.bodyPlane;
+  forBodies(bp.size(), [&](std::size_t c) {
+    const auto b = std::size_t(bp.body[c]);
+    const Plane& plane = contacts_.planes[std::size_t(bp.plane[c])];
+    const double floorY = plane.offset + params_.particleRadius;
+    const Vec3 up = plane.normal;
+    const std::int32_t* cand = bp.candidates.data() + bp.first[c];
+    const std::int32_t ncand = bp.count[c];
     Motion& mo = motion_[b];
-    // Bounding-sphere test: a body whose lowest possible particle is above the
-    // ground skips the sweeps (falling bodies cost nothing here).
-    if (mo.c.y() - reach_[b] > floorY - params_.particleRadius) return;
     RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
     const double mus = staticFriction_[b], muk = dynamicFriction_[b];
     const Mat3 Rprev = mo.qPrev.toRotationMatrix();
@@ -593,16 +672,16 @@ void PbdWorld::rigidContact() {
       const Mat3 R = pose.q.toRotationMatrix();
       double wsum = 0.0, dmax = 0.0;
       Vec3 psum = Vec3::Zero(), ssum = Vec3::Zero();
-      for (std::int32_t i : members_[b]) {
-        const auto j = std::size_t(i);
-        const Vec3 r(rx_[j], ry_[j], rz_[j]);
-        const Vec3 p = R * r + pose.c;
-        const double d = floorY - p.y();  // penetration depth (m)
+      for (std::int32_t m = 0; m < ncand; ++m) {
+        const auto j = std::size_t(cand[m]);
+        const Vec3 rr(rx_[j], ry_[j], rz_[j]);
+        const Vec3 p = R * rr + pose.c;
+        const double d = floorY - up.dot(p);  // penetration depth (m)
         if (d <= 0.0) continue;
         wsum += d;
         dmax = std::max(dmax, d);
         psum += d * p;
-        ssum += d * (p - (Rprev * r + mo.cPrev));  // the point's motion over this substep
+        ssum += d * (p - (Rprev * rr + mo.cPrev));  // the point's motion over this substep
       }
       if (wsum == 0.0) break;
       const Vec3 pc = psum / wsum;  // contact point
@@ -619,7 +698,7 @@ void PbdWorld::rigidContact() {
       // tangential motion of the contact over this substep fully when that takes an
       // impulse within mu_s lambda_n (static), else apply mu_k lambda_n against it.
       Vec3 slide = ssum / wsum + (pcAfter - pc);
-      slide.y() = 0.0;
+      slide -= up.dot(slide) * up;  // tangential part
       const double len = slide.norm();
       if (len > 0.0 && lambdaN > 0.0) {
         const Vec3 t = -slide / len;
@@ -652,19 +731,25 @@ void PbdWorld::writeParticles() {
     // Fixed bodies never move: written once, when the world starts.
     if (mode_[b] == BodyMode::kEmpty || (mode_[b] == BodyMode::kFixed && steps_ > 0)) continue;
     const Motion& mo = motion_[b];
-    const Mat3 R = mo.q.toRotationMatrix();
+    // The particles are the body's float32 image: R r in float loses nothing the float
+    // output keeps (|r| <= reach, relative error 1e-7), and runs as plain SoA loops.
+    const Eigen::Matrix3f R = mo.q.toRotationMatrix().cast<float>();
+    const Eigen::Vector3f w = mo.w.cast<float>(), v = mo.v.cast<float>();
+    const Vec3 c = mo.c;
     const auto& mem = members_[b];
     forRange(mem.size(), [&](std::size_t lo, std::size_t hi) {
       for (std::size_t k = lo; k < hi; ++k) {
         const auto i = std::size_t(mem[k]);
-        const Vec3 r = R * Vec3(rx_[i], ry_[i], rz_[i]);
-        const Vec3 p = r + mo.c, v = mo.v + mo.w.cross(r);
-        parts_.x[i] = static_cast<float>(p.x());
-        parts_.y[i] = static_cast<float>(p.y());
-        parts_.z[i] = static_cast<float>(p.z());
-        parts_.vx[i] = static_cast<float>(v.x());
-        parts_.vy[i] = static_cast<float>(v.y());
-        parts_.vz[i] = static_cast<float>(v.z());
+        const float ax = rx_[i], ay = ry_[i], az = rz_[i];
+        const float r0 = R(0, 0) * ax + R(0, 1) * ay + R(0, 2) * az;
+        const float r1 = R(1, 0) * ax + R(1, 1) * ay + R(1, 2) * az;
+        const float r2 = R(2, 0) * ax + R(2, 1) * ay + R(2, 2) * az;
+        parts_.x[i] = static_cast<float>(c.x() + r0);
+        parts_.y[i] = static_cast<float>(c.y() + r1);
+        parts_.z[i] = static_cast<float>(c.z() + r2);
+        parts_.vx[i] = v.x() + (w.y() * r2 - w.z() * r1);
+        parts_.vy[i] = v.y() + (w.z() * r0 - w.x() * r2);
+        parts_.vz[i] = v.z() + (w.x() * r1 - w.y() * r0);
       }
     });
   }

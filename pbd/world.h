@@ -6,7 +6,8 @@
 //     integrate      dynamic bodies: v += g h; w += h I^-1 (-w x I w) (gyroscopic);
 //                    c += v h; q += h/2 [w, 0] q                (Müller et al. 2020, Alg. 2)
 //     kinematic      bodies held or carried by a move stroke follow their path
-//     rigid_contact  per body near the ground, `iterations` sweeps: one exact rigid
+//     find_contacts  per dynamic body near the ground: its particles within a margin of it
+//     rigid_contact  per body near the ground, `iterations` sweeps over those: one exact rigid
 //                    position correction at the contact patch's depth-weighted
 //                    centroid, then static/dynamic Coulomb friction (Müller 2020 §3.5)
 //     update         v = (c - c_prev) / h; w = 2 vec(q q_prev^-1) / h   (Müller 2020, Alg. 2)
@@ -29,6 +30,7 @@
 #include "core/math.h"
 #include "core/scene.h"
 #include "core/solver.h"
+#include "pbd/contacts.h"
 
 namespace physketch::pbd {
 
@@ -46,7 +48,16 @@ struct PbdParams {
 PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius);
 
 // The passes of one step, in the order they run (the pass table: kPbdPasses[k] describes pass k).
-enum class PbdPass : int { kIntegrate, kKinematic, kRigidContact, kUpdate, kWriteParticles, kGuard, kCount };
+enum class PbdPass : int {
+  kIntegrate,
+  kKinematic,
+  kFindContacts,
+  kRigidContact,
+  kUpdate,
+  kWriteParticles,
+  kGuard,
+  kCount
+};
 extern const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)];
 
 class PbdWorld final : public Solver {
@@ -106,6 +117,7 @@ class PbdWorld final : public Solver {
 
   void integrate(double h);
   void kinematic(int substep);
+  void findContacts();
   void rigidContact();
   void update(double h);
   void writeParticles();
@@ -130,6 +142,16 @@ class PbdWorld final : public Solver {
   std::vector<double> reach_;               // m, max |rest offset| + particle radius
   std::vector<BodyMode> mode_;
   std::vector<std::int32_t> active_;        // dynamic bodies this step
+  ContactSet contacts_;                     // found once per substep
+  // Per body: the ground candidates of the last full scan, reused while the body has
+  // moved less than half the scan's extra margin (a resting body is scanned once).
+  struct GroundCache {
+    bool valid = false;
+    Quat q = Quat::Identity();
+    double cy = 0.0;
+    std::vector<std::int32_t> candidates;
+  };
+  std::vector<GroundCache> groundCache_;
   std::int64_t steps_ = 0;
   bool validate_ = false;
   Profile profile_{kPbdPasses};

@@ -444,7 +444,7 @@ TEST(RigidBody, PlanIsWhatTheStepRuns) {
   const auto plan = w.plan();
   std::vector<std::string> names;
   for (const auto& x : plan) names.push_back(x.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"integrate", "rigid_contact", "update", "write_particles", "guard"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"integrate", "find_contacts", "rigid_contact", "update", "write_particles", "guard"}));
   for (int s = 0; s < 5; ++s) ASSERT_TRUE(w.step());
   // Every planned pass ran perStep times per step, and no other pass ran at all.
   for (int k = 0; k < int(PbdPass::kCount); ++k) {
