@@ -72,7 +72,8 @@ Mat4f projectionMatrix(const Camera& camera, double aspect, double zNear, double
 // Returns false when the point is behind the camera (clip w <= 0).
 bool projectToPixel(const Camera& camera, int width, int height, const Vec3& world, Eigen::Vector2d& pixel);
 
-// GPU memory held by a renderer's meshes (those from uploadMesh, not the ground quad).
+// GL buffer memory held by a renderer's meshes (those from uploadMesh, not the ground quad):
+// on a GPU's memory, or in RAM with llvmpipe.
 struct MeshStats {
   int liveMeshes = 0;         // uploaded and not freed
   std::size_t gpuBytes = 0;   // vertex + index buffer sizes as GL reports them (bytes)
@@ -86,7 +87,7 @@ struct MeshStats {
 //  2. Mesa's surfaceless platform. Mesa picks its driver itself: a GPU's hardware driver when
 //     a DRM render node with a Mesa driver exists, else llvmpipe.
 //  3. any other EGL device, in the order EGL lists them: a hardware GPU (e.g. NVIDIA's EGL
-//     through libglvnd). Images then differ from llvmpipe's in the last bits.
+//     through libglvnd). Its images may differ from llvmpipe's (rasterisation and rounding).
 // Several renderers may exist at once and one after another; each makes its context current
 // on every call. Use a renderer from one thread at a time.
 class OffscreenRenderer {
@@ -98,7 +99,7 @@ class OffscreenRenderer {
   OffscreenRenderer& operator=(const OffscreenRenderer&) = delete;
 
   // Uploads a mesh; returns a handle valid until freeMesh. Handles are never reused, so a
-  // freed handle stays invalid (each costs 16 bytes of CPU memory for the renderer's life:
+  // freed handle stays invalid (each costs about 20 bytes of CPU memory for the renderer's life:
   // re-mesh with updateMesh, not free + upload).
   int uploadMesh(const TriangleMesh& mesh);
   // Replaces the vertex and index buffers of a live handle with `mesh` (any size; the old
