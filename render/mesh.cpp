@@ -3,8 +3,8 @@
 #include <charconv>
 #include <cstdio>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
-#include "render/atomic_file.h"
 
 namespace physketch::render {
 namespace {
@@ -66,7 +66,7 @@ void writeObj(const std::string& path, const TriangleMesh& mesh) {
     text += '\n';
   }
 
-  detail::AtomicFile out(path);
+  AtomicFile out(path);
   if (std::fwrite(text.data(), 1, text.size(), out.file()) != text.size()) out.fail("write failed");
   out.commit();
 }

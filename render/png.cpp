@@ -3,8 +3,8 @@
 #include <csetjmp>
 #include <cstdio>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
-#include "render/atomic_file.h"
 #include "render/renderer.h"
 
 namespace physketch::render {
@@ -68,7 +68,7 @@ void writePng(const std::string& path, const Image& image) {
     throw RuntimeError(path + ": invalid image " + std::to_string(image.width) + "x" +
                        std::to_string(image.height) + " with " + std::to_string(image.rgba.size()) + " bytes");
   }
-  detail::AtomicFile out(path);
+  AtomicFile out(path);
   PngErrorText err;
   if (!encode(out.file(), image, &err)) out.fail(std::string("PNG encoding failed: ") + err.text);
   out.commit();

@@ -11,8 +11,11 @@
 
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <cstring>
+#include <limits>
 #include <string>
+#include <utility>
 
 #include "core/error.h"
 #include "render/renderer.h"
@@ -105,15 +108,31 @@ EGLDisplay tryInitialize(EGLDisplay d, const std::string& label, std::string& lo
   return d;
 }
 
-// Order of preference:
+struct AcquiredDisplay {
+  EGLDisplay display = EGL_NO_DISPLAY;
+  std::string description;  // which platform or device, for OffscreenRenderer::deviceDescription
+};
+
+// Describes a non-software EGL device: its DRM device file when it has one (EGL_EXT_device_drm).
+std::string describeHardwareDevice(EGLDeviceEXT device, PFNEGLQUERYDEVICESTRINGEXTPROC queryDeviceString) {
+  const char* ext = queryDeviceString(device, EGL_EXTENSIONS);
+  if (hasExtension(ext, "EGL_EXT_device_drm")) {
+    if (const char* file = queryDeviceString(device, EGL_DRM_DEVICE_FILE_EXT)) return std::string("hardware, ") + file;
+  }
+  return "hardware";
+}
+
+// Order of preference (documented at OffscreenRenderer in renderer.h):
 //  1. an EGL device advertising EGL_MESA_device_software (llvmpipe). On a machine with a GPU the
 //     surfaceless platform may pick the GPU, whose rasteriser gives different pixels; the
 //     software device keeps images identical on every machine with the same Mesa.
-//  2. Mesa's surfaceless platform (on the project's machines this is the same llvmpipe).
-//  3. any other EGL device.
+//  2. Mesa's surfaceless platform: Mesa loads the hardware driver of a DRM render node when one
+//     exists and has a Mesa driver, else llvmpipe (on the project's machines: llvmpipe, no
+//     render node).
+//  3. any other EGL device, in enumeration order: a GPU (e.g. NVIDIA's EGL via libglvnd).
 // Plain eglGetDisplay(EGL_DEFAULT_DISPLAY) is not tried: without a display server it fails
 // unless EGL_PLATFORM=surfaceless is set in the environment.
-EGLDisplay acquireDisplay() {
+AcquiredDisplay acquireDisplay() {
   std::string log;
   const char* clientExt = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
   auto getPlatformDisplay =
@@ -124,6 +143,7 @@ EGLDisplay acquireDisplay() {
   }
 
   std::vector<EGLDeviceEXT> software, others;
+  std::vector<EGLint> softwareIndex, othersIndex;  // position in EGL's device list, for the description
   auto queryDevices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
   auto queryDeviceString =
       reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
@@ -133,7 +153,9 @@ EGLDisplay acquireDisplay() {
     if (queryDevices(16, devices, &count)) {
       for (EGLint i = 0; i < count; ++i) {
         const char* ext = queryDeviceString(devices[i], EGL_EXTENSIONS);
-        (hasExtension(ext, "EGL_MESA_device_software") ? software : others).push_back(devices[i]);
+        const bool isSoftware = hasExtension(ext, "EGL_MESA_device_software");
+        (isSoftware ? software : others).push_back(devices[i]);
+        (isSoftware ? softwareIndex : othersIndex).push_back(i);
       }
     } else {
       log += "; eglQueryDevicesEXT failed (" + hex(eglGetError()) + ")";
@@ -143,21 +165,22 @@ EGLDisplay acquireDisplay() {
   }
 
   for (std::size_t i = 0; i < software.size(); ++i) {
-    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, software[i], nullptr),
-                                 "software device " + std::to_string(i), log);
-    if (d != EGL_NO_DISPLAY) return d;
+    const std::string label = "EGL device " + std::to_string(softwareIndex[i]);
+    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, software[i], nullptr), label, log);
+    if (d != EGL_NO_DISPLAY) return {d, label + " (EGL_MESA_device_software)"};
   }
   if (hasExtension(clientExt, "EGL_MESA_platform_surfaceless")) {
+    const std::string label = "EGL Mesa surfaceless platform";
     EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr),
-                                 "surfaceless platform", log);
-    if (d != EGL_NO_DISPLAY) return d;
+                                 label, log);
+    if (d != EGL_NO_DISPLAY) return {d, label + " (no software device found; Mesa chose the driver)"};
   } else {
     log += "; no EGL_MESA_platform_surfaceless";
   }
   for (std::size_t i = 0; i < others.size(); ++i) {
-    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, others[i], nullptr),
-                                 "device " + std::to_string(i), log);
-    if (d != EGL_NO_DISPLAY) return d;
+    const std::string label = "EGL device " + std::to_string(othersIndex[i]);
+    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, others[i], nullptr), label, log);
+    if (d != EGL_NO_DISPLAY) return {d, label + " (" + describeHardwareDevice(others[i], queryDeviceString) + ")"};
   }
   throw RuntimeError("EGL: no usable display" + log);
 }
@@ -229,7 +252,34 @@ GLuint compileShader(GLenum type, const char* source) {
 struct GpuMesh {
   GLuint vao = 0, vbo = 0, ebo = 0;
   GLsizei indexCount = 0;
+  bool live = false;  // false once freed (names are then 0)
 };
+
+// Mesh checks shared by upload and update: throws before any GL object is touched.
+void validateMesh(const TriangleMesh& mesh, const char* who) {
+  const std::size_t n = mesh.positions.size();
+  if (mesh.normals.size() != n) {
+    throw RuntimeError(std::string(who) + ": " + std::to_string(mesh.normals.size()) + " normals for " +
+                       std::to_string(n) + " positions");
+  }
+  if (mesh.indices.size() % 3 != 0) throw RuntimeError(std::string(who) + ": index count is not a multiple of 3");
+  for (std::uint32_t i : mesh.indices) {
+    if (i >= n) throw RuntimeError(std::string(who) + ": index " + std::to_string(i) + " out of range");
+  }
+}
+
+// Interleaved position + normal, 6 floats per vertex.
+std::vector<float> interleave(const TriangleMesh& mesh) {
+  const std::size_t n = mesh.positions.size();
+  std::vector<float> vertices(6 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      vertices[6 * i + c] = mesh.positions[i][c];
+      vertices[6 * i + 3 + c] = mesh.normals[i][c];
+    }
+  }
+  return vertices;
+}
 
 }  // namespace
 
@@ -242,13 +292,42 @@ Mat4f projectionMatrix(const Camera& camera, double aspect, double zNear, double
 bool projectToPixel(const Camera& camera, int width, int height, const Vec3& world, Eigen::Vector2d& pixel) {
   if (width <= 0 || height <= 0) throw RuntimeError("projectToPixel: image size must be positive");
   // Near and far only change clip z, never x, y or w, so any valid pair gives the same pixel.
-  const Eigen::Vector4d clip = projectionMatrixD(camera, double(width) / double(height), kNearPlane, kFarPlane) *
+  const ClipRange anyValid;
+  const Eigen::Vector4d clip = projectionMatrixD(camera, double(width) / double(height), anyValid.zNear,
+                                                 anyValid.zFar) *
                                (viewMatrixD(camera) * world.homogeneous());
   if (!(clip.w() > 0.0)) return false;  // on or behind the camera plane
   const double ndcX = clip.x() / clip.w(), ndcY = clip.y() / clip.w();
   pixel.x() = (ndcX * 0.5 + 0.5) * width;
   pixel.y() = (1.0 - (ndcY * 0.5 + 0.5)) * height;  // row 0 is the top of the image
   return true;
+}
+
+ClipRange clipRangeFor(const Camera& camera, const Eigen::AlignedBox3d& drawable) {
+  if (drawable.isEmpty() || !drawable.min().allFinite() || !drawable.max().allFinite()) {
+    throw RuntimeError("clipRangeFor: the drawable box must be non-empty and finite");
+  }
+  // Eye depth of a point = -z in eye space (the camera looks down -z); the view matrix also
+  // rejects a degenerate camera.
+  const Eigen::Matrix4d view = viewMatrixD(camera);
+  double dMin = std::numeric_limits<double>::infinity(), dMax = -dMin;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 corner = drawable.corner(static_cast<Eigen::AlignedBox3d::CornerType>(c));
+    const double depth = -view.row(2).dot(corner.homogeneous());
+    dMin = std::min(dMin, depth);
+    dMax = std::max(dMax, depth);
+  }
+  if (!(dMax > 0.0)) {
+    // All behind the camera: nothing can be seen. A range on the scene's scale keeps the
+    // projection well conditioned.
+    const double far = std::max((drawable.center() - camera.eye).norm() + drawable.diagonal().norm(), 1e-3);
+    return {far / kMaxDepthRatio, far};
+  }
+  ClipRange r;
+  r.zFar = dMax * (1.0 + kClipMargin);
+  // dMin <= 0 (the camera inside the box or beside it) leaves only the precision bound.
+  r.zNear = std::max(dMin / (1.0 + kClipMargin), r.zFar / kMaxDepthRatio);
+  return r;
 }
 
 struct OffscreenRenderer::Impl {
@@ -258,8 +337,13 @@ struct OffscreenRenderer::Impl {
   GLuint fbo = 0, colorRb = 0, depthRb = 0, program = 0;
   GLint uModel = -1, uNormalMatrix = -1, uView = -1, uProj = -1, uColor = -1, uEye = -1, uLightDir = -1,
         uCheckerCell = -1, uInvGamma = -1;
-  std::vector<GpuMesh> meshes;
+  std::vector<GpuMesh> meshes;  // indexed by handle; freed slots stay (handles are never reused)
   GpuMesh ground;  // unit square [-1, 1]^2 in x/z at y = 0, normal +y
+  // One GL_SAMPLES_PASSED query per drawMesh call of the current frame, read in endFrame
+  // (reading each right after its draw would wait for the rasteriser every time).
+  std::vector<GLuint> queries;
+  std::size_t queriesUsed = 0;
+  std::string description;  // deviceDescription()
   bool inFrame = false;
 
   Impl(int w, int h) : width(w), height(h) {}
@@ -270,7 +354,10 @@ struct OffscreenRenderer::Impl {
   void createProgram();
   void makeCurrent() const;
   GpuMesh upload(const TriangleMesh& mesh) const;
-  void draw(const GpuMesh& m, const Mat4f& model, const Color& color, float checkerCell) const;
+  void fill(GpuMesh& g, const TriangleMesh& mesh) const;
+  GpuMesh& liveMesh(int handle, const char* who);
+  void draw(const GpuMesh& m, const Mat4f& model, const Color& color, float checkerCell, bool countSamples);
+  std::uint64_t collectMeshSamples() const;
   void destroy();
   void checkGl(const char* where) const {
     const GLenum e = glGetError();
@@ -279,7 +366,9 @@ struct OffscreenRenderer::Impl {
 };
 
 void OffscreenRenderer::Impl::createContext() {
-  display = acquireDisplay();
+  AcquiredDisplay acquired = acquireDisplay();
+  display = acquired.display;
+  description = std::move(acquired.description);
   if (!eglBindAPI(EGL_OPENGL_API)) throw RuntimeError("EGL: desktop OpenGL API unavailable (" + hex(eglGetError()) + ")");
 
   // Only an FBO is rendered to, so the config's surface type is irrelevant, but the default
@@ -315,6 +404,8 @@ void OffscreenRenderer::Impl::createContext() {
   if (!eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
     throw RuntimeError("EGL: eglMakeCurrent without a surface failed (" + hex(eglGetError()) + ")");
   }
+  const GLubyte* renderer = glGetString(GL_RENDERER);
+  description += " | GL_RENDERER " + std::string(renderer ? reinterpret_cast<const char*>(renderer) : "(unknown)");
 }
 
 void OffscreenRenderer::Impl::makeCurrent() const {
@@ -385,47 +476,58 @@ void OffscreenRenderer::Impl::createProgram() {
 }
 
 GpuMesh OffscreenRenderer::Impl::upload(const TriangleMesh& mesh) const {
-  const std::size_t n = mesh.positions.size();
-  if (mesh.normals.size() != n) {
-    throw RuntimeError("uploadMesh: " + std::to_string(mesh.normals.size()) + " normals for " + std::to_string(n) +
-                       " positions");
-  }
-  if (mesh.indices.size() % 3 != 0) throw RuntimeError("uploadMesh: index count is not a multiple of 3");
-  for (std::uint32_t i : mesh.indices) {
-    if (i >= n) throw RuntimeError("uploadMesh: index " + std::to_string(i) + " out of range");
-  }
-  // Interleaved position + normal, 6 floats per vertex.
-  std::vector<float> vertices(6 * n);
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int c = 0; c < 3; ++c) {
-      vertices[6 * i + c] = mesh.positions[i][c];
-      vertices[6 * i + 3 + c] = mesh.normals[i][c];
-    }
-  }
+  validateMesh(mesh, "uploadMesh");
   GpuMesh g;
-  g.indexCount = static_cast<GLsizei>(mesh.indices.size());
   glGenVertexArrays(1, &g.vao);
-  glBindVertexArray(g.vao);
   glGenBuffers(1, &g.vbo);
-  glBindBuffer(GL_ARRAY_BUFFER, g.vbo);
-  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(float)), vertices.data(),
-               GL_STATIC_DRAW);
   glGenBuffers(1, &g.ebo);
-  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.ebo);
-  glBufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.indices.size() * sizeof(std::uint32_t)),
-               mesh.indices.data(), GL_STATIC_DRAW);
+  g.live = true;
+  glBindVertexArray(g.vao);
+  glBindBuffer(GL_ARRAY_BUFFER, g.vbo);
+  glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.ebo);  // recorded in the vertex array
   const GLsizei stride = 6 * sizeof(float);
   glEnableVertexAttribArray(0);
   glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride, nullptr);
   glEnableVertexAttribArray(1);
   glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride, reinterpret_cast<const void*>(3 * sizeof(float)));
   glBindVertexArray(0);
-  checkGl("uploadMesh");
+  try {
+    fill(g, mesh);
+  } catch (...) {  // e.g. GL_OUT_OF_MEMORY: do not leak the names
+    glDeleteBuffers(1, &g.vbo);
+    glDeleteBuffers(1, &g.ebo);
+    glDeleteVertexArrays(1, &g.vao);
+    throw;
+  }
   return g;
 }
 
-void OffscreenRenderer::Impl::draw(const GpuMesh& m, const Mat4f& model, const Color& color,
-                                   float checkerCell) const {
+// (Re)allocates the buffers' storage with the mesh's data: glBufferData releases the old
+// storage, and the vertex array keeps pointing at the same buffer names.
+void OffscreenRenderer::Impl::fill(GpuMesh& g, const TriangleMesh& mesh) const {
+  const std::vector<float> vertices = interleave(mesh);
+  glBindVertexArray(g.vao);
+  glBindBuffer(GL_ARRAY_BUFFER, g.vbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(vertices.size() * sizeof(float)), vertices.data(),
+               GL_STATIC_DRAW);
+  glBufferData(GL_ELEMENT_ARRAY_BUFFER, static_cast<GLsizeiptr>(mesh.indices.size() * sizeof(std::uint32_t)),
+               mesh.indices.data(), GL_STATIC_DRAW);
+  glBindVertexArray(0);
+  g.indexCount = static_cast<GLsizei>(mesh.indices.size());
+  checkGl("mesh upload");
+}
+
+GpuMesh& OffscreenRenderer::Impl::liveMesh(int handle, const char* who) {
+  if (handle < 0 || handle >= static_cast<int>(meshes.size())) {
+    throw RuntimeError(std::string(who) + ": invalid mesh handle " + std::to_string(handle));
+  }
+  GpuMesh& m = meshes[static_cast<std::size_t>(handle)];
+  if (!m.live) throw RuntimeError(std::string(who) + ": mesh handle " + std::to_string(handle) + " was freed");
+  return m;
+}
+
+void OffscreenRenderer::Impl::draw(const GpuMesh& m, const Mat4f& model, const Color& color, float checkerCell,
+                                   bool countSamples) {
   if (!model.allFinite()) throw RuntimeError("draw: model matrix is not finite");
   const Eigen::Matrix3f linear = model.topLeftCorner<3, 3>();
   if (!(std::abs(linear.determinant()) > 0.0f)) throw RuntimeError("draw: model matrix is singular");
@@ -435,9 +537,28 @@ void OffscreenRenderer::Impl::draw(const GpuMesh& m, const Mat4f& model, const C
   glUniform3f(uColor, color[0], color[1], color[2]);
   glUniform1f(uCheckerCell, checkerCell);
   if (m.indexCount == 0) return;
+  if (countSamples) {
+    if (queriesUsed == queries.size()) {
+      queries.push_back(0);
+      glGenQueries(1, &queries.back());
+    }
+    glBeginQuery(GL_SAMPLES_PASSED, queries[queriesUsed++]);
+  }
   glBindVertexArray(m.vao);
   glDrawElements(GL_TRIANGLES, m.indexCount, GL_UNSIGNED_INT, nullptr);
   glBindVertexArray(0);
+  if (countSamples) glEndQuery(GL_SAMPLES_PASSED);
+}
+
+std::uint64_t OffscreenRenderer::Impl::collectMeshSamples() const {
+  std::uint64_t total = 0;
+  for (std::size_t i = 0; i < queriesUsed; ++i) {
+    GLuint64 samples = 0;
+    glGetQueryObjectui64v(queries[i], GL_QUERY_RESULT, &samples);  // waits for the draw
+    total += samples;
+  }
+  checkGl("endFrame (occlusion queries)");
+  return total;
 }
 
 void OffscreenRenderer::Impl::destroy() {
@@ -452,6 +573,7 @@ void OffscreenRenderer::Impl::destroy() {
       };
       for (GpuMesh& m : meshes) freeMesh(m);
       freeMesh(ground);
+      if (!queries.empty()) glDeleteQueries(static_cast<GLsizei>(queries.size()), queries.data());
       glDeleteProgram(program);
       glDeleteRenderbuffers(1, &colorRb);
       glDeleteRenderbuffers(1, &depthRb);
@@ -487,17 +609,64 @@ OffscreenRenderer::~OffscreenRenderer() = default;
 int OffscreenRenderer::width() const { return impl_->width; }
 int OffscreenRenderer::height() const { return impl_->height; }
 
+const std::string& OffscreenRenderer::deviceDescription() const { return impl_->description; }
+
 int OffscreenRenderer::uploadMesh(const TriangleMesh& mesh) {
-  impl_->makeCurrent();
-  impl_->meshes.push_back(impl_->upload(mesh));
-  return static_cast<int>(impl_->meshes.size()) - 1;
+  Impl& r = *impl_;
+  if (r.meshes.size() >= static_cast<std::size_t>(std::numeric_limits<int>::max())) {
+    throw RuntimeError("uploadMesh: out of mesh handles");
+  }
+  r.makeCurrent();
+  r.meshes.push_back(r.upload(mesh));
+  return static_cast<int>(r.meshes.size()) - 1;
 }
 
-void OffscreenRenderer::beginFrame(const Camera& camera, const Color& background) {
+void OffscreenRenderer::updateMesh(int handle, const TriangleMesh& mesh) {
+  Impl& r = *impl_;
+  GpuMesh& g = r.liveMesh(handle, "updateMesh");
+  validateMesh(mesh, "updateMesh");
+  r.makeCurrent();
+  r.fill(g, mesh);
+}
+
+void OffscreenRenderer::freeMesh(int handle) {
+  Impl& r = *impl_;
+  GpuMesh& g = r.liveMesh(handle, "freeMesh");
+  r.makeCurrent();
+  glDeleteBuffers(1, &g.vbo);
+  glDeleteBuffers(1, &g.ebo);
+  glDeleteVertexArrays(1, &g.vao);
+  g = GpuMesh{};  // names 0, not live
+  r.checkGl("freeMesh");
+}
+
+MeshStats OffscreenRenderer::meshStats() const {
+  const Impl& r = *impl_;
+  r.makeCurrent();
+  MeshStats stats;
+  // Sizes as the driver reports them, not as this class remembers them. GL_COPY_READ_BUFFER
+  // is a binding point that no draw state depends on.
+  auto bufferBytes = [](GLuint buffer) {
+    GLint64 size = 0;
+    glBindBuffer(GL_COPY_READ_BUFFER, buffer);
+    glGetBufferParameteri64v(GL_COPY_READ_BUFFER, GL_BUFFER_SIZE, &size);
+    return static_cast<std::size_t>(size);
+  };
+  for (const GpuMesh& g : r.meshes) {
+    if (!g.live) continue;
+    ++stats.liveMeshes;
+    stats.gpuBytes += bufferBytes(g.vbo) + bufferBytes(g.ebo);
+  }
+  glBindBuffer(GL_COPY_READ_BUFFER, 0);
+  r.checkGl("meshStats");
+  return stats;
+}
+
+void OffscreenRenderer::beginFrame(const Camera& camera, const Color& background, const ClipRange& clip) {
   Impl& r = *impl_;
   r.makeCurrent();
   const Mat4f view = viewMatrix(camera);
-  const Mat4f proj = projectionMatrix(camera, double(r.width) / double(r.height), kNearPlane, kFarPlane);
+  const Mat4f proj = projectionMatrix(camera, double(r.width) / double(r.height), clip.zNear, clip.zFar);
   glBindFramebuffer(GL_FRAMEBUFFER, r.fbo);
   glViewport(0, 0, r.width, r.height);
   // The background is linear like every other colour: encode it as the shader encodes fragments.
@@ -521,6 +690,7 @@ void OffscreenRenderer::beginFrame(const Camera& camera, const Color& background
   glUniform3f(r.uLightDir, light.x(), light.y(), light.z());
   glUniform1f(r.uInvGamma, 1.0f / kGamma);
   r.checkGl("beginFrame");
+  r.queriesUsed = 0;
   r.inFrame = true;
 }
 
@@ -542,18 +712,16 @@ void OffscreenRenderer::drawGround(double y, double cx, double cz, double halfEx
   // test instead of z-fighting.
   glEnable(GL_POLYGON_OFFSET_FILL);
   glPolygonOffset(1.0f, 1.0f);
-  r.draw(r.ground, model, color, static_cast<float>(halfExtent / 8.0));  // 16 x 16 checker cells
+  r.draw(r.ground, model, color, static_cast<float>(halfExtent / 8.0), false);  // 16 x 16 checker cells
   glDisable(GL_POLYGON_OFFSET_FILL);
 }
 
 void OffscreenRenderer::drawMesh(int handle, const Mat4f& model, const Color& color) {
   Impl& r = *impl_;
   if (!r.inFrame) throw RuntimeError("drawMesh called outside beginFrame/endFrame");
-  if (handle < 0 || handle >= static_cast<int>(r.meshes.size())) {
-    throw RuntimeError("drawMesh: invalid mesh handle " + std::to_string(handle));
-  }
+  const GpuMesh& m = r.liveMesh(handle, "drawMesh");
   r.makeCurrent();
-  r.draw(r.meshes[static_cast<std::size_t>(handle)], model, color, 0.0f);
+  r.draw(m, model, color, 0.0f, true);
 }
 
 Image OffscreenRenderer::endFrame() {
@@ -565,6 +733,7 @@ Image OffscreenRenderer::endFrame() {
   Image image;
   image.width = r.width;
   image.height = r.height;
+  image.meshSamples = r.collectMeshSamples();
   const std::size_t stride = static_cast<std::size_t>(r.width) * 4;
   std::vector<std::uint8_t> bottomUp(stride * static_cast<std::size_t>(r.height));
   glBindFramebuffer(GL_READ_FRAMEBUFFER, r.fbo);

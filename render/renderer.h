@@ -1,8 +1,10 @@
-// Off-screen OpenGL renderer on EGL (Mesa surfaceless platform: no display, no GPU).
-// GL 3.3 core, an FBO with RGBA8 colour and 24-bit depth, Blinn-Phong lighting.
+// Off-screen OpenGL renderer on EGL (no window system): which EGL display is used is
+// described at OffscreenRenderer below. GL 3.3 core, an FBO with RGBA8 colour and 24-bit depth,
+// Blinn-Phong lighting.
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -19,13 +21,46 @@ using Color = std::array<float, 3>;  // linear RGB in [0, 1]
 struct Image {
   int width = 0, height = 0;
   std::vector<std::uint8_t> rgba;  // width*height*4 bytes, row 0 is the TOP row
+  // Fragments of this frame's drawMesh calls that passed the depth test (an occlusion query,
+  // GL_SAMPLES_PASSED; no multisampling, so one sample per pixel per draw, overdraw counted;
+  // drawGround is not counted). 0 means no mesh pixel landed in the image: every mesh was
+  // outside the view, clipped by the near/far planes, or hidden behind what was drawn before
+  // it (e.g. under the ground). It is not the number of visible pixels: a mesh hidden only by
+  // something drawn after it still counts.
+  std::uint64_t meshSamples = 0;
 };
 
-// Clip planes the renderer uses (m). Scenes are metre-sized, so 1e4:1 keeps 24-bit depth
-// precision far below a millimetre at the camera distances used; geometry outside
-// [kNearPlane, kFarPlane] from the eye is clipped.
-constexpr double kNearPlane = 0.01;
-constexpr double kFarPlane = 100.0;
+// Distances from the eye along the viewing direction (m) between which geometry is drawn;
+// everything nearer than zNear or farther than zFar is clipped. Need 0 < zNear < zFar.
+// The default is the fixed range used before ranges were derived from the scene: right only
+// for metre-sized scenes seen from a few metres. Pass clipRangeFor(...) instead.
+struct ClipRange {
+  double zNear = 0.01;
+  double zFar = 100.0;
+};
+
+// Largest zFar / zNear clipRangeFor returns. The depth buffer has 24 bits and stores
+// z_w = (f / (f - n)) (1 - n / d) for eye depth d, so one depth step at depth d is about
+// d^2 / (n 2^24): at the far plane, f (f / n) / 2^24. With f / n <= 1e4 that is 0.06% of the
+// far distance, well below a voxel (a workspace of edge W has voxels of W / 151 = 0.66% W,
+// and far is at most a few W when the camera is inside or next to the scene), so touching
+// bodies do not z-fight. 1e5 would give 0.6%, about a voxel. The price: when the camera is
+// inside the scene, geometry nearer than far / 1e4 (1.5 cm at 150 m) is clipped.
+constexpr double kMaxDepthRatio = 1e4;
+// Relative margin around the box's depth range: the planes sit 1% outside the nearest and
+// farthest corner, so float rounding in the projection (relative 1e-7) and the ground's
+// polygon offset never push drawn geometry past a plane, and zFar / zNear >= 1.02 even for
+// a box of zero depth (a float projection of a thinner range loses z to cancellation).
+constexpr double kClipMargin = 0.01;
+
+// The clip range for one frame: the tightest range (within kClipMargin) that holds every
+// point of `drawable` in front of the camera, with zNear as large as possible for depth
+// precision but no smaller than zFar / kMaxDepthRatio. `drawable` is an axis-aligned box
+// around everything drawn this frame (workspace, ground patch, bodies that left the
+// workspace), in world coordinates (m). The depth of a point is linear, so the box's 8 corners
+// bound it. When the whole box is behind the camera nothing can be seen and any valid range
+// is returned. Throws RuntimeError on an empty or non-finite box or a degenerate camera.
+ClipRange clipRangeFor(const Camera& camera, const Eigen::AlignedBox3d& drawable);
 
 // Camera matrices (right-handed, OpenGL clip conventions): viewMatrix is gluLookAt(eye, target,
 // up), projectionMatrix is gluPerspective(fovYDeg, aspect, zNear, zFar). Both throw RuntimeError
@@ -37,8 +72,22 @@ Mat4f projectionMatrix(const Camera& camera, double aspect, double zNear, double
 // Returns false when the point is behind the camera (clip w <= 0).
 bool projectToPixel(const Camera& camera, int width, int height, const Vec3& world, Eigen::Vector2d& pixel);
 
-// One EGL context per renderer, rendering into its own framebuffer; the GPU is never used
-// (llvmpipe is chosen first, so images are bit-identical wherever the Mesa version is the same).
+// GL buffer memory held by a renderer's meshes (those from uploadMesh, not the ground quad):
+// on a GPU's memory, or in RAM with llvmpipe.
+struct MeshStats {
+  int liveMeshes = 0;         // uploaded and not freed
+  std::size_t gpuBytes = 0;   // vertex + index buffer sizes as GL reports them (bytes)
+};
+
+// One EGL context per renderer, rendering into its own framebuffer. The EGL display is the
+// first of these that initialises (deviceDescription() says which one was taken):
+//  1. an EGL device whose extensions contain EGL_MESA_device_software: Mesa's llvmpipe, a CPU
+//     rasteriser. Preferred so images are bit-identical wherever the Mesa version is the
+//     same; on the project's machines this is the one used.
+//  2. Mesa's surfaceless platform. Mesa picks its driver itself: a GPU's hardware driver when
+//     a DRM render node with a Mesa driver exists, else llvmpipe.
+//  3. any other EGL device, in the order EGL lists them: a hardware GPU (e.g. NVIDIA's EGL
+//     through libglvnd). Its images may differ from llvmpipe's (rasterisation and rounding).
 // Several renderers may exist at once and one after another; each makes its context current
 // on every call. Use a renderer from one thread at a time.
 class OffscreenRenderer {
@@ -49,10 +98,26 @@ class OffscreenRenderer {
   OffscreenRenderer(const OffscreenRenderer&) = delete;
   OffscreenRenderer& operator=(const OffscreenRenderer&) = delete;
 
-  // Uploads a mesh once; returns a handle valid for the renderer's lifetime.
+  // Uploads a mesh; returns a handle valid until freeMesh. Handles are never reused, so a
+  // freed handle stays invalid (each costs about 20 bytes of CPU memory for the renderer's life:
+  // re-mesh with updateMesh, not free + upload).
   int uploadMesh(const TriangleMesh& mesh);
+  // Replaces the vertex and index buffers of a live handle with `mesh` (any size; the old
+  // storage is released). For surfaces re-meshed every frame. Throws RuntimeError for an
+  // invalid or freed handle, or an invalid mesh (then the handle keeps its old mesh).
+  void updateMesh(int handle, const TriangleMesh& mesh);
+  // Releases the handle's GL buffers and vertex array. The handle becomes invalid: drawMesh,
+  // updateMesh and freeMesh with it throw RuntimeError.
+  void freeMesh(int handle);
+  MeshStats meshStats() const;
 
-  void beginFrame(const Camera& camera, const Color& background);
+  // "EGL <platform or device, which one> | GL_RENDERER <string>", e.g. "EGL device 0
+  // (EGL_MESA_device_software) | GL_RENDERER llvmpipe (LLVM 15.0.6, 256 bits)", for
+  // report.json and --help.
+  const std::string& deviceDescription() const;
+
+  // Clears colour and depth and sets the camera. `clip`: see ClipRange and clipRangeFor.
+  void beginFrame(const Camera& camera, const Color& background, const ClipRange& clip = ClipRange{});
   // A square ground plane at height y, centred under (cx, cz), half extent in metres, normal +y;
   // a 16 x 16 checkerboard whose dark cells are 80% of `color`. Drawn with a small depth
   // offset so bodies resting on it at the same height are not hidden by it.
@@ -62,7 +127,7 @@ class OffscreenRenderer {
   // rest-pose centre of mass c0, with current rotation R and centre c: model = [R | c - R*c0].
   // Lighting: one directional light from above plus ambient, Blinn-Phong, gamma 2.2.
   void drawMesh(int handle, const Mat4f& model, const Color& color);
-  // Finishes the frame and reads it back (top row first).
+  // Finishes the frame and reads it back (top row first), with Image::meshSamples.
   Image endFrame();
 
   int width() const;

@@ -1,4 +1,4 @@
-// meshVoxels: the one translation unit that includes OpenVDB (its headers cost ~3 s to parse;
+// meshVoxels and meshParticles: the one translation unit that includes OpenVDB (its headers cost ~3 s to parse;
 // stack.md §7). It uses only tools that libopenvdb instantiates explicitly (topologyToLevelSet,
 // volumeToMesh), so this TU compiles in seconds and runs at full speed even in Debug builds.
 #include <openvdb/openvdb.h>
@@ -22,8 +22,8 @@ void initializeOpenVdbOnce() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
-void checkOptions(double voxelSize, const Vec3& origin, const VoxelMeshOptions& o) {
-  auto fail = [](const std::string& what) { throw RuntimeError("meshVoxels: " + what); };
+void checkOptions(const char* who, double voxelSize, const Vec3& origin, const VoxelMeshOptions& o) {
+  auto fail = [who](const std::string& what) { throw RuntimeError(std::string(who) + ": " + what); };
   if (!(voxelSize > 0.0) || !std::isfinite(voxelSize)) fail("voxel size must be finite and > 0 m");
   if (!origin.allFinite()) fail("origin must be finite");
   if (o.halfWidth < 1) fail("halfWidth must be >= 1 voxel");
@@ -89,23 +89,23 @@ TriangleMesh assemble(const std::vector<openvdb::Vec3s>& points, const std::vect
   return mesh;
 }
 
-}  // namespace
-
-TriangleMesh meshVoxels(const std::vector<Vec3i>& voxels, double voxelSize, const Vec3& origin,
-                        const VoxelMeshOptions& options) {
-  checkOptions(voxelSize, origin, options);
-  if (voxels.empty()) return {};
+// The shared pipeline: cells (i,j,k) with centres origin + h*(i,j,k) -> closed mesh.
+// Options are checked by the caller.
+TriangleMesh meshCells(const std::vector<openvdb::Coord>& cells, double voxelSize, const Vec3& origin,
+                       const VoxelMeshOptions& options) {
+  if (cells.empty()) return {};
   initializeOpenVdbOnce();
 
-  // Index space = the sketch lattice: OpenVDB puts voxel (i,j,k)'s centre at index (i,j,k),
+  // Index space = the lattice: OpenVDB puts voxel (i,j,k)'s centre at index (i,j,k),
   // so world = origin + h*(i,j,k) is a uniform scale followed by a translation.
   openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
   openvdb::math::Transform::Ptr xform = openvdb::math::Transform::createLinearTransform(voxelSize);
   xform->postTranslate(openvdb::Vec3d(origin.x(), origin.y(), origin.z()));
   grid->setTransform(xform);
   {
+    // Serial: the grid's topology is the set of cells, whatever their order or repeats.
     openvdb::BoolGrid::Accessor acc = grid->getAccessor();
-    for (const Vec3i& v : voxels) acc.setValueOn(openvdb::Coord(v.x(), v.y(), v.z()), true);
+    for (const openvdb::Coord& c : cells) acc.setValueOn(c, true);
   }
 
   // The level set's zero crossing lies on the boundary between active and inactive voxels,
@@ -118,6 +118,39 @@ TriangleMesh meshVoxels(const std::vector<Vec3i>& voxels, double voxelSize, cons
   std::vector<openvdb::Vec4I> quads;
   openvdb::tools::volumeToMesh(*sdf, points, triangles, quads, /*isovalue=*/0.0, options.adaptivity);
   return assemble(points, triangles, quads);
+}
+
+}  // namespace
+
+TriangleMesh meshVoxels(const std::vector<Vec3i>& voxels, double voxelSize, const Vec3& origin,
+                        const VoxelMeshOptions& options) {
+  checkOptions("meshVoxels", voxelSize, origin, options);
+  std::vector<openvdb::Coord> cells;
+  cells.reserve(voxels.size());
+  for (const Vec3i& v : voxels) cells.emplace_back(v.x(), v.y(), v.z());
+  return meshCells(cells, voxelSize, origin, options);
+}
+
+TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
+                           const ParticleMeshOptions& options) {
+  checkOptions("meshParticles", particleSpacing, options.latticeOrigin, options.surface);
+  // |index| <= 2^30 leaves OpenVDB's int32 coordinates room for the narrow band and closing.
+  constexpr double kMaxIndex = 1073741824.0;
+  std::vector<openvdb::Coord> cells;
+  cells.reserve(positions.size());
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const Vec3& p = positions[i];
+    if (!p.allFinite()) throw RuntimeError("meshParticles: particle " + std::to_string(i) + " position is not finite");
+    // Nearest cell centre: round((p - origin) / h), ties upward (floor(x + 0.5)), so the
+    // cell is a pure function of the position.
+    const Vec3 index = ((p - options.latticeOrigin) / particleSpacing).array() + 0.5;
+    const Vec3 cell = index.array().floor();
+    if (cell.cwiseAbs().maxCoeff() > kMaxIndex) {
+      throw RuntimeError("meshParticles: particle " + std::to_string(i) + " is more than 2^30 spacings from the lattice origin");
+    }
+    cells.emplace_back(static_cast<int>(cell.x()), static_cast<int>(cell.y()), static_cast<int>(cell.z()));
+  }
+  return meshCells(cells, particleSpacing, options.latticeOrigin, options.surface);
 }
 
 }  // namespace physketch::render

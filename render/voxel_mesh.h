@@ -1,4 +1,4 @@
-// Voxel set -> closed triangle surface, through OpenVDB:
+// Voxel set or particle cloud -> closed triangle surface, through OpenVDB:
 //   lattice voxels -> BoolGrid topology -> tools::topologyToLevelSet -> tools::volumeToMesh.
 // Implemented in vdb_bridge.cpp, the only translation unit that includes OpenVDB.
 #pragma once
@@ -23,5 +23,40 @@ struct VoxelMeshOptions {
 // An empty voxel list gives an empty mesh.
 TriangleMesh meshVoxels(const std::vector<Vec3i>& voxels, double voxelSize, const Vec3& origin,
                         const VoxelMeshOptions& options = {});
+
+struct ParticleMeshOptions {
+  // One closing step (dilate, then erode, by one cell): particles off the lattice leave some
+  // cells empty and put two particles in others (a ball's lattice rotated by 0.7 rad marks
+  // 18% fewer cells than it has particles); closing fills such one-cell holes, which would
+  // otherwise become small inner surfaces.
+  VoxelMeshOptions surface{/*halfWidth=*/3, /*closingSteps=*/1, /*smoothingSteps=*/1, /*adaptivity=*/0.0};
+  // A lattice point (m). Pass the centre of the sketch grid's cell (0,0,0) so particles still
+  // at their sketched positions land exactly on cell centres, one particle per cell.
+  Vec3 latticeOrigin = Vec3::Zero();
+};
+
+// A closed surface around particles that no longer sit on the voxel lattice (soft bodies,
+// fluids, MPM): each particle marks the lattice cell whose centre is nearest to it (cells of
+// edge particleSpacing, centres at latticeOrigin + particleSpacing*(i,j,k)), and the union of
+// the marked cells is meshed exactly as meshVoxels does. Each particle stands for the volume
+// of one cell, so the surface encloses about (particle count) * spacing^3 when the particles
+// are about one spacing apart; stretched regions (particles over a cell apart) leave holes,
+// which options.surface.closingSteps closes up to that many cells wide. The result depends
+// only on the set of marked cells: the same for any particle order and thread count.
+// Throws RuntimeError on a non-finite position or spacing, or a position beyond +-2^30 cells.
+TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
+                           const ParticleMeshOptions& options = {});
+
+// How a particle group's surface is made; the app tags each group with one.
+enum class SurfaceKind {
+  // Meshed once from the group's rest cells (meshVoxels) and moved every frame by the body
+  // pose (model matrix [R | c - R c0]): exact and cheap for rigid bodies, whose particles keep
+  // their rest offsets.
+  kRigidRestMesh,
+  // Re-meshed from the current particle positions every frame (meshParticles, then
+  // OffscreenRenderer::updateMesh, drawn with the identity model matrix): for groups that
+  // deform (soft bodies, fluids, MPM).
+  kParticles,
+};
 
 }  // namespace physketch::render

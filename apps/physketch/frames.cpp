@@ -32,7 +32,7 @@ std::size_t FrameWriter::meshesLive() const {
 // material (mixed-material bodies), all moving with the body's pose.
 void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restCells, int b) {
   ScopedPass t(profile_, passMesh_);
-  // TODO(render): free the old GL meshes here once the renderer can (it leaks one set per re-mesh).
+  for (const MeshPart& m : meshes_[b]) renderer_.freeMesh(m.handle);  // the old shape's GL buffers
   meshes_[b].clear();
   std::map<std::int16_t, std::vector<Vec3i>> parts;
   for (std::int32_t i : solver.bodyParticles(b))
@@ -57,9 +57,20 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
   {
     ScopedPass t(profile_, passDraw_);
     const SceneDesc& sc = scene_;
-    renderer_.beginFrame(sc.camera, {0.92f, 0.94f, 0.97f});
-    renderer_.drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), std::max(sc.workspaceSize, 1e-3),
-                         {0.55f, 0.57f, 0.55f});
+    // Near and far planes around everything drawable: the workspace, the ground patch and
+    // every particle (bodies may leave the workspace), so a far camera still sees the scene.
+    const double half = std::max(sc.workspaceSize, 1e-3);
+    Eigen::AlignedBox3d box(sc.workspaceCenter - Vec3::Constant(0.5 * sc.workspaceSize),
+                            sc.workspaceCenter + Vec3::Constant(0.5 * sc.workspaceSize));
+    box.extend(Vec3(sc.workspaceCenter.x() - half, sc.groundY, sc.workspaceCenter.z() - half));
+    box.extend(Vec3(sc.workspaceCenter.x() + half, sc.groundY, sc.workspaceCenter.z() + half));
+    const ParticleArrays& p = solver.particles();
+    for (std::size_t i = 0; i < p.size(); ++i)
+      if (!phase::has(p.phase[i], phase::kRemoved)) box.extend(Vec3(p.x[i], p.y[i], p.z[i]));
+    box.extend(box.min() - Vec3::Constant(mapping_.voxelSize()));  // particles are cubes of one voxel
+    box.extend(box.max() + Vec3::Constant(mapping_.voxelSize()));
+    renderer_.beginFrame(sc.camera, {0.92f, 0.94f, 0.97f}, render::clipRangeFor(sc.camera, box));
+    renderer_.drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), half, {0.55f, 0.57f, 0.55f});
     trianglesLastFrame_ = 0;
     for (const auto& [b, parts] : meshes_) {
       if (solver.mode(b) == BodyMode::kEmpty) continue;
@@ -71,6 +82,8 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
     }
     img = renderer_.endFrame();
   }
+  ++frames_;
+  if (img.meshSamples == 0 && !meshes_.empty()) framesWithNothingInView_.push_back(frames_ - 1);
   ScopedPass t(profile_, passPng_);
   render::writePng(path, img);
 }

@@ -30,6 +30,12 @@ class FrameWriter {
   std::size_t trianglesLastFrame() const { return trianglesLastFrame_; }
   std::size_t trianglesMeshed() const { return trianglesMeshed_; }
   std::size_t meshesLive() const;
+  // Frames (0-based, in write order) where no body showed: the camera sees none of them.
+  const std::vector<int>& framesWithNothingInView() const { return framesWithNothingInView_; }
+  const std::string& device() const { return renderer_.deviceDescription(); }
+  render::MeshStats gpuMeshes() const { return renderer_.meshStats(); }
+  // Times meshBody ran (each body at most once per frame).
+  long meshings() const { return profile_.entries()[std::size_t(passMesh_)].calls; }
 
  private:
   struct MeshPart {
@@ -48,6 +54,8 @@ class FrameWriter {
   Profile profile_;
   int passMesh_, passDraw_, passPng_;
   std::size_t trianglesLastFrame_ = 0, trianglesMeshed_ = 0;
+  int frames_ = 0;
+  std::vector<int> framesWithNothingInView_;
 };
 
 std::string frameName(int index);

@@ -19,6 +19,7 @@
 #include "apps/physketch/prepare.h"
 #include "apps/physketch/report.h"
 #include "apps/physketch/runtime.h"
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/profile.h"
 
@@ -27,29 +28,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-// Writes text to path atomically (temporary file + rename).
-void writeFileAtomic(const fs::path& path, const std::string& text) {
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw RuntimeError("cannot write " + tmp.string());
-    out << text;
-    out.flush();
-    if (!out) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw RuntimeError("cannot write " + tmp.string() + " (disk full?)");
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    std::error_code ec2;
-    fs::remove(tmp, ec2);
-    throw RuntimeError("cannot rename " + tmp.string() + " to " + path.string() + ": " + ec.message());
-  }
-}
 
 // Runs a subcommand body and maps its exceptions to the CLI's exit codes:
 // InputError -> 1 (bad input, message names file:line:field), anything else -> 2.
@@ -254,7 +232,16 @@ int runScene(const RunOptions& opt) {
                      {"height", sc.height},
                      {"triangles", frameWriter ? frameWriter->trianglesLastFrame() : 0},
                      {"triangles_meshed", frameWriter ? frameWriter->trianglesMeshed() : 0},
-                     {"folder", sc.writeFrames ? (out / "frames").string() : ""}};
+                     {"folder", sc.writeFrames ? (out / "frames").string() : ""},
+                     {"device", frameWriter ? frameWriter->device() : ""}};
+    json warnings = json::array();
+    if (frameWriter && !frameWriter->framesWithNothingInView().empty()) {
+      const auto& empty = frameWriter->framesWithNothingInView();
+      warnings.push_back(std::to_string(empty.size()) + " of " + std::to_string(written) +
+                         " frames show no body (first: frame " + std::to_string(empty.front()) +
+                         "): the camera does not look at the sketch; check the scene's 'camera' record");
+    }
+    rep["warnings"] = warnings;
     // Body poses per frame, so trajectories can be checked without decoding images.
     json bodies = json::array();
     for (int b = 0; b < solver->bodyCount(); ++b)
@@ -266,12 +253,13 @@ int runScene(const RunOptions& opt) {
     rep["poses"] = poses;
     rep["timing_s"] = {{"prepare", tPrepared - tStart}, {"simulate_and_render", tEnd - tSimStart},
                        {"total", tEnd - tStart}};
-    if (sc.writeReport) writeFileAtomic(out / "report.json", rep.dump(1) + "\n");
+    if (sc.writeReport) writeFileAtomic((out / "report.json").string(), rep.dump(1) + "\n");
 
     if (solver->guard().tripped()) {
       std::cerr << "error: " << solver->guard().message() << "\n";
       return kExitRuntime;
     }
+    for (const auto& w : warnings) std::cerr << "warning: " << w.get<std::string>() << "\n";
     if (!opt.quiet)
       std::cerr << "physketch: " << sk.particles.size() << " particles, " << solver->bodyCount() << " bodies, " << written
                 << " frames in " << (tEnd - tStart) << " s -> " << out.string() << "\n";

@@ -251,3 +251,48 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_NE(planText.find("rigid_contact"), std::string::npos) << planText;
   fs::remove_all(dir);
 }
+
+TEST(Cli, AFarCameraSeesABigSceneAndACameraLookingAwayIsAWarning) {
+  // Issue: a 100 m workspace viewed from 150 m gave blank frames and exit 0 (the far plane
+  // was fixed near 100 m). Near and far now come from the scene's bounds; a frame with
+  // nothing in view is a warning in the report and on stderr.
+  const fs::path dir = freshDir("camera");
+  {
+    std::ofstream s(dir / "big.strokes");
+    s << "physketch-strokes 1\nprimitive box wood 0  0 30 0  30 30 30\n";
+    std::ofstream a(dir / "far.scene");
+    a << "physketch-scene 1\nstrokes big.strokes\nworkspace 0 50 0 100\nmaterial wood rigid 600 0.5 0.9 0.2 0.1\n"
+         "camera 90 100 110  0 30 0  40\nimage 160 120\n";
+    std::ofstream b(dir / "away.scene");
+    b << "physketch-scene 1\nstrokes big.strokes\nworkspace 0 50 0 100\nmaterial wood rigid 600 0.5 0.9 0.2 0.1\n"
+         "camera 90 100 110  300 100 400  40\nimage 160 120\n";
+  }
+  Result r = runCli("run '" + (dir / "far.scene").string() + "' -q --frames 2 --out '" + (dir / "far").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Rgba img = readPng(dir / "far" / "frames" / "frame_0001.png");
+  int red = 0;  // the box's lit colour is red-dominant: r > g + 60
+  for (std::size_t i = 0; i + 3 < img.px.size(); i += 4) red += img.px[i] > img.px[i + 1] + 60;
+  EXPECT_GT(red, 160 * 120 / 50) << "the box covers a few per cent of the image from 150 m";
+  EXPECT_TRUE(readJson(dir / "far" / "report.json")["warnings"].empty());
+  r = runCli("run '" + (dir / "away.scene").string() + "' -q --frames 2 --out '" + (dir / "away").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("show no body"), std::string::npos) << r.err;
+  const auto w = readJson(dir / "away" / "report.json")["warnings"];
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_NE(w[0].get<std::string>().find("2 of 2 frames"), std::string::npos) << w;
+  fs::remove_all(dir);
+}
+
+TEST(Cli, TrianglesArePerFrameNotCumulative) {
+  const fs::path dir = freshDir("tris");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
+  for (int n : {2, 6})
+    ASSERT_EQ(runCli("run '" + scene + "' -q --frames " + std::to_string(n) + " --out '" + (dir / std::to_string(n)).string() + "'", dir)
+                  .code,
+              0);
+  const auto a = readJson(dir / "2" / "report.json")["frames"], b = readJson(dir / "6" / "report.json")["frames"];
+  EXPECT_GT(a["triangles"].get<long>(), 0);
+  EXPECT_EQ(a["triangles"], b["triangles"]);  // rigid bodies: the same meshes every frame
+  EXPECT_EQ(a["triangles_meshed"], b["triangles_meshed"]);  // meshed once, not per frame
+  fs::remove_all(dir);
+}

@@ -22,61 +22,15 @@
 #include "render/mesh.h"
 #include "render/renderer.h"
 #include "render/voxel_mesh.h"
+#include "tests/render/render_test_util.h"
 
 namespace physketch::render {
 namespace {
 
 namespace fs = std::filesystem;
+using namespace test;  // NOLINT: shared helpers of the render tests
 
 // ---- helpers
-
-std::vector<Vec3i> boxVoxels(int a, int b, int c) {
-  std::vector<Vec3i> v;
-  for (int k = 0; k < c; ++k)
-    for (int j = 0; j < b; ++j)
-      for (int i = 0; i < a; ++i) v.emplace_back(i, j, k);
-  return v;
-}
-
-// Closed and consistently oriented: every directed edge (a, b) occurs exactly once and its
-// reverse (b, a) exactly once, so every edge is shared by exactly two triangles that agree
-// on orientation. Returns a description of the first violation, empty when none.
-std::string closedManifoldViolation(const TriangleMesh& m) {
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> directed;
-  for (std::size_t t = 0; t < m.indices.size(); t += 3) {
-    for (int e = 0; e < 3; ++e) {
-      const std::uint32_t a = m.indices[t + e], b = m.indices[t + (e + 1) % 3];
-      if (a == b) return "degenerate triangle " + std::to_string(t / 3);
-      ++directed[{a, b}];
-    }
-  }
-  for (const auto& [edge, count] : directed) {
-    if (count != 1) return "directed edge used " + std::to_string(count) + " times";
-    if (!directed.count({edge.second, edge.first})) {
-      return "edge " + std::to_string(edge.first) + "-" + std::to_string(edge.second) + " has one triangle";
-    }
-  }
-  return "";
-}
-
-// Divergence theorem: V = sum over triangles of p0 . (p1 x p2) / 6; positive when the
-// triangles are counter-clockwise seen from outside.
-double signedVolume(const TriangleMesh& m) {
-  double v = 0.0;
-  for (std::size_t t = 0; t < m.indices.size(); t += 3) {
-    const Vec3 p0 = m.positions[m.indices[t]].cast<double>();
-    const Vec3 p1 = m.positions[m.indices[t + 1]].cast<double>();
-    const Vec3 p2 = m.positions[m.indices[t + 2]].cast<double>();
-    v += p0.dot(p1.cross(p2)) / 6.0;
-  }
-  return v;
-}
-
-Eigen::AlignedBox3d bounds(const TriangleMesh& m) {
-  Eigen::AlignedBox3d box;
-  for (const Vec3f& p : m.positions) box.extend(p.cast<double>());
-  return box;
-}
 
 // Every normal unit length and, for a convex solid, pointing away from its centre.
 void expectUnitOutwardNormals(const TriangleMesh& m, const Vec3& centre) {
@@ -85,14 +39,6 @@ void expectUnitOutwardNormals(const TriangleMesh& m, const Vec3& centre) {
     EXPECT_NEAR(m.normals[i].norm(), 1.0f, 1e-5f) << "vertex " << i;
     EXPECT_GT(m.normals[i].cast<double>().dot(m.positions[i].cast<double>() - centre), 0.0) << "vertex " << i;
   }
-}
-
-std::string tempDir(const std::string& name) {
-  const fs::path dir = fs::path(::testing::TempDir()) /
-                       ("physketch_render_" + name + "_" + std::to_string(static_cast<long>(::getpid())));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir.string();
 }
 
 // ---- meshVoxels
@@ -183,10 +129,6 @@ std::vector<Vec3i> ballWithTunnel() {
         v.emplace_back(i, j, k);
       }
   return v;
-}
-
-bool sameMesh(const TriangleMesh& x, const TriangleMesh& y) {
-  return x.indices == y.indices && x.positions == y.positions && x.normals == y.normals;
 }
 
 // Boundary faces of a voxel set (faces between an occupied and an empty cell).
@@ -315,12 +257,6 @@ Image renderBox(const BoxScene& s, int w, int h) {
   r.drawMesh(handle, s.model, s.color);
   return r.endFrame();
 }
-
-const std::uint8_t* pixelAt(const Image& img, int x, int y) {
-  return img.rgba.data() + (static_cast<std::size_t>(y) * img.width + x) * 4;
-}
-
-bool samePixel(const std::uint8_t* p, const std::uint8_t* q) { return p[0] == q[0] && p[1] == q[1] && p[2] == q[2]; }
 
 TEST(Renderer, BoxSilhouetteMatchesProjectedBoundsAndIsLit) {
   const BoxScene s = makeBoxScene();
