@@ -30,8 +30,8 @@ SceneDesc build(const RecordFile& file) {
     if (kw != "material") {
       auto [it, fresh] = seen.emplace(kw, r.line);
       if (!fresh)
-        throw InputError(file.path, r.line, "", "duplicate '" + kw + "' (first given on line " +
-                                                    std::to_string(it->second) + ")");
+        throw InputError(file.path, r.line, "record", "'" + kw + "' given twice (first given on line " +
+                                                          std::to_string(it->second) + ")");
     }
     if (kw == "strokes") {
       FieldReader f(file, r, {"path"});
@@ -106,7 +106,7 @@ SceneDesc build(const RecordFile& file) {
         else f.fail(i, "unknown output '" + f.word(i) + "' (known: frames, report)");
       }
     } else {
-      throw InputError(file.path, r.line, "", "unknown record '" + kw +
+      throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
                                                   "ground duration fps material camera image output)");
     }

@@ -18,14 +18,6 @@ Vec3 snapTo(const Vec3& p, double step) {
   return Vec3(std::round(p.x() / step) * step, std::round(p.y() / step) * step, std::round(p.z() / step) * step);
 }
 
-// rot=ax,ay,az,deg -> rotation matrix.
-Mat3 parseRotation(const RecordFile& f, int line, const std::string& text) {
-  const auto v = parseNumberList(f, line, "rot", text, 4);
-  const Vec3 axis(v[0], v[1], v[2]);
-  if (axis.norm() < 1e-12) throw InputError(f.path, line, "rot", "rotation axis is zero");
-  return Eigen::AngleAxisd(v[3] * M_PI / 180.0, axis.normalized()).toRotationMatrix();
-}
-
 double sizeField(const FieldReader& r, std::size_t i) {
   const double v = r.positive(i);
   if (v > kMaxSize) r.fail(i, "must be <= 1000 m (got " + r.word(i) + ")");
@@ -48,7 +40,7 @@ class Parser {
     static const char* const kKnown[] = {"stroke", "sample", "primitive", "stamp", "mirror",
                                          "snap",   "undo",   "redo",      "play"};
     if (std::find(std::begin(kKnown), std::end(kKnown), kw) == std::end(kKnown))
-      throw InputError(f_.path, r.line, "",
+      throw InputError(f_.path, r.line, "record",
                        "unknown record '" + kw + "' (known: stroke, sample, primitive, stamp, mirror, snap, undo, redo, play)");
     if (kw != "sample") closeStroke();
     if (kw == "stroke") stroke(r);
@@ -155,7 +147,8 @@ class Parser {
 
   void closeStroke() {
     if (openStroke_ && out_.operations.back().stroke.samples.empty())
-      throw InputError(f_.path, out_.operations.back().line, "", "stroke has no samples (add 'sample t x y z' lines)");
+      throw InputError(f_.path, out_.operations.back().line, "samples",
+                       "stroke has no samples (add 'sample t x y z' lines after it)");
     openStroke_ = false;
   }
 
@@ -186,7 +179,7 @@ class Parser {
       fr.fail(7, "minor radius must be smaller than the major radius");
     std::string body;
     for (const auto& o : opts) {
-      if (o.key == "rot") p.rotation = parseRotation(f_, r.line, o.value);
+      if (o.key == "rot") p.rotation = parseRotation(f_, r.line, "rot", o.value);
       else if (o.key == "body") body = o.value;
     }
     Operation& op = begin(Operation::Kind::kPrimitive, r, fr.word(1), body);
@@ -210,7 +203,7 @@ class Parser {
         if (!(m.scale > 0) || m.scale > kMaxSize)
           throw InputError(f_.path, r.line, "scale", "must be in (0, 1000] (got " + o.value + ")");
       } else if (o.key == "rot") {
-        m.rotation = parseRotation(f_, r.line, o.value);
+        m.rotation = parseRotation(f_, r.line, "rot", o.value);
       } else if (o.key == "at") {
         const auto v = parseNumberList(f_, r.line, "at", o.value, 3);
         m.translation = snapTo(Vec3(v[0], v[1], v[2]), snap_);

@@ -168,7 +168,9 @@ TEST(Cli, HelpVersionAndUsageErrors) {
   EXPECT_EQ(runCli("--help", dir).code, 0);
   EXPECT_EQ(runCli("--version", dir).code, 0);
   EXPECT_EQ(runCli("run", dir).code, 1);                  // missing scene
-  EXPECT_EQ(runCli("frobnicate x", dir).code, 1);         // unknown subcommand
+  Result unknown = runCli("frobnicate x", dir);           // unknown subcommand: named, with the known ones
+  EXPECT_EQ(unknown.code, 1);
+  EXPECT_NE(unknown.err.find("unknown subcommand 'frobnicate' (known: run, plan, lint"), std::string::npos) << unknown.err;
   const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
   Result r = runCli("plan '" + scene + "'", dir);
   EXPECT_EQ(r.code, 0) << r.err;

@@ -82,3 +82,12 @@ TEST(Scene, FrameIntervalMustBeWholeStepsAndStrokesIsRequired) {
     EXPECT_EQ(e.field(), "strokes");
   }
 }
+
+TEST(Scene, UnknownAndDuplicatedRecordsNameTheRecordField) {
+  auto e = sceneError("bogus 1\n");
+  EXPECT_EQ(e.field(), "record") << e.what();
+  e = sceneError("substeps 3\n");
+  EXPECT_EQ(e.line(), 10);
+  EXPECT_EQ(e.field(), "record") << e.what();
+  EXPECT_NE(std::string(e.what()).find("first given on line 5"), std::string::npos) << e.what();
+}

@@ -194,3 +194,23 @@ TEST(StrokeFile, NotUtf8AndHugeFilesAreRejectedWithoutReadingThem) {
   }
   fs::remove_all(dir);
 }
+
+TEST(StrokeFile, StructuralErrorsNameAField) {
+  EXPECT_EQ(strokeError(kHead + "stroke create sphere 0.05 wood\nsampel 0 0 0 0\n").field(), "record");
+  auto e = strokeError(kHead + "stroke create sphere 0.1 wood\n");
+  EXPECT_EQ(e.line(), 2);
+  EXPECT_EQ(e.field(), "samples") << e.what();
+  EXPECT_EQ(strokeError(kHead + "sample 0 0 0 0\n").field(), "record");
+  EXPECT_EQ(strokeError(kHead + "play 1\nplay 2\n").field(), "record");
+}
+
+TEST(StrokeFile, AByteOrderMarkAndWindowsLineEndsAreAccepted) {
+  const StrokeFile f = parseStrokes("\xEF\xBB\xBF" "physketch-strokes 1\r\nstroke create sphere 0.1 wood\r\n"
+                                    "sample\t0\t0 0.5 0\r\n",
+                                    "bom.strokes");
+  ASSERT_EQ(f.operations.size(), 1u);
+  EXPECT_DOUBLE_EQ(f.operations[0].stroke.samples[0].position.y(), 0.5);
+  auto e = strokeError(kHead + "stroke create sphere 0.1 wood\nsample 0 0 0.5\r0\n");
+  EXPECT_EQ(e.line(), 3);
+  EXPECT_EQ(e.field(), "text");
+}
