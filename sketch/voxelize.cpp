@@ -48,6 +48,8 @@ class Builder {
     std::vector<int> runtimeCreates;
     for (const Operation& op : file_.operations) {
       if (!isActive[static_cast<std::size_t>(op.id)]) continue;
+      // Tool strokes push material in the solver (docs/formats.md); the sketch never sees them.
+      if (op.kind == Operation::Kind::kStroke && op.stroke.op == StrokeOp::kTool) continue;
       cur_ = &sk_.operations[static_cast<std::size_t>(op.id)];
       if (op.startTime() > play) {
         cur_->afterPlay = true;
