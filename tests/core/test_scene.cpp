@@ -605,3 +605,21 @@ TEST(Docs, KindsTableMatchesTheSolverMapping) {
     }
   }
 }
+
+TEST(Docs, TheSceneExampleParses) {
+  // The first fenced block after the scene file's heading, read as if it sat in scenes/.
+  std::ifstream in(std::string(PHYSKETCH_SOURCE_DIR) + "/docs/formats.md");
+  std::string line, text;
+  bool inSection = false, inBlock = false;
+  while (std::getline(in, line)) {
+    if (line.rfind("## Scene file", 0) == 0) inSection = true;
+    else if (inSection && line.rfind("```", 0) == 0 && inBlock) break;
+    else if (inSection && line.rfind("```", 0) == 0) inBlock = true;
+    else if (inBlock) text += line + "\n";
+  }
+  ASSERT_FALSE(text.empty());
+  const SceneDesc s = parseScene(text, kScenes + "doc.scene");
+  EXPECT_EQ(s.materials.size(), 3u);
+  EXPECT_EQ(s.colliders.size(), 2u);
+  EXPECT_EQ(s.colliders[1].keyframes.size(), 2u);
+}

@@ -342,3 +342,20 @@ TEST(StrokeFile, UsesListsWhatTheOperationsInEffectUse) {
   EXPECT_EQ(u.toolStroke.line, 10);
   EXPECT_FALSE(usesOf(parseStrokes(kHead + "primitive sphere w 0 0 0.5 0 0.1\n", "p")).velocity.used());
 }
+
+TEST(StrokeFile, TheDocsExampleParses) {
+  // The first fenced block after the stroke file's heading in docs/formats.md.
+  std::ifstream in(std::string(PHYSKETCH_SOURCE_DIR) + "/docs/formats.md");
+  std::string line, text;
+  bool inSection = false, inBlock = false;
+  while (std::getline(in, line)) {
+    if (line.rfind("## Stroke file", 0) == 0) inSection = true;
+    else if (inSection && line.rfind("```", 0) == 0 && inBlock) break;
+    else if (inSection && line.rfind("```", 0) == 0) inBlock = true;
+    else if (inBlock) text += line + "\n";
+  }
+  ASSERT_FALSE(text.empty());
+  const StrokeFile f = parseStrokes(text, "doc.strokes");
+  EXPECT_EQ(f.operations.size(), 9u);
+  EXPECT_EQ(f.operations.back().stroke.op, StrokeOp::kTool);
+}
