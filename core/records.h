@@ -3,8 +3,10 @@
 //
 //   # comment until end of line
 //   <magic> <version>            first record of the file
-//   keyword field field ...      one record per line, fields split on blanks
+//   keyword field field ...      one record per line, fields split on spaces and tabs
 //
+// Lines end in LF or CR LF; a UTF-8 byte-order mark at the start is skipped; any other
+// control character (a lone CR included) is an error naming its line.
 // Every check reports file:line:field through InputError. Readers are bounded:
 // a line over kMaxLineBytes or a file over kMaxFileBytes is an error, never an
 // allocation of whatever size the file claims.
@@ -14,6 +16,8 @@
 #include <initializer_list>
 #include <string>
 #include <vector>
+
+#include "core/math.h"
 
 namespace physketch {
 
@@ -39,21 +43,35 @@ RecordFile readRecordFile(const std::string& path, const std::string& magic, int
 RecordFile parseRecordText(const std::string& text, const std::string& path, const std::string& magic,
                            int maxVersion);
 
-// An option field `key=value` of a record (after its positional fields).
+// An option field of a record (after its positional fields): `key=value`, or a bare
+// flag such as `fixed` (flag = true, value empty).
 struct RecordOption {
   std::string key, value;
+  bool flag = false;
 };
 
-// Splits a record into its positional tokens (kept in `positional`) and its
-// `key=value` options. Options must come after all positional fields and each
-// key must be one of `allowed` and appear once; otherwise InputError names it.
+// Splits a record into its positional tokens (kept in `positional`) and its options:
+// `key=value` fields and bare flags (a word listed in `flags`, after the keyword).
+// Options must come after all positional fields, each key must be one of `allowed`
+// (or `flags`) and appear once; otherwise InputError names it. A flag is therefore a
+// reserved word in the positional fields of the records that take it.
 std::vector<RecordOption> splitOptions(const RecordFile& file, const Record& record, Record& positional,
-                                       std::initializer_list<const char*> allowed);
+                                       std::initializer_list<const char*> allowed,
+                                       std::initializer_list<const char*> flags = {});
+std::vector<RecordOption> splitOptions(const RecordFile& file, const Record& record, Record& positional,
+                                       const std::vector<std::string>& allowed,
+                                       const std::vector<std::string>& flags = {});
 
 // Parses a comma-separated list of exactly `n` finite numbers (an option value such
 // as `axis=0,1,0`). Throws InputError naming `field`.
 std::vector<double> parseNumberList(const RecordFile& file, int line, const std::string& field,
                                     const std::string& text, std::size_t n);
+
+// `x,y,z` with |v| <= maxNorm (an option such as `vel=0,1,0`). Throws InputError naming `field`.
+Vec3 parseVec3(const RecordFile& file, int line, const std::string& field, const std::string& text,
+               double maxNorm);
+// `ax,ay,az,deg`: a rotation of deg degrees about the axis (need not be unit, not zero).
+Mat3 parseRotation(const RecordFile& file, int line, const std::string& field, const std::string& text);
 
 // Reads the fields of one record against a schema of field names (the keyword
 // is not a field). Checks the field count up front: too few names the first
@@ -73,6 +91,7 @@ class FieldReader {
   double inRange(std::size_t i, double lo, double hi) const;  // finite, lo <= v <= hi
   long integer(std::size_t i, long lo, long hi) const;
   [[noreturn]] void fail(std::size_t i, const std::string& what) const;
+  // An error about the record as a whole (misplaced, given twice): names the field 'record'.
   [[noreturn]] void failLine(const std::string& what) const;
   const std::string& name(std::size_t i) const { return names_.at(i); }
   int line() const { return record_.line; }

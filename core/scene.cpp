@@ -1,16 +1,22 @@
 #include "core/scene.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <map>
 
 #include "core/error.h"
+#include "core/material_table.h"
 #include "core/records.h"
 
 namespace physketch {
 namespace {
 
 constexpr int kSceneVersion = 1;
+constexpr std::size_t kMaxColliders = 1000;
+constexpr std::size_t kMaxKeyframes = 100000;  // all colliders together
+constexpr double kMaxTime = 3600.0;           // s, as 'duration'
 
 std::string resolveRelative(const std::string& scenePath, const std::string& p) {
   namespace fs = std::filesystem;
@@ -19,19 +25,92 @@ std::string resolveRelative(const std::string& scenePath, const std::string& p) 
   return (fs::path(scenePath).parent_path() / rel).lexically_normal().string();
 }
 
+// A collider's mesh: one of the formats the stamp loader reads, and a file that exists now
+// (not when the simulation reaches it).
+void checkMeshPath(const RecordFile& file, const FieldReader& f, std::size_t field, const std::string& resolved) {
+  namespace fs = std::filesystem;
+  std::string ext = fs::path(resolved).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (ext != ".obj" && ext != ".off" && ext != ".ply")
+    f.fail(field, "mesh '" + f.word(field) + "' is not .obj, .off or .ply");
+  std::error_code ec;
+  if (!fs::is_regular_file(resolved, ec))
+    f.fail(field, "mesh file '" + resolved + "' not found (paths are relative to the scene file's folder, " +
+                      (fs::path(file.path).parent_path().empty() ? std::string(".") : fs::path(file.path).parent_path().string()) +
+                      ")");
+}
+
+MeshCollider parseCollider(const RecordFile& file, const Record& r, const std::vector<MeshCollider>& existing,
+                           bool& atGiven) {
+  Record pos;
+  const auto opts = splitOptions(file, r, pos, {"scale", "rot", "at", "friction"});
+  FieldReader f(file, pos, {"name", "path"});
+  MeshCollider c;
+  c.name = f.word(0);
+  c.line = r.line;
+  for (const auto& other : existing)
+    if (other.name == c.name) f.fail(0, "collider '" + c.name + "' defined twice (first on line " + std::to_string(other.line) + ")");
+  if (existing.size() >= kMaxColliders) f.failLine("too many colliders (at most " + std::to_string(kMaxColliders) + ")");
+  c.path = resolveRelative(file.path, f.word(1));
+  checkMeshPath(file, f, 1, c.path);
+  atGiven = false;
+  for (const auto& o : opts) {
+    if (o.key == "scale") {
+      c.scale = parseNumberList(file, r.line, "scale", o.value, 1)[0];
+      if (!(c.scale > 0) || c.scale > 1000.0)
+        throw InputError(file.path, r.line, "scale", "must be in (0, 1000] (got " + o.value + ")");
+    } else if (o.key == "rot") {
+      c.rotation = parseRotation(file, r.line, "rot", o.value);
+    } else if (o.key == "at") {
+      c.position = parseVec3(file, r.line, "at", o.value, 1e6);
+      atGiven = true;
+    } else if (o.key == "friction") {
+      const double mu = parseNumberList(file, r.line, "friction", o.value, 1)[0];
+      if (!(mu >= 0 && mu <= 2)) throw InputError(file.path, r.line, "friction", "must be in [0, 2] (got " + o.value + ")");
+      c.friction = mu;
+    }
+  }
+  return c;
+}
+
+// keyframe NAME t x y z [rot=ax,ay,az,deg]: appended to its collider's keyframes.
+void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshCollider>& colliders,
+                   std::size_t& keyframeCount) {
+  Record pos;
+  const auto opts = splitOptions(file, r, pos, {"rot"});
+  FieldReader f(file, pos, {"name", "t", "x", "y", "z"});
+  auto it = std::find_if(colliders.begin(), colliders.end(), [&](const MeshCollider& c) { return c.name == f.word(0); });
+  if (it == colliders.end())
+    f.fail(0, "unknown collider '" + f.word(0) + "' (a 'collider' record must define it before its keyframes)");
+  if (++keyframeCount > kMaxKeyframes) f.failLine("too many keyframes (at most " + std::to_string(kMaxKeyframes) + ")");
+  ColliderKeyframe k;
+  k.t = f.nonNegative(1);
+  if (k.t > kMaxTime) f.fail(1, "must be <= 3600 s (got " + f.word(1) + ")");
+  if (!it->keyframes.empty() && !(k.t > it->keyframes.back().t))
+    f.fail(1, "time " + f.word(1) + " does not increase (collider '" + it->name + "' has a keyframe at t = " +
+                  std::to_string(it->keyframes.back().t) + " on line " + std::to_string(it->keyframes.back().line) + ")");
+  k.position = Vec3(f.number(2), f.number(3), f.number(4));
+  k.rotation = it->rotation;  // the collider's rot= unless the keyframe gives its own
+  for (const auto& o : opts) k.rotation = parseRotation(file, r.line, o.key, o.value);
+  k.line = r.line;
+  it->keyframes.push_back(k);
+}
+
 SceneDesc build(const RecordFile& file) {
   SceneDesc s;
   s.path = file.path;
-  std::map<std::string, int> seen;  // keyword -> first line (each may appear once, except material)
+  std::map<std::string, int> seen;  // keyword -> first line (each may appear once, except the repeatable ones)
+  std::vector<int> colliderAtLine;  // per collider: its line when it gave at=, else 0
+  std::size_t keyframeCount = 0;
   bool haveStrokes = false;
   int dtLine = 0, fpsLine = 0;
   for (const Record& r : file.records) {
     const std::string& kw = r.keyword();
-    if (kw != "material") {
+    if (kw != "material" && kw != "collider" && kw != "keyframe") {
       auto [it, fresh] = seen.emplace(kw, r.line);
       if (!fresh)
-        throw InputError(file.path, r.line, "", "duplicate '" + kw + "' (first given on line " +
-                                                    std::to_string(it->second) + ")");
+        throw InputError(file.path, r.line, "record", "'" + kw + "' given twice (first given on line " +
+                                                          std::to_string(it->second) + ")");
     }
     if (kw == "strokes") {
       FieldReader f(file, r, {"path"});
@@ -45,8 +124,8 @@ SceneDesc build(const RecordFile& file) {
       if (s.workspaceSize > 1000.0) f.fail(3, "must be <= 1000 m (got " + f.word(3) + ")");
     } else if (kw == "solver") {
       FieldReader f(file, r, {"name"});
-      if (f.word(0) != "pbd") f.fail(0, "unknown solver '" + f.word(0) + "' (this build has: pbd)");
-      s.solver = SolverKind::kPbd;
+      if (!parseSolverKind(f.word(0), s.solver)) f.fail(0, "unknown solver '" + f.word(0) + "' (known: pbd, mpm)");
+      s.solverLine = r.line;
     } else if (kw == "dt") {
       FieldReader f(file, r, {"seconds"});
       s.dt = f.positive(0);
@@ -74,17 +153,19 @@ SceneDesc build(const RecordFile& file) {
       if (s.fps > 1000.0) f.fail(0, "must be <= 1000 (got " + f.word(0) + ")");
       fpsLine = r.line;
     } else if (kw == "material") {
-      FieldReader f(file, r, {"name", "kind", "density", "friction", "r", "g", "b"});
-      Material m;
-      m.name = f.word(0);
-      if (findMaterial(s.materials, m.name) >= 0) f.fail(0, "material '" + m.name + "' defined twice");
-      if (!parseMaterialKind(f.word(1), m.kind)) f.fail(1, "unknown material kind '" + f.word(1) + "' (known: rigid)");
-      m.density = f.positive(2);
-      if (m.density > 1e5) f.fail(2, "must be <= 1e5 kg/m^3 (got " + f.word(2) + ")");
-      m.friction = f.inRange(3, 0.0, 2.0);
-      for (int c = 0; c < 3; ++c) m.color[c] = static_cast<float>(f.inRange(4 + c, 0.0, 1.0));
-      if (s.materials.size() >= 32000) f.failLine("too many materials");
-      s.materials.push_back(m);
+      Material m = parseMaterialRecord(file, r);
+      const int prev = findMaterial(s.materials, m.name);
+      if (prev >= 0)
+        throw InputError(file.path, r.line, "name", "material '" + m.name + "' defined twice (first on line " +
+                                                        std::to_string(s.materials[static_cast<std::size_t>(prev)].line) + ")");
+      if (s.materials.size() >= 32000) throw InputError(file.path, r.line, "record", "too many materials");
+      s.materials.push_back(std::move(m));
+    } else if (kw == "collider") {
+      bool atGiven = false;
+      s.colliders.push_back(parseCollider(file, r, s.colliders, atGiven));
+      colliderAtLine.push_back(atGiven ? r.line : 0);
+    } else if (kw == "keyframe") {
+      parseKeyframe(file, r, s.colliders, keyframeCount);
     } else if (kw == "camera") {
       FieldReader f(file, r, {"ex", "ey", "ez", "tx", "ty", "tz", "fov"});
       s.camera.eye = Vec3(f.number(0), f.number(1), f.number(2));
@@ -106,12 +187,18 @@ SceneDesc build(const RecordFile& file) {
         else f.fail(i, "unknown output '" + f.word(i) + "' (known: frames, report)");
       }
     } else {
-      throw InputError(file.path, r.line, "", "unknown record '" + kw +
+      throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "ground duration fps material camera image output)");
+                                                  "ground duration fps material collider keyframe camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");
+  for (std::size_t i = 0; i < s.colliders.size(); ++i)
+    if (colliderAtLine[i] && !s.colliders[i].keyframes.empty())
+      throw InputError(file.path, colliderAtLine[i], "at",
+                       "collider '" + s.colliders[i].name + "' has keyframes (line " +
+                           std::to_string(s.colliders[i].keyframes.front().line) +
+                           "): its position comes from them; drop at=");
   // One frame interval must be a whole number of solver steps, so frames land on step boundaries.
   const double ratio = 1.0 / (s.fps * s.dt);
   if (std::abs(ratio - std::round(ratio)) > 1e-6 * ratio || std::round(ratio) < 1.0)
@@ -121,6 +208,27 @@ SceneDesc build(const RecordFile& file) {
 }
 
 }  // namespace
+
+void MeshCollider::poseAt(double t, Mat3& rotationOut, Vec3& positionOut) const {
+  if (keyframes.empty()) {
+    rotationOut = rotation;
+    positionOut = position;
+    return;
+  }
+  const auto next = std::upper_bound(keyframes.begin(), keyframes.end(), t,
+                                     [](double v, const ColliderKeyframe& k) { return v < k.t; });
+  if (next == keyframes.begin() || next == keyframes.end()) {
+    const ColliderKeyframe& k = next == keyframes.begin() ? keyframes.front() : keyframes.back();
+    rotationOut = k.rotation;
+    positionOut = k.position;
+    return;
+  }
+  const ColliderKeyframe& a = *(next - 1);
+  const ColliderKeyframe& b = *next;
+  const double u = (t - a.t) / (b.t - a.t);
+  positionOut = (1.0 - u) * a.position + u * b.position;
+  rotationOut = Quat(a.rotation).slerp(u, Quat(b.rotation)).toRotationMatrix();
+}
 
 int SceneDesc::stepsPerFrame() const { return static_cast<int>(std::lround(1.0 / (fps * dt))); }
 

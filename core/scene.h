@@ -1,6 +1,7 @@
 // The scene: how to run a sketch (docs/formats.md, "Scene file").
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,7 +17,32 @@ struct Camera {
   double fovYDeg = 40.0;     // vertical field of view (degrees)
 };
 
-enum class SolverKind { kPbd };
+// One pose of a moving mesh collider (a `keyframe` record).
+struct ColliderKeyframe {
+  double t = 0.0;                    // s of simulated time (0 = the start of the simulation, at 'play')
+  Vec3 position = Vec3::Zero();      // m
+  Mat3 rotation = Mat3::Identity();  // local -> world
+  int line = 0;
+};
+
+// A triangle mesh that material collides with but never moves (`collider` record), or that
+// follows its keyframes. world = rotation * (scale * p) + position.
+struct MeshCollider {
+  std::string name;
+  std::string path;  // resolved relative to the scene file's folder; checked to exist when parsed
+  int line = 0;
+  double scale = 1.0;
+  Mat3 rotation = Mat3::Identity();  // rot=
+  Vec3 position = Vec3::Zero();      // at= (m); unused when there are keyframes
+  // friction=: Coulomb coefficient (static = dynamic) of contacts with this collider; unset:
+  // the touching material's static_friction / dynamic_friction.
+  std::optional<double> friction;
+  std::vector<ColliderKeyframe> keyframes;  // strictly increasing t; empty: static
+
+  // Pose at simulated time t (s): the static pose, or the keyframes interpolated — position
+  // linearly, rotation by slerp — held at the first before it and at the last after it.
+  void poseAt(double t, Mat3& rotationOut, Vec3& positionOut) const;
+};
 
 struct SceneDesc {
   std::string path;          // the scene file, as given
@@ -27,6 +53,7 @@ struct SceneDesc {
   Vec3 workspaceCenter{0.0, 0.5, 0.0};
   double workspaceSize = 1.0;
   SolverKind solver = SolverKind::kPbd;
+  int solverLine = 0;        // line of the 'solver' record, 0 = the default
   double dt = 1.0 / 60.0;    // s, one solver step
   int substeps = 4;          // substeps per step
   int iterations = 4;        // constraint iterations per substep
@@ -35,6 +62,7 @@ struct SceneDesc {
   double duration = 2.0;     // s of simulated time
   double fps = 30.0;         // frames per simulated second; 1/fps is a whole number of steps
   std::vector<Material> materials;
+  std::vector<MeshCollider> colliders;
   Camera camera;
   int width = 640, height = 480;  // image size (pixels)
   bool writeFrames = true;
@@ -44,7 +72,9 @@ struct SceneDesc {
   int frameCount() const;     // frames including frame 0 at t = 0
 };
 
-// Parses and validates a scene file. Throws InputError naming file:line:field.
+// Parses and validates a scene file. Throws InputError naming file:line:field. What
+// depends on the solver (kinds, parameters and features it simulates) is checked
+// afterwards, against what the sketch uses: checkSupport() in core/support.h.
 SceneDesc loadScene(const std::string& path);
 SceneDesc parseScene(const std::string& text, const std::string& path);
 

@@ -52,6 +52,9 @@ class Solver {
   // Switches a body between dynamic and kinematic. A released body keeps the
   // velocity of its prescribed motion.
   virtual void setMode(int body, BodyMode mode) = 0;
+  // Sets a dynamic body's linear (m/s) and angular (rad/s) velocity (a create after play
+  // released with vel= or spin=).
+  virtual void setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) = 0;
   // Where a kinematic body's centre of mass must be at the end of the next step.
   virtual void setKinematicTarget(int body, const Vec3& centre) = 0;
   // Removes particles from the simulation. A body that loses particles is rebuilt

@@ -17,7 +17,8 @@ mkdir -p fuzz/out fuzz/corpus
 bin=fuzz/out/fuzz_parsers
 clang++-14 -std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
   -I. -I/usr/include/eigen3 \
-  fuzz/fuzz_parsers.cpp core/error.cpp core/records.cpp core/scene.cpp core/material.cpp core/particles.cpp \
+  fuzz/fuzz_parsers.cpp core/error.cpp core/records.cpp core/scene.cpp core/material.cpp core/material_table.cpp \
+  core/support.cpp core/particles.cpp \
   sketch/grid.cpp sketch/solids.cpp sketch/strokes.cpp sketch/raster_kernels.cpp sketch/rasterize.cpp \
   sketch/voxelize.cpp sketch/mesh_stamp.cpp \
   -frounding-math -lgmp -lmpfr -ltbb -o "$bin"

@@ -175,8 +175,8 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
     const double mi = parts_.mass[k];
     const Material& mat = materials_[static_cast<std::size_t>(parts_.material[k])];
     m += mi;
-    mus += mi * mat.friction;
-    muk += mi * mat.friction;
+    mus += mi * mat.staticFriction;
+    muk += mi * mat.dynamicFriction;
     reach = std::max(reach, Vec3(rx_[k], ry_[k], rz_[k]).norm());
   }
   if (mem.empty() || !(m > 0.0)) {
@@ -233,6 +233,13 @@ void PbdWorld::setMode(int body, BodyMode mode) {
   mo.kinStart = mo.kinTarget = mo.c;
   if (mode == BodyMode::kFixed) mo.v = mo.w = Vec3::Zero();
   if (mode == BodyMode::kKinematic) mo.w = Vec3::Zero();  // carried bodies keep their rotation
+}
+
+void PbdWorld::setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) {
+  const auto b = static_cast<std::size_t>(body);
+  if (mode_.at(b) != BodyMode::kDynamic) throw RuntimeError("PbdWorld::setVelocity: body is not dynamic");
+  motion_[b].v = velocity;
+  motion_[b].w = angularVelocity;
 }
 
 void PbdWorld::setKinematicTarget(int body, const Vec3& centre) {

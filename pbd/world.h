@@ -88,6 +88,7 @@ class PbdWorld final : public Solver {
   int addBody(const ParticleArrays& particles, const BodyInit& init, bool kinematic) override;
   void setMode(int body, BodyMode mode) override;
   void setKinematicTarget(int body, const Vec3& centre) override;
+  void setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) override;
   std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
 
   const PbdParams& params() const { return params_; }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <map>
 
 #include "core/error.h"
 #include "core/records.h"
@@ -12,18 +13,18 @@ namespace {
 
 constexpr int kStrokeVersion = 1;
 constexpr double kMaxSize = 1000.0;  // m; anything bigger is a typo, not a brush
+constexpr double kMaxSpeed = 1000.0;  // m/s, |vel=|
+constexpr double kMaxSpin = 1e4;      // rad/s, |spin=|
+
+// vel=, spin= and fixed as one create record gives them.
+struct Motion {
+  std::optional<Vec3> velocity, spin;
+  bool fixed = false;
+};
 
 Vec3 snapTo(const Vec3& p, double step) {
   if (step <= 0.0) return p;
   return Vec3(std::round(p.x() / step) * step, std::round(p.y() / step) * step, std::round(p.z() / step) * step);
-}
-
-// rot=ax,ay,az,deg -> rotation matrix.
-Mat3 parseRotation(const RecordFile& f, int line, const std::string& text) {
-  const auto v = parseNumberList(f, line, "rot", text, 4);
-  const Vec3 axis(v[0], v[1], v[2]);
-  if (axis.norm() < 1e-12) throw InputError(f.path, line, "rot", "rotation axis is zero");
-  return Eigen::AngleAxisd(v[3] * M_PI / 180.0, axis.normalized()).toRotationMatrix();
 }
 
 double sizeField(const FieldReader& r, std::size_t i) {
@@ -39,6 +40,8 @@ class Parser {
   StrokeFile run() {
     for (const Record& r : f_.records) record(r);
     closeStroke();
+    mergeBodyMotion();
+    checkToolsAfterPlay();
     return std::move(out_);
   }
 
@@ -48,7 +51,7 @@ class Parser {
     static const char* const kKnown[] = {"stroke", "sample", "primitive", "stamp", "mirror",
                                          "snap",   "undo",   "redo",      "play"};
     if (std::find(std::begin(kKnown), std::end(kKnown), kw) == std::end(kKnown))
-      throw InputError(f_.path, r.line, "",
+      throw InputError(f_.path, r.line, "record",
                        "unknown record '" + kw + "' (known: stroke, sample, primitive, stamp, mirror, snap, undo, redo, play)");
     if (kw != "sample") closeStroke();
     if (kw == "stroke") stroke(r);
@@ -85,15 +88,44 @@ class Parser {
     return out_.operations.back();
   }
 
+  // vel=, spin=, fixed: only create operations make bodies, and a fixed body does not move.
+  Motion motion(const Record& r, const std::vector<RecordOption>& opts, bool creates, const std::string& what) const {
+    Motion m;
+    for (const auto& o : opts) {
+      if (o.key != "vel" && o.key != "spin" && o.key != "fixed") continue;
+      if (!creates)
+        throw InputError(f_.path, r.line, o.key,
+                         "only create operations make bodies: '" + what + "' takes no " + (o.flag ? o.key : o.key + "="));
+      if (o.key == "vel") m.velocity = parseVec3(f_, r.line, "vel", o.value, kMaxSpeed);
+      else if (o.key == "spin") m.spin = parseVec3(f_, r.line, "spin", o.value, kMaxSpin);
+      else m.fixed = true;
+    }
+    if (m.fixed && (m.velocity || m.spin))
+      throw InputError(f_.path, r.line, m.velocity ? "vel" : "spin",
+                       "a fixed body does not move: give vel= and spin=, or fixed, not both");
+    return m;
+  }
+
+  static void setMotion(Operation& op, const Motion& m) {
+    op.velocity = m.velocity;
+    op.spin = m.spin;
+    op.fixed = m.fixed;
+    op.written.velocity = m.velocity.has_value();
+    op.written.spin = m.spin.has_value();
+    op.written.fixed = m.fixed;
+  }
+
   void stroke(const Record& r) {
     Record pos;
-    const auto opts = splitOptions(f_, r, pos, {"orient", "axis", "length", "body"});
+    const auto opts =
+        splitOptions(f_, r, pos, {"orient", "axis", "length", "body", "vel", "spin", "friction"}, {"fixed"});
     FieldReader fr(f_, pos, {"op", "brush", "size", "material"}, 3);
     StrokeOp op;
     if (fr.word(0) == "create") op = StrokeOp::kCreate;
     else if (fr.word(0) == "remove") op = StrokeOp::kRemove;
     else if (fr.word(0) == "move") op = StrokeOp::kMove;
-    else fr.fail(0, "unknown operation '" + fr.word(0) + "' (known: create, remove, move)");
+    else if (fr.word(0) == "tool") op = StrokeOp::kTool;
+    else fr.fail(0, "unknown operation '" + fr.word(0) + "' (known: create, remove, move, tool)");
     Stroke s;
     s.op = op;
     const std::string& b = fr.word(1);
@@ -130,10 +162,19 @@ class Parser {
       } else if (o.key == "body") {
         if (op != StrokeOp::kCreate) throw InputError(f_.path, r.line, "body", "only 'create' strokes belong to a body");
         body = o.value;
+      } else if (o.key == "friction") {
+        if (op != StrokeOp::kTool)
+          throw InputError(f_.path, r.line, "friction",
+                           "only tool strokes take friction= (a material's friction is set in the scene)");
+        const double mu = parseNumberList(f_, r.line, "friction", o.value, 1)[0];
+        if (!(mu >= 0 && mu <= 2)) throw InputError(f_.path, r.line, "friction", "must be in [0, 2] (got " + o.value + ")");
+        s.toolFriction = mu;
       }
     }
+    const Motion m = motion(r, opts, op == StrokeOp::kCreate, std::string("stroke ") + toString(op));
     Operation& o = begin(Operation::Kind::kStroke, r, material, body);
     o.stroke = s;
+    setMotion(o, m);
     openStroke_ = true;
   }
 
@@ -155,13 +196,14 @@ class Parser {
 
   void closeStroke() {
     if (openStroke_ && out_.operations.back().stroke.samples.empty())
-      throw InputError(f_.path, out_.operations.back().line, "", "stroke has no samples (add 'sample t x y z' lines)");
+      throw InputError(f_.path, out_.operations.back().line, "samples",
+                       "stroke has no samples (add 'sample t x y z' lines after it)");
     openStroke_ = false;
   }
 
   void primitive(const Record& r) {
     Record pos;
-    const auto opts = splitOptions(f_, r, pos, {"rot", "body"});
+    const auto opts = splitOptions(f_, r, pos, {"rot", "body", "vel", "spin"}, {"fixed"});
     if (pos.tokens.size() < 2) FieldReader(f_, pos, {"kind"});
     const std::string& kind = pos.tokens[1];
     Primitive p;
@@ -186,16 +228,18 @@ class Parser {
       fr.fail(7, "minor radius must be smaller than the major radius");
     std::string body;
     for (const auto& o : opts) {
-      if (o.key == "rot") p.rotation = parseRotation(f_, r.line, o.value);
+      if (o.key == "rot") p.rotation = parseRotation(f_, r.line, "rot", o.value);
       else if (o.key == "body") body = o.value;
     }
+    const Motion m = motion(r, opts, true, "primitive");
     Operation& op = begin(Operation::Kind::kPrimitive, r, fr.word(1), body);
     op.primitive = p;
+    setMotion(op, m);
   }
 
   void stamp(const Record& r) {
     Record pos;
-    const auto opts = splitOptions(f_, r, pos, {"scale", "rot", "at", "body"});
+    const auto opts = splitOptions(f_, r, pos, {"scale", "rot", "at", "body", "vel", "spin"}, {"fixed"});
     FieldReader fr(f_, pos, {"path", "material", "t"});
     MeshStamp m;
     namespace fs = std::filesystem;
@@ -210,7 +254,7 @@ class Parser {
         if (!(m.scale > 0) || m.scale > kMaxSize)
           throw InputError(f_.path, r.line, "scale", "must be in (0, 1000] (got " + o.value + ")");
       } else if (o.key == "rot") {
-        m.rotation = parseRotation(f_, r.line, o.value);
+        m.rotation = parseRotation(f_, r.line, "rot", o.value);
       } else if (o.key == "at") {
         const auto v = parseNumberList(f_, r.line, "at", o.value, 3);
         m.translation = snapTo(Vec3(v[0], v[1], v[2]), snap_);
@@ -218,8 +262,10 @@ class Parser {
         body = o.value;
       }
     }
+    const Motion mo = motion(r, opts, true, "stamp");
     Operation& op = begin(Operation::Kind::kStamp, r, fr.word(1), body);
     op.stamp = m;
+    setMotion(op, mo);
   }
 
   void mirror(const Record& r) {
@@ -275,6 +321,70 @@ class Parser {
     out_.playLine = r.line;
   }
 
+  // vel=, spin= and fixed describe a whole body: the parts of a named body in effect agree
+  // (a value given on one part holds for all), and every part then carries the body's values.
+  void mergeBodyMotion() {
+    struct Merged {
+      const Operation* velocity = nullptr;
+      const Operation* spin = nullptr;
+      const Operation* fixed = nullptr;
+    };
+    std::map<std::string, Merged> bodies;
+    auto text = [](const Vec3& v) {
+      return std::to_string(v.x()) + "," + std::to_string(v.y()) + "," + std::to_string(v.z());
+    };
+    auto agree = [&](const Operation* first, const Operation& op, const std::optional<Vec3> Operation::*field,
+                     const char* key) {
+      if (first && *(first->*field) != *(op.*field))
+        throw InputError(f_.path, op.line, key,
+                         "body '" + op.body + "' already has " + key + "=" + text(*(first->*field)) + " (line " +
+                             std::to_string(first->line) + "): give a body's " + key +
+                             "= on one of its parts, or the same on each");
+    };
+    for (int id : out_.active) {
+      const Operation& op = out_.operations[static_cast<std::size_t>(id)];
+      if (op.body.empty()) continue;
+      Merged& b = bodies[op.body];
+      if (op.written.velocity) {
+        agree(b.velocity, op, &Operation::velocity, "vel");
+        if (!b.velocity) b.velocity = &op;
+      }
+      if (op.written.spin) {
+        agree(b.spin, op, &Operation::spin, "spin");
+        if (!b.spin) b.spin = &op;
+      }
+      if (op.written.fixed && !b.fixed) b.fixed = &op;
+      const Operation* moving = b.velocity ? b.velocity : b.spin;
+      if (b.fixed && moving)
+        throw InputError(f_.path, op.line, op.written.fixed ? "fixed" : (op.written.velocity ? "vel" : "spin"),
+                         "body '" + op.body + "' is fixed (line " + std::to_string(b.fixed->line) + ") and moves (line " +
+                             std::to_string(moving->line) + "): a fixed body does not move");
+    }
+    for (int id : out_.active) {
+      Operation& op = out_.operations[static_cast<std::size_t>(id)];
+      if (op.body.empty()) continue;
+      const Merged& b = bodies[op.body];
+      if (b.velocity) op.velocity = b.velocity->velocity;
+      if (b.spin) op.spin = b.spin->spin;
+      op.fixed = b.fixed != nullptr;
+    }
+  }
+
+  // Tools act while the simulation runs: a tool stroke in effect starts at or after play.
+  void checkToolsAfterPlay() const {
+    const double play = out_.playTime();
+    for (int id : out_.active) {
+      const Operation& op = out_.operations[static_cast<std::size_t>(id)];
+      if (op.kind != Operation::Kind::kStroke || op.stroke.op != StrokeOp::kTool || op.startTime() >= play) continue;
+      const Sample& first = op.stroke.samples.front();
+      throw InputError(f_.path, first.line, "t",
+                       "a tool stroke acts while the simulation runs: this one starts at t = " + std::to_string(first.t) +
+                           " s, before play (t = " + std::to_string(play) + " s" +
+                           (out_.play ? ", line " + std::to_string(out_.playLine) : std::string(", the end of the sketch")) +
+                           ")");
+    }
+  }
+
   const RecordFile& f_;
   StrokeFile out_;
   Mirror mirror_;
@@ -292,6 +402,7 @@ const char* toString(StrokeOp op) {
     case StrokeOp::kCreate: return "create";
     case StrokeOp::kRemove: return "remove";
     case StrokeOp::kMove: return "move";
+    case StrokeOp::kTool: return "tool";
   }
   return "?";
 }
@@ -335,8 +446,33 @@ double Operation::endTime() const {
 double StrokeFile::playTime() const {
   if (play) return *play;
   double t = 0.0;
-  for (int id : active) t = std::max(t, operations[static_cast<std::size_t>(id)].endTime());
+  for (int id : active) {
+    const Operation& op = operations[static_cast<std::size_t>(id)];
+    if (op.kind == Operation::Kind::kStroke && op.stroke.op == StrokeOp::kTool) continue;
+    t = std::max(t, op.endTime());
+  }
   return t;
+}
+
+SketchUses usesOf(const StrokeFile& file) {
+  SketchUses u;
+  auto mark = [&](FirstUse& use, const Operation& op, const char* field) {
+    if (!use.used()) use = FirstUse{file.path, op.line, field};
+  };
+  for (int id : file.active) {  // in file order: the first use is the first in the file
+    const Operation& op = file.operations[static_cast<std::size_t>(id)];
+    const bool isStroke = op.kind == Operation::Kind::kStroke;
+    if (!isStroke || op.stroke.op == StrokeOp::kCreate) {
+      const bool seen = std::any_of(u.materials.begin(), u.materials.end(),
+                                    [&](const MaterialUse& m) { return m.material == op.material; });
+      if (!seen) u.materials.push_back({op.material, FirstUse{file.path, op.line, "material"}});
+    }
+    if (isStroke && op.stroke.op == StrokeOp::kTool) mark(u.toolStroke, op, "op");
+    if (op.written.velocity) mark(u.velocity, op, "vel");
+    if (op.written.spin) mark(u.velocity, op, "spin");
+    if (op.written.fixed) mark(u.fixedBody, op, "fixed");
+  }
+  return u;
 }
 
 StrokeFile loadStrokes(const std::string& path) {

@@ -24,6 +24,16 @@ struct CapReached {};
 
 const char* kAxisNames[] = {"x", "y", "z"};
 
+// How a body starts, from the create options of the operation that made it (every part
+// of a named body carries the body's values: sketch/strokes.h).
+BodyInit bodyInit(const Operation& op) {
+  BodyInit init;
+  init.velocity = op.velocity.value_or(Vec3::Zero());
+  init.spin = op.spin.value_or(Vec3::Zero());
+  init.fixed = op.fixed;
+  return init;
+}
+
 class Builder {
  public:
   // `alreadyLive` particles exist elsewhere and count towards the cap (the sketch's,
@@ -48,6 +58,8 @@ class Builder {
     std::vector<int> runtimeCreates;
     for (const Operation& op : file_.operations) {
       if (!isActive[static_cast<std::size_t>(op.id)]) continue;
+      // Tool strokes push material in the solver (docs/formats.md); the sketch never sees them.
+      if (op.kind == Operation::Kind::kStroke && op.stroke.op == StrokeOp::kTool) continue;
       cur_ = &sk_.operations[static_cast<std::size_t>(op.id)];
       if (op.startTime() > play) {
         cur_->afterPlay = true;
@@ -91,6 +103,7 @@ class Builder {
       r.start = op.startTime() - play;
       r.end = op.endTime() - play;
       r.bodyName = op.body.empty() ? "stroke " + std::to_string(op.id) : op.body;
+      r.init = br.init;
       r.particles.reserve(static_cast<std::size_t>(br.count));
       for (std::int32_t i = br.first; i < br.first + br.count; ++i) {
         const auto k = static_cast<std::size_t>(i);
@@ -542,6 +555,7 @@ class Builder {
       r.first = static_cast<std::int32_t>(start[b]);
       r.count = static_cast<std::int32_t>(c);
       r.stroke = out.stroke[static_cast<std::size_t>(start[b])];
+      r.init = bodyInit(file_.operations[static_cast<std::size_t>(r.stroke)]);
       sk_.bodies.push_back(r);
       sk_.bodyNames.push_back(names[b]);
     }

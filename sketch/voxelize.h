@@ -43,6 +43,7 @@ struct RuntimeOp {
   ParticleArrays particles;    // at voxel centres, grouped as one body
   std::vector<Vec3i> cells;
   std::string bodyName;
+  BodyInit init;               // vel=, spin=, fixed of the create
   // kRemove: at each time, the particles whose current cell is in the set are removed.
   std::vector<std::pair<double, std::vector<Vec3i>>> removals;
   // kMove: at `start` the bodies of the particles whose current cell is in `grab` become

@@ -43,6 +43,19 @@ int main(int argc, char** argv) {
   auto* lintCmd = cli.add_subcommand("lint", "Parse and voxelize only: particles per stroke and material, memory estimate, warnings; exit 1 on any error");
   lintCmd->add_option("scene", lintPath, "Scene file")->required();
 
+  // CLI11 reports a word that is not a subcommand as "A subcommand is required": name it instead.
+  if (argc > 1 && argv[1][0] != '-') {
+    std::string known;
+    bool found = false;
+    for (const CLI::App* c : {runCmd, planCmd, lintCmd}) {
+      found = found || c->check_name(argv[1]);
+      known += (known.empty() ? "" : ", ") + c->get_name();
+    }
+    if (!found) {
+      std::cerr << "physketch: unknown subcommand '" << argv[1] << "' (known: " << known << "; see --help)\n";
+      return kExitBadInput;
+    }
+  }
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

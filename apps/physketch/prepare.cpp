@@ -7,6 +7,22 @@
 
 namespace physketch::app {
 
+SolverSupport supportOf(SolverKind solver) {
+  SolverSupport s;
+  s.solver = solver;
+  switch (solver) {
+    case SolverKind::kPbd:
+      s.kinds = {MaterialKind::kRigid};
+      s.initialMotion = true;
+      s.fixedBodies = true;
+      s.paramsNotYet = {"restitution"};  // the PBD issue adds bouncing
+      break;
+    case SolverKind::kMpm:
+      break;  // the MPM issue
+  }
+  return s;
+}
+
 Prepared prepare(const std::string& scenePath) {
   Prepared p;
   p.scene = loadScene(scenePath);
@@ -14,6 +30,7 @@ Prepared prepare(const std::string& scenePath) {
   if (!std::ifstream(p.scene.strokesPath))
     throw InputError(p.scene.path, p.scene.strokesLine, "path", "cannot open stroke file '" + p.scene.strokesPath + "'");
   p.strokes = sketch::loadStrokes(p.scene.strokesPath);
+  checkSupport(p.scene, sketch::usesOf(p.strokes), supportOf(p.scene.solver));
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
   p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials));
   return p;
@@ -25,8 +42,11 @@ std::unique_ptr<Solver> makeSolver(const Prepared& p) {
     case SolverKind::kPbd:
       return std::make_unique<pbd::PbdWorld>(p.sketch->particles, p.sketch->bodies, sc.materials,
                                              pbd::paramsFromScene(sc, 0.5 * p.sketch->mapping.voxelSize()));
+    case SolverKind::kMpm:
+      break;
   }
-  throw RuntimeError("unknown solver");
+  throw InputError(sc.path, sc.solverLine, "name",
+                   std::string("solver ") + toString(sc.solver) + " is not available in this build yet (use pbd)");
 }
 
 }  // namespace physketch::app

@@ -6,6 +6,7 @@
 
 #include "core/scene.h"
 #include "core/solver.h"
+#include "core/support.h"
 #include "sketch/voxelize.h"
 
 namespace physketch::app {
@@ -16,7 +17,12 @@ struct Prepared {
   std::unique_ptr<sketch::Sketch> sketch;
 };
 
-// Loads the scene and its stroke file and voxelizes the sketch. Throws InputError
+// What each solver simulates today (core/support.h): anything else a scene asks for is
+// an error at load time naming the record, never silently ignored.
+SolverSupport supportOf(SolverKind solver);
+
+// Loads the scene and its stroke file, checks that its solver simulates everything they
+// ask for, and voxelizes the sketch. Throws InputError
 // (file:line:field) for anything wrong in either file.
 Prepared prepare(const std::string& scenePath);
 

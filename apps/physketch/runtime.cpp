@@ -52,13 +52,15 @@ std::vector<int> RuntimeDriver::beforeStep() {
       case RuntimeOp::Kind::kCreate:
         if (!st.started) {
           // Static while being drawn (Phys-Sketch §4): kinematic until the stroke ends.
-          st.body = solver_.addBody(op.particles, BodyInit{}, /*kinematic=*/op.end >= t1);
+          st.body = solver_.addBody(op.particles, op.init, /*kinematic=*/op.end >= t1);
           restCells_.insert(restCells_.end(), op.cells.begin(), op.cells.end());
           reshaped.push_back(st.body);
           st.started = true;
           st.finished = op.end < t1;
         } else if (op.end < t1) {
-          solver_.setMode(st.body, BodyMode::kDynamic);
+          // Released where it was drawn, with its create's vel= and spin= (a thrown stroke).
+          solver_.setMode(st.body, op.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic);
+          if (!op.init.fixed) solver_.setVelocity(st.body, op.init.velocity, op.init.spin);
           st.finished = true;
         }
         break;

@@ -179,3 +179,16 @@ TEST(Runtime, AReshapedBodyIsReMeshedOncePerFrameAndItsOldMeshesAreFreed) {
   EXPECT_LE(fw.meshings(), long(r.world.bodyCount()) * 8);
   EXPECT_GT(r.driver.stats()[0].removed, 0);
 }
+
+TEST(Runtime, ACreateAfterPlayIsReleasedWithItsVelAndSpin) {
+  // A stroke thrown while the simulation runs: held while drawn (0.1-0.2 s), then it
+  // leaves with vel= and spin= (closed form: x moves v t in free flight).
+  Sim r("play 0\nstroke create sphere 0.08 wood vel=2,0,0 spin=0,0,3\nsample 0.1 0 0.7 0\nsample 0.2 0 0.7 0.01\n");
+  r.steps(21);  // released at t = 0.20
+  ASSERT_EQ(r.world.mode(0), BodyMode::kDynamic);
+  const Vec3 c0 = r.centre(0);
+  EXPECT_NEAR(r.world.velocity(0).x(), 2.0, 1e-12);
+  EXPECT_NEAR(r.world.angularVelocity(0).z(), 3.0, 1e-9);
+  r.steps(10);
+  EXPECT_NEAR(r.centre(0).x() - c0.x(), 2.0 * 0.1, 1e-9);
+}

@@ -25,7 +25,7 @@ std::vector<Material> rigidMaterial(double friction = 0.5) {
   Material m;
   m.name = "rigid";
   m.density = kDensity;
-  m.friction = friction;
+  m.staticFriction = m.dynamicFriction = friction;
   return {m};
 }
 
