@@ -13,13 +13,21 @@ int main(int argc, char** argv) {
       "removes, moves, mirror, undo). Everything drawn before 'play' is voxelized into a 151^3 grid; each\n"
       "stroke (or named body) becomes a rigid body that falls under gravity onto the ground; what is drawn\n"
       "after 'play' happens while the bodies move. Every frame is rendered to PNG.\n"
+      "Materials carry a kind and parameters (docs/formats.md has the table); each solver simulates\n"
+      "some kinds today (pbd: rigid, with vel=, spin= and fixed), and a scene that asks for more is\n"
+      "refused at load time with the record that asks.\n"
+      "Frames are drawn off-screen through EGL: Mesa's software device (llvmpipe, CPU) when present,\n"
+      "else the surfaceless platform, else another EGL device; report.json names the one used.\n"
       "File formats: docs/formats.md. Examples: scenes/hello.scene, scenes/play.scene.\n\n"
       "Examples:\n"
       "  physketch run scenes/hello.scene --out out/hello      # frames in out/hello/frames, report.json\n"
       "  physketch run scenes/hello.scene --frames 10 --threads 1\n"
-      "  physketch plan scenes/hello.scene                     # the passes a step runs\n"
+      "  physketch plan scenes/hello.scene                     # the passes a step runs, and why\n"
+      "  physketch run scenes/play.scene --validate            # check the state after every pass\n"
       "  physketch lint scenes/hello.scene                     # check a sketch without simulating it\n\n"
-      "Exit codes: 0 success, 1 bad input (the message names file:line:field), 2 runtime failure."};
+      "Exit codes: 0 success, 1 bad input (the message names file:line:field), 2 runtime failure\n"
+      "(e.g. the stability guard tripped: the message and report.json name the pass, particle, stroke,\n"
+      "material, value, bound and the setting to change)."};
   cli.set_version_flag("--version", std::string("physketch ") + PHYSKETCH_VERSION);
   cli.require_subcommand(1);
 
