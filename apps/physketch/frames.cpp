@@ -28,26 +28,65 @@ std::size_t FrameWriter::meshesLive() const {
   return n;
 }
 
-// (Re)builds the meshes of one body from its particles' rest cells: one mesh per
-// material (mixed-material bodies), all moving with the body's pose.
+render::SurfaceKind surfaceOf(MaterialKind kind) {
+  return kind == MaterialKind::kRigid ? render::SurfaceKind::kRigidRestMesh : render::SurfaceKind::kParticles;
+}
+
+// (Re)builds the meshes of one body: one mesh per material (mixed-material bodies). A
+// rigid material's mesh comes from its particles' rest cells and moves with the body's
+// pose; any other kind deforms, so its mesh is made from the current particle positions
+// (and the body stays marked for re-meshing every frame). Existing GL meshes are updated
+// in place; meshes of materials the body no longer has are freed.
 void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restCells, int b) {
   ScopedPass t(profile_, passMesh_);
-  for (const MeshPart& m : meshes_[b]) renderer_.freeMesh(m.handle);  // the old shape's GL buffers
+  const ParticleArrays& p = solver.particles();
+  std::map<std::int16_t, std::vector<std::int32_t>> byMaterial;
+  for (std::int32_t i : solver.bodyParticles(b)) byMaterial[p.material[static_cast<std::size_t>(i)]].push_back(i);
+  std::vector<MeshPart> old = std::move(meshes_[b]);
   meshes_[b].clear();
-  std::map<std::int16_t, std::vector<Vec3i>> parts;
-  for (std::int32_t i : solver.bodyParticles(b))
-    parts[solver.particles().material[static_cast<std::size_t>(i)]].push_back(restCells[static_cast<std::size_t>(i)]);
+  bool deforming = false;
   const Vec3 origin = mapping_.toWorld(Vec3i(0, 0, 0));
-  for (const auto& [material, cells] : parts) {
-    render::TriangleMesh mesh = render::meshVoxels(cells, mapping_.voxelSize(), origin);
+  for (const auto& [material, ids] : byMaterial) {
+    const render::SurfaceKind surface = surfaceOf(scene_.materials[static_cast<std::size_t>(material)].kind);
+    render::TriangleMesh mesh;
+    if (surface == render::SurfaceKind::kRigidRestMesh) {
+      std::vector<Vec3i> cells;
+      cells.reserve(ids.size());
+      for (std::int32_t i : ids) cells.push_back(restCells[static_cast<std::size_t>(i)]);
+      mesh = render::meshVoxels(cells, mapping_.voxelSize(), origin);
+    } else {
+      deforming = true;
+      std::vector<Vec3> pos;
+      pos.reserve(ids.size());
+      for (std::int32_t i : ids) {
+        const auto k = static_cast<std::size_t>(i);
+        pos.emplace_back(p.x[k], p.y[k], p.z[k]);
+      }
+      render::ParticleMeshOptions opt;
+      opt.latticeOrigin = origin;
+      mesh = render::meshParticles(pos, mapping_.voxelSize(), opt);
+    }
     trianglesMeshed_ += mesh.triangleCount();
-    meshes_[b].push_back({renderer_.uploadMesh(mesh), material, mesh.triangleCount()});
+    auto reuse = std::find_if(old.begin(), old.end(), [&](const MeshPart& m) { return m.material == material; });
+    int handle;
+    if (reuse != old.end()) {
+      handle = reuse->handle;
+      renderer_.updateMesh(handle, mesh);
+      old.erase(reuse);
+    } else {
+      handle = renderer_.uploadMesh(mesh);
+    }
+    meshes_[b].push_back({handle, material, mesh.triangleCount(), surface});
   }
+  for (const MeshPart& m : old) renderer_.freeMesh(m.handle);
+  if (deforming) deforming_.push_back(b);
 }
 
 void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCells, const std::string& path) {
   // Bodies new since the last frame, then bodies reshaped since: each meshed once per frame at most.
   for (; meshedBodies_ < solver.bodyCount(); ++meshedBodies_) dirty_.push_back(meshedBodies_);
+  dirty_.insert(dirty_.end(), deforming_.begin(), deforming_.end());  // deforming bodies: every frame
+  deforming_.clear();
   std::sort(dirty_.begin(), dirty_.end());
   dirty_.erase(std::unique(dirty_.begin(), dirty_.end()), dirty_.end());
   for (int b : dirty_) meshBody(solver, restCells, b);
@@ -76,7 +115,9 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
       if (solver.mode(b) == BodyMode::kEmpty) continue;
       const Mat4f model = solver.pose(b).model();
       for (const MeshPart& m : parts) {
-        renderer_.drawMesh(m.handle, model, sc.materials[static_cast<std::size_t>(m.material)].color);
+        // A deforming surface was meshed where the particles are: no pose to apply.
+        renderer_.drawMesh(m.handle, m.surface == render::SurfaceKind::kRigidRestMesh ? model : Mat4f::Identity(),
+                           sc.materials[static_cast<std::size_t>(m.material)].color);
         trianglesLastFrame_ += m.triangles;
       }
     }

@@ -12,6 +12,7 @@
 #include "core/scene.h"
 #include "core/solver.h"
 #include "render/renderer.h"
+#include "render/voxel_mesh.h"
 #include "sketch/grid.h"
 
 namespace physketch::app {
@@ -42,6 +43,7 @@ class FrameWriter {
     int handle;
     std::int16_t material;
     std::size_t triangles;
+    render::SurfaceKind surface;
   };
   void meshBody(const Solver& solver, const std::vector<Vec3i>& restCells, int body);
 
@@ -50,6 +52,7 @@ class FrameWriter {
   render::OffscreenRenderer renderer_;
   std::map<int, std::vector<MeshPart>> meshes_;  // body -> one mesh per material
   std::vector<int> dirty_;                       // bodies to (re)mesh before the next frame
+  std::vector<int> deforming_;                   // bodies with a deforming surface: re-meshed every frame
   int meshedBodies_ = 0;                         // bodies 0..meshedBodies_-1 have been meshed once
   Profile profile_;
   int passMesh_, passDraw_, passPng_;
@@ -59,5 +62,8 @@ class FrameWriter {
 };
 
 std::string frameName(int index);
+// How a material's particles become a surface: rigid kinds keep their rest mesh and move
+// with the body pose; every other kind deforms and is meshed from its particles each frame.
+render::SurfaceKind surfaceOf(MaterialKind kind);
 
 }  // namespace physketch::app

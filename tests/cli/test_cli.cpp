@@ -88,6 +88,10 @@ TEST(Cli, HelloSceneWritesFramesAndReport) {
     ASSERT_EQ(frames.back().height, 480) << f;
   }
   EXPECT_FALSE(fs::exists(out / "frames" / "frame_0004.png"));
+  // stderr is a file here, not a terminal: progress still shows, as plain lines (every few
+  // seconds and at the end), not as a carriage-return line.
+  EXPECT_NE(r.err.find("frame 4/4  t = 0.100 s"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find('\r'), std::string::npos);
   // The bodies show: hello's materials are lit versions of wood (0.72 0.50 0.30) and
   // friends; the background (0.92 0.94 0.97) and ground are grey. At least 1 % of the
   // image is far from every grey, and the frames change as the bodies fall.

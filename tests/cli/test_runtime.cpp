@@ -192,3 +192,82 @@ TEST(Runtime, ACreateAfterPlayIsReleasedWithItsVelAndSpin) {
   r.steps(10);
   EXPECT_NEAR(r.centre(0).x() - c0.x(), 2.0 * 0.1, 1e-9);
 }
+
+namespace {
+// A stand-in solver for one deforming body (the kinds the PBD and MPM issues add): a
+// block of particles that stretches along x every step. Just enough of the interface
+// for FrameWriter.
+class StretchingBlock final : public Solver {
+ public:
+  explicit StretchingBlock(const sketch::GridMapping& m) {
+    const double h = m.voxelSize();
+    for (int k = 0; k < 8; ++k)
+      for (int j = 0; j < 8; ++j)
+        for (int i = 0; i < 8; ++i) {
+          parts_.push(float(i * h), float(0.3 + j * h), float(k * h), 0, 0);
+          members_.push_back(std::int32_t(parts_.size() - 1));
+        }
+    for (auto& ph : parts_.phase) ph = phase::make(0);
+  }
+  const char* name() const override { return "stretch"; }
+  bool step() override {
+    for (auto& x : parts_.x) x *= 1.5f;
+    ++steps_;
+    return true;
+  }
+  std::vector<PlanEntry> plan() const override { return {}; }
+  const Profile& profile() const override { return profile_; }
+  const GuardRecord& guard() const override { return guard_; }
+  void setValidate(bool) override {}
+  const ParticleArrays& particles() const override { return parts_; }
+  int bodyCount() const override { return 1; }
+  const std::vector<std::int32_t>& bodyParticles(int) const override { return members_; }
+  BodyPose pose(int) const override { return BodyPose{}; }
+  BodyMode mode(int) const override { return BodyMode::kDynamic; }
+  Vec3 velocity(int) const override { return Vec3::Zero(); }
+  Vec3 angularVelocity(int) const override { return Vec3::Zero(); }
+  std::int64_t stepCount() const override { return steps_; }
+  double dt() const override { return 0.01; }
+  std::uint64_t stateHash() const override { return 0; }
+  int addBody(const ParticleArrays&, const BodyInit&, bool) override { return -1; }
+  void setMode(int, BodyMode) override {}
+  void setVelocity(int, const Vec3&, const Vec3&) override {}
+  void setKinematicTarget(int, const Vec3&) override {}
+  std::vector<int> removeParticles(const std::vector<std::int32_t>&) override { return {}; }
+
+ private:
+  ParticleArrays parts_;
+  std::vector<std::int32_t> members_;
+  Profile profile_;
+  GuardRecord guard_;
+  std::int64_t steps_ = 0;
+};
+}  // namespace
+
+TEST(Frames, ADeformingMaterialIsMeshedFromItsParticlesEveryFrameInPlace) {
+  // Rigid kinds keep their rest mesh; any other kind deforms, so FrameWriter meshes it
+  // from the current particles every frame, updating one GL mesh in place. A block of
+  // 8^3 particles stretched 1.5x in x per frame: its surface grows (the side faces get
+  // longer: more triangles), it is meshed once per frame, and one mesh stays alive.
+  EXPECT_EQ(app::surfaceOf(MaterialKind::kRigid), render::SurfaceKind::kRigidRestMesh);
+  EXPECT_EQ(app::surfaceOf(MaterialKind::kSoft), render::SurfaceKind::kParticles);
+  StretchingBlock block(kMap);
+  SceneDesc sc;
+  Material soft;
+  soft.name = "jelly";
+  soft.kind = MaterialKind::kSoft;
+  sc.materials = {soft};
+  sc.width = 64;
+  sc.height = 48;
+  app::FrameWriter fw(sc, kMap);
+  const std::vector<Vec3i> rest(block.particles().size(), Vec3i::Zero());  // unused for deforming kinds
+  std::vector<std::size_t> tris;
+  for (int f = 0; f < 3; ++f) {
+    if (f > 0) block.step();
+    fw.write(block, rest, ::testing::TempDir() + "/stretch.png");
+    tris.push_back(fw.trianglesLastFrame());
+    EXPECT_EQ(fw.gpuMeshes().liveMeshes, 1) << "frame " << f;
+  }
+  EXPECT_EQ(fw.meshings(), 3);
+  EXPECT_LT(tris[0], tris[1]);
+}
