@@ -128,19 +128,25 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   writeParticles();
 }
 
-void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode) {
-  const std::size_t b = members_.size();
+// Appends one slot to every per-body array; mass properties are filled by refreshMassProperties.
+std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
+                                   BodyMode mode) {
   members_.push_back(std::move(members));
-  motion_.emplace_back();
-  restCentre_.push_back(Vec3::Zero());
+  motion_.push_back(motion);
+  restCentre_.push_back(restCentre);
   invMass_.push_back(0.0);
   inertiaRest_.push_back(Mat3::Zero());
   invInertiaRest_.push_back(Mat3::Zero());
   staticFriction_.push_back(0.0);
   dynamicFriction_.push_back(0.0);
   reach_.push_back(0.0);
-  mode_.push_back(BodyMode::kDynamic);
+  mode_.push_back(mode);
   groundCache_.emplace_back();
+  return members_.size() - 1;
+}
+
+void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode) {
+  const std::size_t b = pushBodySlot(std::move(members), Motion{}, Vec3::Zero(), BodyMode::kDynamic);
   // Rest shape = the particles' current positions; the pose starts at identity.
   Vec3 c = Vec3::Zero();
   double m = 0.0;
@@ -328,18 +334,8 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
     recentre(bb);
     refreshMassProperties(bb);
     for (std::size_t k = 1; k < parts.size(); ++k) {
-      const std::size_t nb = members_.size();
-      members_.push_back(std::move(parts[k]));
-      motion_.push_back(before);  // offsets are still relative to the old rest centre
-      restCentre_.push_back(restBefore);
-      invMass_.push_back(0.0);
-      inertiaRest_.push_back(Mat3::Zero());
-      invInertiaRest_.push_back(Mat3::Zero());
-      staticFriction_.push_back(0.0);
-      dynamicFriction_.push_back(0.0);
-      reach_.push_back(0.0);
-      mode_.push_back(mode);
-      groundCache_.emplace_back();
+      // Offsets are still relative to the old rest centre: start from the old frame.
+      const std::size_t nb = pushBodySlot(std::move(parts[k]), before, restBefore, mode);
       recentre(nb);
       refreshMassProperties(nb);
       const Vec3 v = motion_[nb].v, w = motion_[nb].w;

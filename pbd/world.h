@@ -123,6 +123,8 @@ class PbdWorld final : public Solver {
   void update(double h);
   void writeParticles();
 
+  std::size_t pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
+                           BodyMode mode);
   void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode);
   void refreshMassProperties(std::size_t body);
   void recentre(std::size_t body);

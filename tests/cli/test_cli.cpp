@@ -69,6 +69,8 @@ Rgba readPng(const fs::path& path) {
 
 nlohmann::json readJson(const fs::path& p) { return nlohmann::json::parse(slurp(p)); }
 
+void writeText(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
+
 }  // namespace
 
 TEST(Cli, HelloSceneWritesFramesAndReport) {
@@ -263,16 +265,11 @@ TEST(Cli, AFarCameraSeesABigSceneAndACameraLookingAwayIsAWarning) {
   // was fixed near 100 m). Near and far now come from the scene's bounds; a frame with
   // nothing in view is a warning in the report and on stderr.
   const fs::path dir = freshDir("camera");
-  {
-    std::ofstream s(dir / "big.strokes");
-    s << "physketch-strokes 1\nprimitive box wood 0  0 30 0  30 30 30\n";
-    std::ofstream a(dir / "far.scene");
-    a << "physketch-scene 1\nstrokes big.strokes\nworkspace 0 50 0 100\nmaterial wood rigid 600 0.5 0.9 0.2 0.1\n"
-         "camera 90 100 110  0 30 0  40\nimage 160 120\n";
-    std::ofstream b(dir / "away.scene");
-    b << "physketch-scene 1\nstrokes big.strokes\nworkspace 0 50 0 100\nmaterial wood rigid 600 0.5 0.9 0.2 0.1\n"
-         "camera 90 100 110  300 100 400  40\nimage 160 120\n";
-  }
+  const std::string common = "physketch-scene 1\nstrokes big.strokes\nworkspace 0 50 0 100\n"
+                             "material wood rigid 600 0.5 0.9 0.2 0.1\nimage 160 120\n";
+  writeText(dir / "big.strokes", "physketch-strokes 1\nprimitive box wood 0  0 30 0  30 30 30\n");
+  writeText(dir / "far.scene", common + "camera 90 100 110  0 30 0  40\n");
+  writeText(dir / "away.scene", common + "camera 90 100 110  300 100 400  40\n");
   Result r = runCli("run '" + (dir / "far.scene").string() + "' -q --frames 2 --out '" + (dir / "far").string() + "'", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const Rgba img = readPng(dir / "far" / "frames" / "frame_0001.png");
@@ -308,14 +305,11 @@ TEST(Cli, VelocitySpinAndFixedFromTheStrokeFileReachTheSolver) {
   // poses against the closed form: a body 0.45 m up flies free for 2 frames (1/15 s),
   // its centre moving v t in x (exact for the integrator) and turning w t about y.
   const fs::path dir = freshDir("motion");
-  {
-    std::ofstream s(dir / "m.strokes");
-    s << "physketch-strokes 1\n"
-         "primitive box wood 0  0 0.45 0  0.1 0.1 0.1 vel=1.5,0,0 spin=0,2,0\n"
-         "primitive box wood 0  0.3 0.2 0  0.1 0.1 0.1 fixed\n";
-    std::ofstream sc(dir / "m.scene");
-    sc << "physketch-scene 1\nstrokes m.strokes\nmaterial wood rigid 600 0.5 0.9 0.2 0.1\noutput report\n";
-  }
+  writeText(dir / "m.strokes",
+            "physketch-strokes 1\n"
+            "primitive box wood 0  0 0.45 0  0.1 0.1 0.1 vel=1.5,0,0 spin=0,2,0\n"
+            "primitive box wood 0  0.3 0.2 0  0.1 0.1 0.1 fixed\n");
+  writeText(dir / "m.scene", "physketch-scene 1\nstrokes m.strokes\nmaterial wood rigid 600 0.5 0.9 0.2 0.1\noutput report\n");
   const Result r = runCli("run '" + (dir / "m.scene").string() + "' -q --frames 3 --out '" + (dir / "o").string() + "'", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const auto poses = readJson(dir / "o" / "report.json")["poses"];
@@ -330,13 +324,9 @@ TEST(Cli, VelocitySpinAndFixedFromTheStrokeFileReachTheSolver) {
 
 TEST(Cli, WhatTheSolverDoesNotSimulateYetIsAnErrorAtLoadTimeNamingTheRecord) {
   const fs::path dir = freshDir("support");
-  {
-    std::ofstream s(dir / "s.strokes");
-    s << "physketch-strokes 1\nprimitive box water 0  0 0.45 0  0.1 0.1 0.1\n";
-  }
+  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box water 0  0 0.45 0  0.1 0.1 0.1\n");
   const auto scene = [&](const std::string& name, const std::string& body) {
-    std::ofstream sc(dir / name);
-    sc << "physketch-scene 1\nstrokes s.strokes\n" << body;
+    writeText(dir / name, "physketch-scene 1\nstrokes s.strokes\n" + body);
     return "run '" + (dir / name).string() + "' -q --out '" + (dir / "o").string() + "'";
   };
   Result r = runCli(scene("fluid.scene", "material water fluid\n"), dir);
