@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <queue>
 #include <random>
 #include <set>
@@ -205,5 +206,68 @@ TEST(Voxelize, OverCapNamesTheStrokeThatCrossedIt) {
   } catch (const InputError& e) {
     EXPECT_EQ(e.line(), 9);
     EXPECT_NE(std::string(e.what()).find("688590"), std::string::npos);
+  }
+}
+
+namespace {
+
+// Components by brute force: union-find over every pair of cells, joined when they
+// differ by at most one in every coordinate (26-connectivity); then numbered in
+// the order of each component's smallest linear index.
+std::vector<int> componentsByPairs(const std::vector<Vec3i>& cells) {
+  std::vector<std::size_t> parent(cells.size());
+  for (std::size_t i = 0; i < cells.size(); ++i) parent[i] = i;
+  auto root = [&](std::size_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (std::size_t i = 0; i < cells.size(); ++i)
+    for (std::size_t j = i + 1; j < cells.size(); ++j)
+      if ((cells[i] - cells[j]).cwiseAbs().maxCoeff() <= 1) parent[root(i)] = root(j);
+  std::map<std::size_t, std::int64_t> smallest;  // root -> smallest linear index
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    const auto l = GridMapping::linear(cells[i]);
+    auto [it, fresh] = smallest.emplace(root(i), l);
+    if (!fresh) it->second = std::min(it->second, l);
+  }
+  std::map<std::int64_t, int> order;
+  for (const auto& kv : smallest) order.emplace(kv.second, 0);
+  int n = 0;
+  for (auto& kv : order) kv.second = n++;
+  std::vector<int> out(cells.size());
+  for (std::size_t i = 0; i < cells.size(); ++i) out[i] = order[smallest[root(i)]];
+  return out;
+}
+
+}  // namespace
+
+TEST(ConnectedComponents26, SmallCasesByHand) {
+  EXPECT_TRUE(connectedComponents26({}).empty());
+  // Corner contact joins; a gap of one cell does not.
+  EXPECT_EQ(connectedComponents26({Vec3i(5, 5, 5), Vec3i(6, 6, 6)}), (std::vector<int>{0, 0}));
+  EXPECT_EQ(connectedComponents26({Vec3i(5, 5, 5), Vec3i(7, 5, 5)}), (std::vector<int>{0, 1}));
+  // Numbered by the smallest linear index (z first): the cell at z = 3 is component 0.
+  EXPECT_EQ(connectedComponents26({Vec3i(0, 0, 9), Vec3i(150, 150, 3), Vec3i(1, 1, 9)}), (std::vector<int>{1, 0, 1}));
+  // A cell listed twice is one cell.
+  EXPECT_EQ(connectedComponents26({Vec3i(2, 2, 2), Vec3i(9, 9, 9), Vec3i(2, 2, 2)}), (std::vector<int>{0, 1, 0}));
+  // A chain that turns back on itself at grid corners.
+  EXPECT_EQ(connectedComponents26({Vec3i(0, 0, 0), Vec3i(150, 150, 150), Vec3i(1, 1, 1)}), (std::vector<int>{0, 1, 0}));
+  EXPECT_THROW(connectedComponents26({Vec3i(0, 0, 151)}), RuntimeError);
+}
+
+TEST(ConnectedComponents26, MatchesPairwiseBruteForceOnRandomSets) {
+  std::mt19937 rng(7);
+  for (int n = 0; n < 60; ++n) {
+    // Random cells in a small box: from sparse dust to nearly solid, so components
+    // of every size meet and merge through faces, edges and corners alike.
+    const int box = 3 + static_cast<int>(rng() % 12);
+    const int count = 1 + static_cast<int>(rng() % 400);
+    const Vec3i corner(static_cast<int>(rng() % (kGridSize - box)), static_cast<int>(rng() % (kGridSize - box)),
+                       static_cast<int>(rng() % (kGridSize - box)));
+    std::vector<Vec3i> cells;
+    for (int i = 0; i < count; ++i)
+      cells.push_back(corner + Vec3i(static_cast<int>(rng() % box), static_cast<int>(rng() % box),
+                                     static_cast<int>(rng() % box)));
+    ASSERT_EQ(connectedComponents26(cells), componentsByPairs(cells)) << "set " << n;
   }
 }
