@@ -118,13 +118,36 @@ TEST(Voxelize, FastDiagonalStrokeWithoutInterpolationWouldHaveHoles) {
   const double h = m.voxelSize();
   StrokeFile f;
   f.path = "diag.strokes";
-  // Five samples, 0.2 m apart in 3D: far more than a brush of 3 voxels.
+  // Five samples, 0.19 m apart in 3D: far more than a brush of 3 voxels.
   std::vector<Vec3> pts;
   for (int i = 0; i < 5; ++i) pts.push_back(Vec3(-0.4 + 0.12 * i, 0.2 + 0.1 * i, -0.3 + 0.11 * i));
   add(f, makeStroke(BrushShape::kCube, 3 * h, pts));
   const Sketch sk = voxelize(f, m, oneMaterial());
+  // The stamps in closed form: the first sample, then per segment of length
+  // L = |(0.12, 0.1, 0.11)| = 0.19105 m = 28.85 h: i_max = 29 points cur - i h dir.
+  const double len = std::sqrt(0.12 * 0.12 + 0.1 * 0.1 + 0.11 * 0.11);
+  ASSERT_EQ(std::lround(len / h), 29);
+  std::vector<Vec3> stamps{pts[0]};
+  for (int k = 1; k < 5; ++k)
+    for (int i = 0; i <= 29; ++i) stamps.push_back(pts[k] - i * h * (pts[k] - pts[k - 1]) / len);
+  // The cube brush (edge 3h, default axis: aligned with the grid) covers the cells
+  // whose centres are within 1.5 h of its centre along every axis.
+  std::set<std::int64_t> expected;
+  for (const Vec3& s : stamps) {
+    const Vec3i c = m.discretize(s);
+    for (int dz = -2; dz <= 2; ++dz)
+      for (int dy = -2; dy <= 2; ++dy)
+        for (int dx = -2; dx <= 2; ++dx) {
+          const Vec3i cell = c + Vec3i(dx, dy, dz);
+          if ((m.toWorld(cell) - s).cwiseAbs().maxCoeff() <= 1.5 * h) expected.insert(GridMapping::linear(cell));
+        }
+  }
+  std::set<std::int64_t> got;
+  for (const auto& c : sk.cells) got.insert(GridMapping::linear(c));
+  EXPECT_EQ(got, expected);
+  // Without interpolation the five cubes of 27 cells lie apart.
   EXPECT_EQ(components(sk.cells), 1);
-  EXPECT_GT(sk.particles.size(), 9u * 5u);  // more than the five stamps alone
+  EXPECT_GT(sk.particles.size(), 10u * 27u);
 }
 
 TEST(Voxelize, OneParticlePerVoxelAtTheVoxelCentre) {
