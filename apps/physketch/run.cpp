@@ -38,7 +38,8 @@ struct Prepared {
   std::vector<BodyRange> bodies;
 };
 
-Prepared prepare(const std::string& scenePath) {
+// `threads`: for voxelizing (0 = every core); the sketch does not depend on it.
+Prepared prepare(const std::string& scenePath, int threads = 0) {
   Prepared p;
   p.scene = loadScene(scenePath);
   try {
@@ -49,7 +50,7 @@ Prepared prepare(const std::string& scenePath) {
     throw;
   }
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
-  p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials));
+  p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials, {threads}));
   p.bodies = p.sketch->bodies;
   return p;
 }
@@ -204,7 +205,7 @@ int runScene(const RunOptions& opt) {
   tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
   Prepared p;
   if (const int rc = withExitCodes([&] {
-        p = prepare(opt.scene);
+        p = prepare(opt.scene, threads);
         return kExitOk;
       });
       rc != kExitOk)
