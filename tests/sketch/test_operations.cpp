@@ -207,13 +207,30 @@ TEST(Move, TranslatesExactlyTheGrabbedVoxels) {
   expectConsistent(after);
 }
 
-TEST(Move, CarryingParticlesOutOfTheWorkspaceIsAnError) {
+TEST(Move, CarryingParticlesOutOfTheWorkspaceNamesTheLastSampleAndTheAxis) {
   try {
     sketchOf("primitive box wood 0  0 0.9 0  0.1 0.1 0.1\nstroke move sphere 0.1\nsample 1 0 0.9 0\nsample 2 0 0.99 0\n");
     FAIL();
   } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "t.strokes");
     EXPECT_EQ(e.line(), 5);
-    EXPECT_NE(std::string(e.what()).find("outside the workspace"), std::string::npos);
+    EXPECT_EQ(e.field(), "y");
+    EXPECT_NE(std::string(e.what()).find("outside the workspace"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Move, ASampleOutsideTheWorkspaceNamesItsLineAndAxisBeforeAndAfterPlay) {
+  for (const char* play : {"", "play 0.5\n"}) {
+    try {
+      sketchOf(std::string("primitive box wood 0  0 0.5 0  0.1 0.1 0.1\n") + play +
+               "stroke move sphere 0.1\nsample 1 0 0.5 0\nsample 2 0 0.5 0\nsample 3 0 0.5 -0.62\n");
+      FAIL() << play;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), "t.strokes");
+      EXPECT_EQ(e.line(), *play ? 7 : 6) << play;
+      EXPECT_EQ(e.field(), "z") << play;
+      EXPECT_NE(std::string(e.what()).find("sample outside the workspace"), std::string::npos) << e.what();
+    }
   }
 }
 
@@ -327,6 +344,30 @@ TEST(Lint, WarnsAboutThinFeaturesRemovedStrokesUnusedMaterialsAndSplitBodies) {
   EXPECT_NE(all.find("t.strokes:10: stroke create sphere: creates no particle"), std::string::npos) << all;
 }
 
+TEST(Lint, OperationsAfterPlay) {
+  const Sketch sk = sketchOf(
+      "primitive sphere wood 0  0 0.5 0  0.05 body=table\nplay 1\n"
+      "stroke remove sphere 0.005\nsample 2 0 0.5 0\n"                           // thinner than 2h, after play
+      "primitive sphere stone 3  0.2 0.5 0  0.05 body=table\n"                     // reuses a name from before play
+      "stroke create sphere 0.05 wood\nsample 4 0 0.5 0.2\nundo\n");            // undone after play
+  std::string all;
+  for (const auto& w : sk.warnings) all += w + "\n";
+  EXPECT_NE(all.find("t.strokes:4: stroke remove sphere: feature of"), std::string::npos) << all;
+  // Stone is used, by a create after play only.
+  EXPECT_EQ(all.find("material 'stone' is never used"), std::string::npos) << all;
+  EXPECT_NE(all.find("t.strokes:6: primitive sphere: body=table after play makes a new body; it cannot join the body "
+                     "'table' made before play"),
+            std::string::npos)
+      << all;
+  EXPECT_NE(all.find("t.strokes:7: stroke create sphere: drawn after play and undone, so it never happens"),
+            std::string::npos)
+      << all;
+  EXPECT_EQ(sk.bodies.size(), 1u);
+  ASSERT_EQ(sk.runtime.size(), 2u);
+  EXPECT_EQ(sk.runtime[1].bodyName, "table");
+  EXPECT_EQ(sk.operations[3].body, -1);  // not a body of the sketch
+}
+
 TEST(Voxelize, OperationsAfterPlayBecomeRuntimeOperations) {
   const Sketch sk = sketchOf(
       "primitive sphere wood 0 0 0.5 0 0.05\nplay 1\n"
@@ -356,7 +397,8 @@ TEST(Voxelize, CreatesAfterPlayCountTowardsTheCap) {
     FAIL();
   } catch (const InputError& e) {
     EXPECT_EQ(e.line(), 4);
-    EXPECT_NE(std::string(e.what()).find("particle cap"), std::string::npos);
+    EXPECT_EQ(e.field(), "sx");  // the largest dimension (all three are equal)
+    EXPECT_NE(std::string(e.what()).find("primitive box crosses the particle cap"), std::string::npos) << e.what();
   }
 }
 

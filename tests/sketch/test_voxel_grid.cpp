@@ -227,8 +227,21 @@ TEST(Voxelize, OverCapNamesTheStrokeThatCrossedIt) {
     voxelize(f, m, oneMaterial());
     FAIL();
   } catch (const InputError& e) {
+    // The line and the field, not the operation's index (which counts from 0).
     EXPECT_EQ(e.line(), 9);
-    EXPECT_NE(std::string(e.what()).find("688590"), std::string::npos);
+    EXPECT_EQ(e.field(), "size");
+    EXPECT_NE(std::string(e.what()).find("stroke create cube crosses the particle cap of 688590"), std::string::npos)
+        << e.what();
+    EXPECT_EQ(std::string(e.what()).find("operation 1"), std::string::npos) << e.what();
+  }
+  // A primitive names its largest dimension.
+  StrokeFile g = parseStrokes("physketch-strokes 1\nprimitive box wood 0  0 0.5 0  0.8 0.95 0.9\n", "cap.strokes");
+  try {
+    voxelize(g, m, oneMaterial());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 2);
+    EXPECT_EQ(e.field(), "sy");
   }
 }
 
