@@ -72,7 +72,8 @@ void CreatesAfterPlay::add(const Operation& op, double play, OperationSummary& s
   for (std::size_t i = from; i < made.size(); ++i) {
     const Vec3i c = GridMapping::cellOf(made[i]);
     const Vec3 q = checks_.mapping().toWorld(c);  // Eq. 5
-    r.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op.id, sum.material);
+    r.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op.id,
+                     sum.material);
     r.cells.push_back(c);
   }
   out.push_back(std::move(r));

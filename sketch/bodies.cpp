@@ -52,7 +52,8 @@ std::vector<int> compactIntoBodies(const SketchCells& cells, const BodyPlan& pla
   std::vector<Piece> pieces;
   std::vector<std::size_t> firstPiece(nPlanned + 1, 0);  // the pieces of body b: [firstPiece[b], firstPiece[b+1])
   std::vector<std::vector<const OpRun*>> runsOf(nPlanned);
-  for (const OpRun& run : cells.runs()) runsOf[static_cast<std::size_t>(plan.bodyOfOp[static_cast<std::size_t>(run.op)])].push_back(&run);
+  for (const OpRun& run : cells.runs())
+    runsOf[static_cast<std::size_t>(plan.bodyOfOp[static_cast<std::size_t>(run.op)])].push_back(&run);
   for (std::size_t b = 0; b < nPlanned; ++b) {
     firstPiece[b] = pieces.size();
     for (const OpRun* run : runsOf[b])
@@ -130,32 +131,33 @@ namespace {
 std::vector<bool> touchedBodies(const SketchCells& cells, const BodyPlan& plan, const std::vector<int>& planned,
                                 const Sketch& sk) {
   std::vector<int> bodyOfPlanned(plan.names.size(), -1);
-  for (std::size_t b = 0; b < planned.size(); ++b) bodyOfPlanned[static_cast<std::size_t>(planned[b])] = static_cast<int>(b);
+  for (std::size_t b = 0; b < planned.size(); ++b)
+    bodyOfPlanned[static_cast<std::size_t>(planned[b])] = static_cast<int>(b);
   std::vector<std::int64_t> created(sk.bodies.size(), 0);
   const std::vector<OpRun>& runs = cells.runs();
-  auto bodyOfRun = [&](const OpRun& run) { return bodyOfPlanned[static_cast<std::size_t>(plan.bodyOfOp[static_cast<std::size_t>(run.op)])]; };
+  auto bodyOfRun = [&](const OpRun& run) {
+    return bodyOfPlanned[static_cast<std::size_t>(plan.bodyOfOp[static_cast<std::size_t>(run.op)])];
+  };
   for (const OpRun& run : runs)
     if (const int b = bodyOfRun(run); b >= 0) created[static_cast<std::size_t>(b)] += run.end - run.first;
   std::vector<bool> touched(sk.bodies.size(), false);
   for (std::size_t b = 0; b < sk.bodies.size(); ++b) touched[b] = created[b] != sk.bodies[b].count;
   for (const std::int32_t p : cells.movedParticles()) {
     // The run holding p: runs are in creation order, so by their first particle.
-    const auto it = std::upper_bound(runs.begin(), runs.end(), p, [](std::int32_t q, const OpRun& r) { return q < r.first; });
+    const auto it =
+        std::upper_bound(runs.begin(), runs.end(), p, [](std::int32_t q, const OpRun& r) { return q < r.first; });
     if (const int b = bodyOfRun(*std::prev(it)); b >= 0) touched[static_cast<std::size_t>(b)] = true;
   }
   return touched;
 }
 
-// The body each of body `b`'s particles goes to (0 = the one keeping the planned name),
-// by the rule of splitCutBodies; empty when the body stays whole.
-std::vector<int> piecesOf(const SketchCells& cells, const BodyPlan& plan, int plannedBody, const BodyRange& body,
-                          const Sketch& sk) {
-  const std::vector<Vec3i> finalCells(sk.cells.begin() + body.first, sk.cells.begin() + body.first + body.count);
-  const std::vector<int> comp = connectedComponents26(finalCells);
-  const int nComp = *std::max_element(comp.begin(), comp.end()) + 1;
-  if (nComp == 1) return {};
-  // The cells its particles were created in, removed ones included (they held the
-  // design together), in the order compactIntoBodies wrote the live ones.
+// For each 26-connected component `comp` of a body's final cells (labels per live
+// particle): does it hold a whole design piece? The design pieces are the components
+// of the cells the body's particles were created in, removed ones included (they
+// held the design together); one is whole when its live particles all lie in one
+// final component.
+std::vector<bool> holdsWholeDesignPiece(const SketchCells& cells, const BodyPlan& plan, int plannedBody,
+                                        const std::vector<int>& comp, int nComp) {
   std::vector<Vec3i> born;
   std::vector<std::size_t> liveAt;  // index into `born` of each live particle, in output order
   for (const OpRun& run : cells.runs()) {
@@ -167,7 +169,6 @@ std::vector<int> piecesOf(const SketchCells& cells, const BodyPlan& plan, int pl
   }
   const std::vector<int> design = connectedComponents26(born);
   const int nDesign = *std::max_element(design.begin(), design.end()) + 1;
-  // A design piece is whole when its live particles all lie in one final component.
   std::vector<int> compOf(static_cast<std::size_t>(nDesign), -1);
   std::vector<bool> broken(static_cast<std::size_t>(nDesign), false);
   for (std::size_t j = 0; j < liveAt.size(); ++j) {
@@ -175,23 +176,35 @@ std::vector<int> piecesOf(const SketchCells& cells, const BodyPlan& plan, int pl
     if (compOf[d] < 0) compOf[d] = comp[j];
     else if (compOf[d] != comp[j]) broken[d] = true;
   }
-  std::vector<bool> holdsWhole(static_cast<std::size_t>(nComp), false);
+  std::vector<bool> whole(static_cast<std::size_t>(nComp), false);
   for (std::size_t d = 0; d < compOf.size(); ++d)
-    if (compOf[d] >= 0 && !broken[d]) holdsWhole[static_cast<std::size_t>(compOf[d])] = true;
+    if (compOf[d] >= 0 && !broken[d]) whole[static_cast<std::size_t>(compOf[d])] = true;
+  return whole;
+}
+
+// The body each particle of `body` goes to (0 = the one keeping the planned name),
+// by the rule of splitCutBodies; empty when the body stays one.
+std::vector<int> piecesOf(const SketchCells& cells, const BodyPlan& plan, int plannedBody, const BodyRange& body,
+                          const Sketch& sk) {
+  const std::vector<Vec3i> finalCells(sk.cells.begin() + body.first, sk.cells.begin() + body.first + body.count);
+  const std::vector<int> comp = connectedComponents26(finalCells);
+  const int nComp = *std::max_element(comp.begin(), comp.end()) + 1;
+  if (nComp == 1) return {};
+  const std::vector<bool> whole = holdsWholeDesignPiece(cells, plan, plannedBody, comp, nComp);
   // The fragments, largest first (ties: the component whose first cell comes first).
   std::vector<std::int32_t> size(static_cast<std::size_t>(nComp), 0);
   for (int c : comp) ++size[static_cast<std::size_t>(c)];
   std::vector<int> fragments;
   for (int c = 0; c < nComp; ++c)
-    if (!holdsWhole[static_cast<std::size_t>(c)]) fragments.push_back(c);
+    if (!whole[static_cast<std::size_t>(c)]) fragments.push_back(c);
+  if (fragments.empty()) return {};  // every component holds a whole design piece: one body, as drawn
   std::stable_sort(fragments.begin(), fragments.end(), [&](int a, int b) {
     return size[static_cast<std::size_t>(a)] > size[static_cast<std::size_t>(b)];
   });
-  const bool anyWhole = fragments.size() < static_cast<std::size_t>(nComp);
-  if (anyWhole && fragments.empty()) return {};  // every component holds a whole design piece: one body, as drawn
-  std::vector<int> pieceOfComp(static_cast<std::size_t>(nComp), 0);  // whole pieces: body 0
+  const int first = fragments.size() < static_cast<std::size_t>(nComp) ? 1 : 0;  // 1: body 0 is the whole pieces
+  std::vector<int> pieceOfComp(static_cast<std::size_t>(nComp), 0);
   for (std::size_t f = 0; f < fragments.size(); ++f)
-    pieceOfComp[static_cast<std::size_t>(fragments[f])] = static_cast<int>(f) + (anyWhole ? 1 : 0);
+    pieceOfComp[static_cast<std::size_t>(fragments[f])] = first + static_cast<int>(f);
   std::vector<int> piece(comp.size());
   for (std::size_t j = 0; j < comp.size(); ++j) piece[j] = pieceOfComp[static_cast<std::size_t>(comp[j])];
   return piece;

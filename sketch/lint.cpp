@@ -8,7 +8,8 @@
 
 namespace physketch::sketch {
 
-void lint(const StrokeFile& file, const std::vector<Material>& materials, const std::vector<CutBody>& cuts, Sketch& sk) {
+void lint(const StrokeFile& file, const std::vector<Material>& materials, const std::vector<CutBody>& cuts,
+          Sketch& sk) {
   const double h = sk.mapping.voxelSize();
   const double play = file.playTime();
   auto warn = [&](int line, const std::string& text) {
@@ -63,8 +64,9 @@ void lint(const StrokeFile& file, const std::vector<Material>& materials, const 
     std::string list;
     for (int b = cut.firstBody; b < cut.firstBody + cut.pieces; ++b)
       list += (list.empty() ? "'" : ", '") + sk.bodyNames[static_cast<std::size_t>(b)] + "'";
-    warn(cut.line, "body '" + sk.bodyNames[static_cast<std::size_t>(cut.firstBody)] + "' was cut by a remove or move into " +
-                       std::to_string(cut.pieces) + " bodies: " + list);
+    const std::string& name = sk.bodyNames[static_cast<std::size_t>(cut.firstBody)];
+    warn(cut.line, "body '" + name + "' was cut by a remove or move into " + std::to_string(cut.pieces) +
+                       " bodies: " + list);
   }
 }
 

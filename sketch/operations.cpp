@@ -146,7 +146,8 @@ Footprint Footprints::meshStamp(const Operation& op, const std::string& strokeFi
   return Footprint(nullptr, &cells_, op.mirror, mapping_, op.mirror.axis >= 0 ? 2 : 1);
 }
 
-Footprint createFootprint(const Operation& op, Footprints& footprints, const InputChecks& checks, OperationSummary& sum) {
+Footprint createFootprint(const Operation& op, Footprints& footprints, const InputChecks& checks,
+                          OperationSummary& sum) {
   auto made = [&](Footprint fp) {
     sum.stamps += fp.stamps();
     return fp;

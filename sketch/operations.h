@@ -112,7 +112,8 @@ void createIn(const Footprint& fp, Store& store) {
 
 // Checks a create operation's input and makes its footprint; records its material
 // and stamps in `sum`.
-Footprint createFootprint(const Operation& op, Footprints& footprints, const InputChecks& checks, OperationSummary& sum);
+Footprint createFootprint(const Operation& op, Footprints& footprints, const InputChecks& checks,
+                          OperationSummary& sum);
 
 // Applies an operation that starts before play to the sketch.
 void applyBeforePlay(const Operation& op, Footprints& footprints, const InputChecks& checks, SketchCells& cells,

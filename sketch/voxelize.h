@@ -28,7 +28,7 @@ struct OperationSummary {
   std::int32_t moved = 0;      // particles it carried (move strokes)
   std::int32_t remaining = 0;  // of the particles it created, how many are in the final sketch
   std::int64_t stamps = 0;     // brush positions stamped (samples + interpolated points, mirror copies included)
-  double minFeature = 0.0;     // m: smallest brush/primitive dimension, for the thin-feature warning (every active operation)
+  double minFeature = 0.0;     // m: smallest brush/primitive dimension, for the thin-feature warning (active ones)
   int body = -1;               // body of its particles in the final sketch, the first of them when a remove
                                // or move cut its body; -1 for none (and for operations after play)
   bool afterPlay = false;      // happens while the simulation runs (see Sketch::runtime)
