@@ -173,11 +173,17 @@ void applyBeforePlay(const Operation& op, Footprints& footprints, const InputChe
   cells.begin(sum);
   if (createsParticles(op)) return createIn(createFootprint(op, footprints, checks, sum), cells);
   checks.samplesInside(op.stroke);
-  if (op.stroke.op == StrokeOp::kMove) return applyMove(op, checks, cells, sum);
-  // Alg. 2: free every cell under the brush at every stamp.
-  const Footprint fp = footprints.stroke(op);
-  sum.stamps += fp.stamps();
-  fp.forEachCell([&](const Vec3i& c) { cells.drop(c); });
+  switch (op.stroke.op) {  // no default: a new stroke operation must be handled here (-Wswitch)
+    case StrokeOp::kCreate: return;  // handled above
+    case StrokeOp::kMove: return applyMove(op, checks, cells, sum);
+    case StrokeOp::kRemove: {
+      // Alg. 2: free every cell under the brush at every stamp.
+      const Footprint fp = footprints.stroke(op);
+      sum.stamps += fp.stamps();
+      fp.forEachCell([&](const Vec3i& c) { cells.drop(c); });
+      return;
+    }
+  }
 }
 
 }  // namespace physketch::sketch
