@@ -60,7 +60,7 @@ int main(int argc, char** argv) {
   std::unique_ptr<sketch::Sketch> sk;
   for (int r = 0; r < repeats; ++r) {
     const double t0 = nowSeconds();
-    sk = std::make_unique<sketch::Sketch>(sketch::voxelize(strokes, mapping, sc.materials));
+    sk = std::make_unique<sketch::Sketch>(sketch::voxelize(strokes, mapping, sc.materials, {threads}));
     tv.push_back(nowSeconds() - t0);
   }
   const std::size_t n = sk->particles.size();

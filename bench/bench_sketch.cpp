@@ -83,8 +83,10 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  // Long strokes are swept in parallel parts (sketch::voxelize); the result does not depend on it.
-  tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(std::max(1, threads)));
+  // Long strokes are swept in parallel parts (sketch::voxelize is given the count); the
+  // result does not depend on it. The process limit holds anything else TBB runs to it.
+  threads = std::max(1, threads);
+  tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
   const GridMapping map(Vec3(0, 0.5, 0), 1.0);
   Material wood;
   wood.name = "wood";
@@ -102,7 +104,7 @@ int main(int argc, char** argv) {
     long stamps = 0;
     for (int r = 0; r < repeats; ++r) {
       const double t0 = nowSeconds();
-      const Sketch sk = voxelize(f, map, mats);
+      const Sketch sk = voxelize(f, map, mats, {threads});
       t.push_back(nowSeconds() - t0);
       n = sk.particles.size();
       stamps = sk.operations[0].stamps;

@@ -11,8 +11,10 @@
 namespace physketch {
 
 // Labels each cell with the index of its 26-connected component. Components are
-// numbered 0, 1, ... in the order of their first cell in `cells` (so the labelling
-// is a pure function of the input order). Duplicate cells share a label.
+// numbered 0, 1, ... in the z, y, x order of their smallest cell (for cells of one grid:
+// by their smallest linear index), so the labelling is a pure function of the set of
+// cells, not of their order. Duplicate cells share a label. Dense over the bounding box
+// (O(n + box)); a box too large to allocate falls back to a sorted search (O(n log n)).
 std::vector<std::int32_t> componentLabels26(const std::vector<Vec3i>& cells, int* componentCount = nullptr);
 
 }  // namespace physketch

@@ -1,5 +1,8 @@
 #include "sketch/grid.h"
 
+#include "core/lattice.h"
+
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -58,6 +61,13 @@ std::int64_t OccupancyGrid::occupied() const {
 bool OccupancyGrid::operator==(const OccupancyGrid& other) const {
   const std::size_t bytes = static_cast<std::size_t>(kGridCells) * sizeof(std::int32_t);
   return std::memcmp(cells_.get(), other.cells_.get(), bytes) == 0;
+}
+
+std::vector<int> connectedComponents26(const std::vector<Vec3i>& cells) {
+  for (const Vec3i& c : cells)
+    if (!GridMapping::inGrid(c)) throw RuntimeError("connectedComponents26: a cell lies outside the grid");
+  const std::vector<std::int32_t> label = componentLabels26(cells);
+  return std::vector<int>(label.begin(), label.end());
 }
 
 }  // namespace physketch::sketch

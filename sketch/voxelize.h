@@ -8,6 +8,7 @@
 
 #include "core/material.h"
 #include "core/particles.h"
+#include "sketch/brush.h"
 #include "sketch/grid.h"
 #include "sketch/rasterize.h"
 #include "sketch/solids.h"
@@ -27,8 +28,9 @@ struct OperationSummary {
   std::int32_t moved = 0;      // particles it carried (move strokes)
   std::int32_t remaining = 0;  // of the particles it created, how many are in the final sketch
   std::int64_t stamps = 0;     // brush positions stamped (samples + interpolated points, mirror copies included)
-  double minFeature = 0.0;     // m: smallest brush/primitive dimension, for the thin-feature warning
-  int body = -1;               // body of its particles in the final sketch (-1 if none)
+  double minFeature = 0.0;     // m: smallest brush/primitive dimension, for the thin-feature warning (active ones)
+  int body = -1;               // body of its particles in the final sketch, the first of them when a remove
+                               // or move cut its body; -1 for none (and for operations after play)
   bool afterPlay = false;      // happens while the simulation runs (see Sketch::runtime)
 };
 
@@ -59,34 +61,32 @@ struct Sketch {
   std::vector<Vec3i> cells;           // grid cell of each particle
   std::vector<OperationSummary> operations;  // one per operation in the file (undone ones too)
   std::vector<BodyRange> bodies;      // contiguous particle ranges; material = the first particle's
-  std::vector<std::string> bodyNames; // "chair" for body=chair, else "stroke N"
+  std::vector<std::string> bodyNames; // "chair" for body=chair, else "stroke N"; "chair #2", "stroke N #2", ... for
+                                      // the further pieces of a body that a remove or move cut
   std::vector<std::string> warnings;  // lint warnings (file:line: text)
   std::vector<RuntimeOp> runtime;     // operations after play, in start-time order
 
   explicit Sketch(const GridMapping& m) : mapping(m) {}
 };
 
-// Eq. 6-7: the brush positions stamped for the segment from `prev` to `cur`:
-// P'(i) = cur - i * V/|V| * d for i in [0, i_max], i_max = Round(|V| dt / d).
-// |V| dt is the distance travelled. `out` is cleared first; a zero-length segment gives {cur}.
-void interpolateSegment(const Vec3& prev, const Vec3& cur, double particleDiameter, std::vector<Vec3>& out);
-
-// The brush of a stroke at one stamp: size scaled by pressure, axis fixed or along `direction`.
-Solid brushSolid(const Stroke& stroke, const Vec3& position, double pressure, const Vec3& direction, double voxelSize);
-
-// Reflects a cell across a mirror plane snapped to the nearest cell centre or
-// face (so the mirrored set is exact): i' = 2m - i on the mirror axis.
-Vec3i mirrorCell(const Vec3i& cell, const Mirror& mirror, const GridMapping& mapping);
-
+struct VoxelizeOptions {
+  // Threads for the parallel parts (a long stroke is swept in this many parts, the
+  // particle arrays are written in pieces), run in a TBB arena of this many threads;
+  // 0 = every core. TBB's process-wide limit is not read. The sketch is the same bit
+  // for bit for any count.
+  int threads = 0;
+};
 
 // Replays the active operations that start before the play time, in file order;
 // operations that start after it become RuntimeOps (creates are voxelized into a
-// grid of their own, in file order, so they never overlap each other).
+// grid of their own, in file order, so they never overlap each other). A body that
+// a remove or a move disconnects becomes one body per piece (sketch/bodies.h).
 // Throws InputError (stroke file:line:field) for an unknown material, a sample
 // outside the workspace, a move that carries particles out of the workspace,
 // an unreadable stamp mesh, or a sketch that crosses the particle cap (naming
-// the operation that crossed it).
+// the line and field of the operation that crossed it).
 // Mesh stamps are voxelized with StampMesh (CGAL, sketch/mesh_stamp.cpp).
-Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials);
+Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
+                const VoxelizeOptions& options = {});
 
 }  // namespace physketch::sketch

@@ -23,7 +23,7 @@ SolverSupport supportOf(SolverKind solver) {
   return s;
 }
 
-Prepared prepare(const std::string& scenePath) {
+Prepared prepare(const std::string& scenePath, int threads) {
   Prepared p;
   p.scene = loadScene(scenePath);
   // A stroke file that cannot be opened is the scene's error (its 'strokes' line).
@@ -32,7 +32,7 @@ Prepared prepare(const std::string& scenePath) {
   p.strokes = sketch::loadStrokes(p.scene.strokesPath);
   checkSupport(p.scene, sketch::usesOf(p.strokes), supportOf(p.scene.solver));
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
-  p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials));
+  p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials, {threads}));
   return p;
 }
 

@@ -24,7 +24,8 @@ SolverSupport supportOf(SolverKind solver);
 // Loads the scene and its stroke file, checks that its solver simulates everything they
 // ask for, and voxelizes the sketch. Throws InputError
 // (file:line:field) for anything wrong in either file.
-Prepared prepare(const std::string& scenePath);
+// `threads`: for voxelizing (0 = every core); the sketch does not depend on it.
+Prepared prepare(const std::string& scenePath, int threads = 0);
 
 // The solver the scene asks for (`solver` record), started on the sketch's particles
 // and bodies. Throws InputError naming the scene's line when that solver cannot run it.

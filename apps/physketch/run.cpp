@@ -168,7 +168,7 @@ int runScene(const RunOptions& opt) {
   Prepared p;
   std::unique_ptr<Solver> solver;
   if (const int rc = withExitCodes([&] {
-        p = prepare(opt.scene);
+        p = prepare(opt.scene, threads);
         solver = makeSolver(p);
         return kExitOk;
       });

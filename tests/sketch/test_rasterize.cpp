@@ -6,8 +6,6 @@
 #include <random>
 #include <set>
 
-#include <tbb/global_control.h>
-
 #include "sketch/raster_kernels.h"
 #include "sketch/rasterize.h"
 #include "sketch/voxelize.h"
@@ -198,7 +196,7 @@ TEST(RasterizeKernels, Avx2MatchesScalar) {
 }
 
 // Voxelization splits long strokes into parts swept in parallel: the sketch must be
-// the same bit for bit with 1, 2 and 3 threads (creates, removes, mirror, moves).
+// the same bit for bit with 1, 2 and 3 threads (creates, removes, mirror, moves, a cut body).
 TEST(Voxelize, SameSketchForAnyThreadCount) {
   std::string text = "physketch-strokes 1\nmirror x 0.02\nstroke create sphere 0.06 wood\n";
   for (int i = 0; i < 5000; ++i) {
@@ -213,15 +211,15 @@ TEST(Voxelize, SameSketchForAnyThreadCount) {
   for (int i = 0; i < 2500; ++i)
     text += "sample " + std::to_string(200 + i / 90.0) + " 0 " + std::to_string(0.1 + 0.0003 * i) + " " +
             std::to_string(0.1 * std::sin(0.01 * i)) + "\n";
+  // A cut through the capsule stroke where it passes y = 0.5 (i = 1333, z = 0.067): two bodies.
+  text += "stroke remove cube 0.08\nsample 300 0 0.5 0.0674\n";
   const StrokeFile f = parseStrokes(text, "t.strokes");
   Material wood, stone;
   wood.name = "wood", stone.name = "stone";
-  auto run = [&](int threads) {
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
-    return voxelize(f, kMap, {wood, stone});
-  };
+  auto run = [&](int threads) { return voxelize(f, kMap, {wood, stone}, {threads}); };
   const Sketch one = run(1);
   ASSERT_GT(one.particles.size(), 50000u);
+  ASSERT_GT(one.bodies.size(), 2u);  // the remove cuts the helix: its pieces are bodies of their own
   for (int threads : {2, 3}) {
     const Sketch many = run(threads);
     EXPECT_TRUE(many.grid == one.grid) << threads << " threads";
@@ -229,6 +227,12 @@ TEST(Voxelize, SameSketchForAnyThreadCount) {
     EXPECT_EQ(many.particles.x, one.particles.x);
     EXPECT_EQ(many.particles.stroke, one.particles.stroke);
     EXPECT_EQ(many.particles.material, one.particles.material);
+    EXPECT_EQ(many.bodyNames, one.bodyNames) << threads << " threads";
+    ASSERT_EQ(many.bodies.size(), one.bodies.size());
+    for (std::size_t b = 0; b < one.bodies.size(); ++b) {
+      EXPECT_EQ(many.bodies[b].first, one.bodies[b].first);
+      EXPECT_EQ(many.bodies[b].count, one.bodies[b].count);
+    }
     for (std::size_t o = 0; o < one.operations.size(); ++o) {
       EXPECT_EQ(many.operations[o].created, one.operations[o].created);
       EXPECT_EQ(many.operations[o].removed, one.operations[o].removed);

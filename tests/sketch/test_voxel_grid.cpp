@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <queue>
 #include <random>
 #include <set>
@@ -117,13 +118,36 @@ TEST(Voxelize, FastDiagonalStrokeWithoutInterpolationWouldHaveHoles) {
   const double h = m.voxelSize();
   StrokeFile f;
   f.path = "diag.strokes";
-  // Five samples, 0.2 m apart in 3D: far more than a brush of 3 voxels.
+  // Five samples, 0.19 m apart in 3D: far more than a brush of 3 voxels.
   std::vector<Vec3> pts;
   for (int i = 0; i < 5; ++i) pts.push_back(Vec3(-0.4 + 0.12 * i, 0.2 + 0.1 * i, -0.3 + 0.11 * i));
   add(f, makeStroke(BrushShape::kCube, 3 * h, pts));
   const Sketch sk = voxelize(f, m, oneMaterial());
+  // The stamps in closed form: the first sample, then per segment of length
+  // L = |(0.12, 0.1, 0.11)| = 0.19105 m = 28.85 h: i_max = 29 points cur - i h dir.
+  const double len = std::sqrt(0.12 * 0.12 + 0.1 * 0.1 + 0.11 * 0.11);
+  ASSERT_EQ(std::lround(len / h), 29);
+  std::vector<Vec3> stamps{pts[0]};
+  for (int k = 1; k < 5; ++k)
+    for (int i = 0; i <= 29; ++i) stamps.push_back(pts[k] - i * h * (pts[k] - pts[k - 1]) / len);
+  // The cube brush (edge 3h, default axis: aligned with the grid) covers the cells
+  // whose centres are within 1.5 h of its centre along every axis.
+  std::set<std::int64_t> expected;
+  for (const Vec3& s : stamps) {
+    const Vec3i c = m.discretize(s);
+    for (int dz = -2; dz <= 2; ++dz)
+      for (int dy = -2; dy <= 2; ++dy)
+        for (int dx = -2; dx <= 2; ++dx) {
+          const Vec3i cell = c + Vec3i(dx, dy, dz);
+          if ((m.toWorld(cell) - s).cwiseAbs().maxCoeff() <= 1.5 * h) expected.insert(GridMapping::linear(cell));
+        }
+  }
+  std::set<std::int64_t> got;
+  for (const auto& c : sk.cells) got.insert(GridMapping::linear(c));
+  EXPECT_EQ(got, expected);
+  // Without interpolation the five cubes of 27 cells lie apart.
   EXPECT_EQ(components(sk.cells), 1);
-  EXPECT_GT(sk.particles.size(), 9u * 5u);  // more than the five stamps alone
+  EXPECT_GT(sk.particles.size(), 10u * 27u);
 }
 
 TEST(Voxelize, OneParticlePerVoxelAtTheVoxelCentre) {
@@ -203,7 +227,83 @@ TEST(Voxelize, OverCapNamesTheStrokeThatCrossedIt) {
     voxelize(f, m, oneMaterial());
     FAIL();
   } catch (const InputError& e) {
+    // The line and the field, not the operation's index (which counts from 0).
     EXPECT_EQ(e.line(), 9);
-    EXPECT_NE(std::string(e.what()).find("688590"), std::string::npos);
+    EXPECT_EQ(e.field(), "size");
+    EXPECT_NE(std::string(e.what()).find("stroke create cube crosses the particle cap of 688590"), std::string::npos)
+        << e.what();
+    EXPECT_EQ(std::string(e.what()).find("operation 1"), std::string::npos) << e.what();
+  }
+  // A primitive names its largest dimension.
+  StrokeFile g = parseStrokes("physketch-strokes 1\nprimitive box wood 0  0 0.5 0  0.8 0.95 0.9\n", "cap.strokes");
+  try {
+    voxelize(g, m, oneMaterial());
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 2);
+    EXPECT_EQ(e.field(), "sy");
+  }
+}
+
+namespace {
+
+// Components by brute force: union-find over every pair of cells, joined when they
+// differ by at most one in every coordinate (26-connectivity); then numbered in
+// the order of each component's smallest linear index.
+std::vector<int> componentsByPairs(const std::vector<Vec3i>& cells) {
+  std::vector<std::size_t> parent(cells.size());
+  for (std::size_t i = 0; i < cells.size(); ++i) parent[i] = i;
+  auto root = [&](std::size_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (std::size_t i = 0; i < cells.size(); ++i)
+    for (std::size_t j = i + 1; j < cells.size(); ++j)
+      if ((cells[i] - cells[j]).cwiseAbs().maxCoeff() <= 1) parent[root(i)] = root(j);
+  std::map<std::size_t, std::int64_t> smallest;  // root -> smallest linear index
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    const auto l = GridMapping::linear(cells[i]);
+    auto [it, fresh] = smallest.emplace(root(i), l);
+    if (!fresh) it->second = std::min(it->second, l);
+  }
+  std::map<std::int64_t, int> order;
+  for (const auto& kv : smallest) order.emplace(kv.second, 0);
+  int n = 0;
+  for (auto& kv : order) kv.second = n++;
+  std::vector<int> out(cells.size());
+  for (std::size_t i = 0; i < cells.size(); ++i) out[i] = order[smallest[root(i)]];
+  return out;
+}
+
+}  // namespace
+
+TEST(ConnectedComponents26, SmallCasesByHand) {
+  EXPECT_TRUE(connectedComponents26({}).empty());
+  // Corner contact joins; a gap of one cell does not.
+  EXPECT_EQ(connectedComponents26({Vec3i(5, 5, 5), Vec3i(6, 6, 6)}), (std::vector<int>{0, 0}));
+  EXPECT_EQ(connectedComponents26({Vec3i(5, 5, 5), Vec3i(7, 5, 5)}), (std::vector<int>{0, 1}));
+  // Numbered by the smallest linear index (z first): the cell at z = 3 is component 0.
+  EXPECT_EQ(connectedComponents26({Vec3i(0, 0, 9), Vec3i(150, 150, 3), Vec3i(1, 1, 9)}), (std::vector<int>{1, 0, 1}));
+  // A cell listed twice is one cell.
+  EXPECT_EQ(connectedComponents26({Vec3i(2, 2, 2), Vec3i(9, 9, 9), Vec3i(2, 2, 2)}), (std::vector<int>{0, 1, 0}));
+  // A chain that turns back on itself at grid corners.
+  EXPECT_EQ(connectedComponents26({Vec3i(0, 0, 0), Vec3i(150, 150, 150), Vec3i(1, 1, 1)}), (std::vector<int>{0, 1, 0}));
+  EXPECT_THROW(connectedComponents26({Vec3i(0, 0, 151)}), RuntimeError);
+}
+
+TEST(ConnectedComponents26, MatchesPairwiseBruteForceOnRandomSets) {
+  std::mt19937 rng(7);
+  for (int n = 0; n < 60; ++n) {
+    // Random cells in a small box: from sparse dust to nearly solid, so components
+    // of every size meet and merge through faces, edges and corners alike.
+    const int box = 3 + static_cast<int>(rng() % 12);
+    const int count = 1 + static_cast<int>(rng() % 400);
+    const Vec3i corner(static_cast<int>(rng() % (kGridSize - box)), static_cast<int>(rng() % (kGridSize - box)),
+                       static_cast<int>(rng() % (kGridSize - box)));
+    std::vector<Vec3i> cells;
+    for (int i = 0; i < count; ++i)
+      cells.push_back(corner + Vec3i(static_cast<int>(rng() % box), static_cast<int>(rng() % box),
+                                     static_cast<int>(rng() % box)));
+    ASSERT_EQ(connectedComponents26(cells), componentsByPairs(cells)) << "set " << n;
   }
 }
