@@ -58,9 +58,10 @@ class Solver {
   // Where a kinematic body's centre of mass must be at the end of the next step.
   virtual void setKinematicTarget(int body, const Vec3& centre) = 0;
   // Removes particles from the simulation. A body that loses particles is rebuilt
-  // from the rest (mass, centre, inertia), and a body the removal cuts into pieces
-  // (26-connected in its rest lattice) becomes one body per piece: the largest keeps
-  // the index, the others are appended. Returns every body changed or created, ascending.
+  // from the rest (mass, centre, inertia), and a body the removal cuts (26-connectivity in
+  // its rest lattice) is split as docs/formats.md says: the design pieces still whole keep
+  // the index, each fragment of a broken one is appended as a body of its own. Returns
+  // every body changed or created, ascending.
   virtual std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) = 0;
 };
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -111,6 +112,7 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   rx_.assign(n, 0.0f);
   ry_.assign(n, 0.0f);
   rz_.assign(n, 0.0f);
+  design_.assign(n, 0);
   const double spacing = 2.0 * params_.particleRadius;
   for (std::size_t i = 0; i < n; ++i) {
     const auto m = static_cast<std::size_t>(parts_.material[i]);
@@ -164,6 +166,7 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
   }
   Motion& mo = motion_[b];
   mo.c = mo.cPrev = mo.kinStart = mo.kinTarget = restCentre_[b] = c;
+  labelDesignPieces(b);
   refreshMassProperties(b);
   setMode(static_cast<int>(b), mode);
   if (mode_[b] == BodyMode::kDynamic) {
@@ -220,6 +223,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyInit& init, bool kinema
     rx_.push_back(0.0f);
     ry_.push_back(0.0f);
     rz_.push_back(0.0f);
+    design_.push_back(0);
     ids.push_back(id);
   }
   const BodyMode mode = kinematic ? BodyMode::kKinematic : init.fixed ? BodyMode::kFixed : BodyMode::kDynamic;
@@ -282,12 +286,12 @@ void PbdWorld::recentre(std::size_t b) {
   restCentre_[b] += cr;
 }
 
-// The 26-connected pieces of a body in its rest lattice (rest offsets are whole
-// multiples of the particle spacing apart), largest first; ties by smallest id.
-std::vector<std::vector<std::int32_t>> PbdWorld::pieces(std::size_t b) const {
+// A body's particles in its rest lattice (rest offsets are whole multiples of the particle
+// spacing apart: offsets from the first member, rounded; float rounding is far below
+// half a spacing), labelled by 26-connected component.
+std::vector<std::int32_t> PbdWorld::restComponents(std::size_t b, int& count) const {
   const auto& mem = members_[b];
   const double inv = 1.0 / (2.0 * params_.particleRadius);
-  // Offsets from the first member are whole spacings (up to float rounding, far below half a spacing).
   const auto f = std::size_t(mem.front());
   std::vector<Vec3i> cells(mem.size());
   for (std::size_t k = 0; k < mem.size(); ++k) {
@@ -295,12 +299,49 @@ std::vector<std::vector<std::int32_t>> PbdWorld::pieces(std::size_t b) const {
     cells[k] = Vec3i(int(std::lround((double(rx_[i]) - rx_[f]) * inv)), int(std::lround((double(ry_[i]) - ry_[f]) * inv)),
                      int(std::lround((double(rz_[i]) - rz_[f]) * inv)));
   }
+  return componentLabels26(cells, &count);
+}
+
+// The bodies a body with fewer particles becomes (docs/formats.md, the same rule as a cut
+// before play): its design pieces (the connected parts it had when made: a named body or
+// a mirrored stroke may have several) that are still connected stay together as the
+// body; every fragment of a design piece that broke becomes a body of its own. When no
+// design piece is whole, the largest fragment keeps the body. Returns the body's new
+// members first, then the fragments, largest first (ties: smallest first id).
+std::vector<std::vector<std::int32_t>> PbdWorld::pieces(std::size_t b) const {
+  const auto& mem = members_[b];
   int count = 0;
-  const std::vector<std::int32_t> label = componentLabels26(cells, &count);
-  std::vector<std::vector<std::int32_t>> out(static_cast<std::size_t>(count));
-  for (std::size_t k = 0; k < mem.size(); ++k) out[std::size_t(label[k])].push_back(mem[k]);
-  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& c) { return a.size() > c.size(); });
+  const std::vector<std::int32_t> label = restComponents(b, count);
+  std::vector<std::vector<std::int32_t>> comp(static_cast<std::size_t>(count));
+  for (std::size_t k = 0; k < mem.size(); ++k) comp[std::size_t(label[k])].push_back(mem[k]);
+  // A component lies inside one design piece (a removal never connects anything).
+  std::map<std::int32_t, int> fragmentsOf;
+  for (const auto& c : comp) ++fragmentsOf[design_[std::size_t(c.front())]];
+  std::vector<std::int32_t> keep;
+  std::vector<std::vector<std::int32_t>> out(1), fragments;
+  for (auto& c : comp) {
+    if (fragmentsOf[design_[std::size_t(c.front())]] == 1) keep.insert(keep.end(), c.begin(), c.end());
+    else fragments.push_back(std::move(c));
+  }
+  std::stable_sort(fragments.begin(), fragments.end(), [](const auto& a, const auto& c) {
+    return a.size() != c.size() ? a.size() > c.size() : a.front() < c.front();
+  });
+  if (keep.empty()) {
+    keep = std::move(fragments.front());
+    fragments.erase(fragments.begin());
+  }
+  std::sort(keep.begin(), keep.end());
+  out[0] = std::move(keep);
+  for (auto& f : fragments) out.push_back(std::move(f));
   return out;
+}
+
+// Labels the design pieces of a body as it is now (when it is made, or a fragment of one).
+void PbdWorld::labelDesignPieces(std::size_t b) {
+  int count = 0;
+  const std::vector<std::int32_t> label = restComponents(b, count);
+  const auto& mem = members_[b];
+  for (std::size_t k = 0; k < mem.size(); ++k) design_[std::size_t(mem[k])] = label[k];
 }
 
 std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids) {
@@ -337,6 +378,7 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
       // Offsets are still relative to the old rest centre: start from the old frame.
       const std::size_t nb = pushBodySlot(std::move(parts[k]), before, restBefore, mode);
       recentre(nb);
+      labelDesignPieces(nb);  // a fragment is one connected piece
       refreshMassProperties(nb);
       const Vec3 v = motion_[nb].v, w = motion_[nb].w;
       // A carried body keeps only its largest piece on the brush; the others fall.

@@ -128,13 +128,17 @@ class PbdWorld final : public Solver {
   void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode);
   void refreshMassProperties(std::size_t body);
   void recentre(std::size_t body);
+  std::vector<std::int32_t> restComponents(std::size_t body, int& count) const;
   std::vector<std::vector<std::int32_t>> pieces(std::size_t body) const;
+  void labelDesignPieces(std::size_t body);
 
   PbdParams params_;
   ParticleArrays parts_;
   std::vector<Material> materials_;
   // Per particle (same ids as parts_): rest offset from its body's rest centre of mass (m).
   std::vector<float> rx_, ry_, rz_;
+  // Per particle: its design piece within its body (the connected part it was made in).
+  std::vector<std::int32_t> design_;
   // Per body.
   std::vector<std::vector<std::int32_t>> members_;  // particle ids, ascending
   std::vector<Motion> motion_;

@@ -518,3 +518,24 @@ TEST(RigidBody, GuardStopsTheWorldOnExplosion) {
   EXPECT_FALSE(w.step());  // a tripped world does not step
   EXPECT_EQ(w.particles().x, before);
 }
+
+TEST(RigidBody, ANamedBodyOfSeparatePartsSplitsOnlyWhereAPartIsCut) {
+  // One body drawn as two separate bars A and B (a named body, or a stroke and its mirror
+  // copy): removing a particle that disconnects nothing keeps one body; cutting A through
+  // its middle leaves B (still whole) as the body and A's two halves as two new bodies.
+  ParticleArrays p;
+  BodyRange a = addBox(p, Vec3(0.0, 0.5, 0.0), 10, 2, 2);
+  const BodyRange bb = addBox(p, Vec3(0.3, 0.5, 0.0), 10, 2, 2);
+  a.count += bb.count;  // one body, two parts that do not touch
+  PbdWorld w(p, {a}, rigidMaterial(), params(2, 2, -100.0));
+  EXPECT_EQ(w.removeParticles({0}), (std::vector<int>{0}));  // a corner of A: nothing disconnected
+  ASSERT_EQ(w.bodyCount(), 1);
+  std::vector<std::int32_t> cut;
+  for (std::int32_t i = 0; i < 40; ++i)
+    if (i % 10 == 5) cut.push_back(i);  // A's middle column
+  EXPECT_EQ(w.removeParticles(cut), (std::vector<int>{0, 1, 2}));
+  ASSERT_EQ(w.bodyCount(), 3);
+  EXPECT_EQ(w.bodyParticles(0).size(), 40u);  // B, whole
+  EXPECT_EQ(w.bodyParticles(0).front(), 40);
+  EXPECT_EQ(w.bodyParticles(1).size() + w.bodyParticles(2).size(), 40u - 1 - 4);
+}
