@@ -129,7 +129,7 @@ class NeighborGrid {
 
  private:
   void setKeySpace(const std::int64_t lo[3], const std::int64_t hi[3]);
-  void sortKeys(std::uint64_t maxKey);
+  void sortKeys(const float* x, const float* y, const float* z);
   void findCells();
   void buildRows();
   void checkQuery(float radius) const;
@@ -143,6 +143,7 @@ class NeighborGrid {
   Vec3 origin_ = Vec3::Zero();
   std::int64_t cellOffset_[3] = {0, 0, 0};  // cell coordinate of key digit 1 (0 is padding)
   std::uint64_t dimX_ = 0, dimXY_ = 0;      // key = kx + dimX * ky + dimXY * kz
+  std::uint64_t maxKey_ = 0;                // largest key of the padded box
   int sortPasses_ = 0;
 
   std::vector<std::int32_t> order_, rank_;
@@ -157,6 +158,7 @@ class NeighborGrid {
   std::vector<std::uint64_t> keys_, keysTmp_;  // cell key per particle, then per rank
   std::vector<std::int32_t> idsTmp_;
   std::vector<std::uint32_t> hist_;            // radix histograms, one per chunk
+  std::vector<std::uint32_t> keyStart_;        // first rank of each digit of the last pass
 };
 
 template <class F>
