@@ -527,16 +527,94 @@ __attribute__((target("avx512f,popcnt"))) void listCellAvx512(const CellJob& job
 }
 #undef PHYSKETCH_AVX512
 
+// The AVX2 form, 8 candidates at a time. AVX2 has no compress: a table gives, for each
+// 8-bit hit mask, the lanes to pack (3 bits each), expanded by variable shifts.
+struct PackTable {
+  std::uint32_t lanes[256];
+  constexpr PackTable() : lanes() {
+    for (int m = 0; m < 256; ++m) {
+      std::uint32_t packed = 0;
+      for (int lane = 0, k = 0; lane < 8; ++lane)
+        if (m >> lane & 1) packed |= std::uint32_t(lane) << (4 * k++);
+      lanes[m] = packed;
+    }
+  }
+};
+constexpr PackTable kPack;
+
+#define PHYSKETCH_AVX2 __attribute__((target("avx2,popcnt"), always_inline)) inline
+
+struct Probe256 {  // one particle, broadcast
+  __m256 x, y, z;
+  __m256i self;
+};
+PHYSKETCH_AVX2 Probe256 probe256(const CellJob& job, std::int32_t i) {
+  return {_mm256_set1_ps(job.xs[i]), _mm256_set1_ps(job.ys[i]), _mm256_set1_ps(job.zs[i]), _mm256_set1_epi32(i)};
+}
+PHYSKETCH_AVX2 std::int32_t appendHits256(const Probe256& p, __m256 px, __m256 py, __m256 pz, __m256i js, __m256 r2,
+                                          std::int32_t* out, std::int32_t cnt) {
+  const __m256 dx = _mm256_sub_ps(px, p.x), dy = _mm256_sub_ps(py, p.y), dz = _mm256_sub_ps(pz, p.z);
+  const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
+  const int within = _mm256_movemask_ps(_mm256_cmp_ps(d2, r2, _CMP_LE_OQ));
+  const int self = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(js, p.self)));
+  const unsigned hit = unsigned(within & ~self);
+  const __m256i shifts = _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28);
+  const __m256i lanes = _mm256_and_si256(_mm256_srlv_epi32(_mm256_set1_epi32(int(kPack.lanes[hit])), shifts),
+                                         _mm256_set1_epi32(7));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + cnt), _mm256_permutevar8x32_epi32(js, lanes));
+  return cnt + std::int32_t(_mm_popcnt_u32(hit));
+}
+
+__attribute__((target("avx2,popcnt"))) void listCellAvx2(const CellJob& job, ListStats& s) {
+  const float *cx = job.cand->x.data(), *cy = job.cand->y.data(), *cz = job.cand->z.data();
+  const std::int32_t* cr = job.cand->rank.data();
+  const std::int32_t padded = job.cand->padded;
+  CellJob second = job;
+  second.tmp = job.tmp + padded + 16;
+  const __m256 r2 = _mm256_set1_ps(job.r2);
+  std::int32_t i = job.ib;
+  for (; i + 1 < job.ie; i += 2) {
+    const Probe256 a = probe256(job, i), b = probe256(job, i + 1);
+    std::int32_t na = 0, nb = 0;
+    for (std::int32_t k = 0; k < padded; k += 8) {
+      const __m256 px = _mm256_loadu_ps(cx + k), py = _mm256_loadu_ps(cy + k), pz = _mm256_loadu_ps(cz + k);
+      const __m256i js = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cr + k));
+      na = appendHits256(a, px, py, pz, js, r2, job.tmp, na);
+      nb = appendHits256(b, px, py, pz, js, r2, second.tmp, nb);
+    }
+    storeList(job, i, na, s);
+    storeList(second, i + 1, nb, s);
+  }
+  if (i < job.ie) {
+    const Probe256 a = probe256(job, i);
+    std::int32_t na = 0;
+    for (std::int32_t k = 0; k < padded; k += 8)
+      na = appendHits256(a, _mm256_loadu_ps(cx + k), _mm256_loadu_ps(cy + k), _mm256_loadu_ps(cz + k),
+                         _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cr + k)), r2, job.tmp, na);
+    storeList(job, i, na, s);
+  }
+}
+#undef PHYSKETCH_AVX2
+
 }  // namespace
 
-bool NeighborGrid::cpuHasAvx512() { return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("popcnt"); }
+bool NeighborGrid::cpuHas(Kernel kernel) {
+  switch (kernel) {
+    case Kernel::kAvx512: return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("popcnt");
+    case Kernel::kAvx2: return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
+    default: return true;
+  }
+}
 
 void NeighborGrid::buildNeighborLists(float radius, int width, NeighborLists& out, Kernel kernel) const {
   checkQuery(radius);
   if (width < 1) throw RuntimeError("NeighborGrid::buildNeighborLists: width " + std::to_string(width) + " must be >= 1");
-  if (kernel == Kernel::kAvx512 && !cpuHasAvx512())
-    throw RuntimeError("NeighborGrid::buildNeighborLists: this CPU has no AVX-512");
-  const bool avx512 = kernel == Kernel::kAvx512 || (kernel == Kernel::kAuto && cpuHasAvx512());
+  if (!cpuHas(kernel)) throw RuntimeError("NeighborGrid::buildNeighborLists: this CPU lacks the requested SIMD kernel");
+  if (kernel == Kernel::kAuto)
+    kernel = cpuHas(Kernel::kAvx512) ? Kernel::kAvx512 : cpuHas(Kernel::kAvx2) ? Kernel::kAvx2 : Kernel::kScalar;
+  void (*const listCell)(const CellJob&, ListStats&) = kernel == Kernel::kAvx512 ? listCellAvx512
+                                                       : kernel == Kernel::kAvx2 ? listCellAvx2
+                                                                                 : listCellScalar;
   const std::size_t n = size(), cells = cellCount();
   out.width = width, out.radius = radius;
   out.index.resize(n * std::size_t(width));
@@ -551,7 +629,7 @@ void NeighborGrid::buildNeighborLists(float radius, int width, NeighborLists& ou
       if (tmp.size() < 2 * std::size_t(cand.padded) + 16) tmp.resize(2 * std::size_t(cand.padded) + 16);
       const CellJob job{xs_.data(), ys_.data(), zs_.data(), &cand, cellStart_[c], cellStart_[c + 1],
                         radius * radius, width, out.index.data(), out.count.data(), tmp.data()};
-      avx512 ? listCellAvx512(job, s) : listCellScalar(job, s);
+      listCell(job, s);
     }
   });
   out.overflowed = 0, out.maxCount = 0;

@@ -115,16 +115,16 @@ class NeighborGrid {
   template <class F>
   void forEachNeighbor(std::int32_t id, float radius, F&& f) const;
 
-  // Which inner loop buildNeighborLists runs: the AVX-512 one does the same exactly
-  // rounded float operations in the same order as the scalar one, so both give the same
-  // lists (a test holds them to it); kAuto takes AVX-512 when the CPU has it.
-  enum class Kernel { kAuto, kScalar, kAvx512 };
-  static bool cpuHasAvx512();
+  // Which inner loop buildNeighborLists runs: the SIMD ones do the same exactly rounded
+  // float operations in the same order as the scalar one, so all give the same lists (a
+  // test holds them to it); kAuto takes the widest the CPU has. No -march flag needed.
+  enum class Kernel { kAuto, kScalar, kAvx2, kAvx512 };
+  static bool cpuHas(Kernel kernel);
 
   // Fills `out` (its buffers are reused) with the neighbours of every particle within
   // radius (same test and limits as forEachNeighbor), `width` slots each (width >= 1).
   // Runs in parallel over fixed blocks of cells; the same lists for any thread count.
-  // Throws RuntimeError for kAvx512 on a CPU without it.
+  // Throws RuntimeError for a kernel the CPU does not have.
   void buildNeighborLists(float radius, int width, NeighborLists& out, Kernel kernel = Kernel::kAuto) const;
 
  private:
