@@ -11,8 +11,12 @@
 //
 // Why x fastest and not Morton order: the three cells x-1, x, x+1 of a row are then
 // adjacent in rank order, so the 27 cells around a cell are 9 contiguous rank ranges
-// ("rows") and a query streams 9 runs of ~24 particles through SIMD lanes. Morton
-// order splits them into up to 27 runs of ~8 (measured slower: docs/benchmarks.md).
+// ("rows"), found by direct lookup. Morton order splits them into up to 27 runs of ~8
+// particles found by search; measured on 80k and 688k particles (cell = 2 spacings,
+// AVX-512), the neighbour lists took 1.5x as long and the build 14x (docs/benchmarks.md).
+//
+// Sizes: the sort is an LSD radix sort whose passes adapt to the key range (one plain
+// counting sort for a compact box; more passes, not more memory, for a huge sparse one).
 //
 // Typical use by a solver (PBF, particle contacts), once per step:
 //   grid.build(x, y, z, n, h);                 // h = kernel radius (m)
