@@ -12,18 +12,24 @@
 // Why x fastest and not Morton order: the three cells x-1, x, x+1 of a row are then
 // adjacent in rank order, so the 27 cells around a cell are 9 contiguous rank ranges
 // ("rows"), found by direct lookup. Morton order splits them into up to 27 runs of ~8
-// particles found by search; measured on 80k and 688k particles (cell = 2 spacings,
-// AVX-512), the neighbour lists took 1.5x as long and the build 14x (docs/benchmarks.md).
+// particles, found by search: measured on 80k and 688k jittered-lattice particles (cell
+// = 2 spacings, 1 thread, AVX-512), its neighbour lists took 5.8 and 52 ms against 3.8
+// and 33 ms, and its build (searches, sparse keys) 8.7 and 80 ms against 0.6 and 6.9 ms.
 //
 // Sizes: the sort is an LSD radix sort whose passes adapt to the key range (one plain
 // counting sort for a compact box; more passes, not more memory, for a huge sparse one).
 //
 // Typical use by a solver (PBF, particle contacts), once per step:
-//   grid.build(x, y, z, n, h);                 // h = kernel radius (m)
+//   grid.build(x, y, z, n, h);                 // h = kernel radius (+ skin) (m)
 //   grid.gather(vx, vxSorted);                 // hot arrays in rank order ...
 //   grid.buildNeighborLists(h, 32, lists);     // ... one neighbour structure per step,
 //   ... iterate on the rank-ordered arrays with lists ...
 //   grid.scatter(xSorted, x);                  // outputs back in stable id order
+// A solver that keeps its arrays in last step's rank order builds from those instead
+// (nearly sorted input, so the sort's scatter streams: bench_neighbor's build_ms against
+// build_shuffled_ms) and composes the permutations with gather(int32) to keep stable ids.
+// Ties inside a cell then follow last step's order: still deterministic and the same for
+// any thread count, but a function of the history rather than of the positions alone.
 //
 // Sorting particles by block for MLS-MPM: buildFromCells() with the block coordinates
 // the MPM computes itself (e.g. base node >> 2 for 4^3 blocks), so the block of a particle
