@@ -31,15 +31,16 @@ namespace {
 // the split: every particle is written by exactly one task.
 constexpr std::size_t kChunk = 4096;
 
+// f(lo, hi) runs on the chunks [j kChunk, min(n, (j+1) kChunk)): fixed boundaries,
+// whatever the thread count, so a chunk's index is lo / kChunk.
 template <class F>
 void forRange(std::size_t n, F&& f) {
-  if (n <= kChunk) {
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  if (chunks <= 1) {
     f(std::size_t(0), n);
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kChunk),
-                    [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); },
-                    tbb::simple_partitioner());
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) { f(j * kChunk, std::min(n, (j + 1) * kChunk)); });
 }
 
 // Runs f(k) for k in [0, n): bodies are independent, each is solved serially inside.
@@ -511,7 +512,9 @@ bool PbdWorld::step() {
       GuardRecord r;
       {
         ScopedPass t(profile_, PbdPass::kGuard);
-        r = checkImplied(false, true);
+        // write_particles summarized what it wrote: scan particle by particle only when
+        // that summary is suspect (or nothing was written this step).
+        if (writtenSuspect_ || !work()[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
       }
       if (r.tripped()) {
         // Replay the step from its start with a check after every pass, so the record
@@ -771,7 +774,18 @@ void PbdWorld::update(double h) {
   }
 }
 
+// Also summarizes what it wrote for the guard, while the values are in registers: any
+// non-finite value ((x - x) is NaN exactly then), and for dynamic bodies the largest
+// speed and the lowest particle. Each chunk keeps its own summary and they are combined
+// in chunk order; min, max and "any NaN" do not depend on that order anyway.
 void PbdWorld::writeParticles() {
+  struct Summary {
+    float nonFinite = 0.0f, maxV2 = 0.0f, minY = 3.4e38f;
+  };
+  const float floorY = static_cast<float>(params_.groundY + params_.particleRadius);
+  const float bound = static_cast<float>(params_.particleRadius);
+  const float max2 = static_cast<float>(params_.maxSpeed * params_.maxSpeed);
+  bool suspect = false;
   for (std::size_t b = 0; b < members_.size(); ++b) {
     // Fixed bodies never move: written once, when the world starts.
     if (mode_[b] == BodyMode::kEmpty || (mode_[b] == BodyMode::kFixed && steps_ > 0)) continue;
@@ -782,22 +796,46 @@ void PbdWorld::writeParticles() {
     const Eigen::Vector3f w = mo.w.cast<float>(), v = mo.v.cast<float>();
     const Vec3 c = mo.c;
     const auto& mem = members_[b];
-    forRange(mem.size(), [&](std::size_t lo, std::size_t hi) {
+    std::vector<Summary> chunks((mem.size() + kChunk - 1) / kChunk);
+    // A body made by the sketch is a contiguous id range until a cut: then the loop runs
+    // on ids directly (no gather or scatter, so the compiler vectorizes it).
+    const bool contiguous = !mem.empty() && std::size_t(mem.back() - mem.front()) + 1 == mem.size();
+    const std::size_t first = mem.empty() ? 0 : std::size_t(mem.front());
+    const auto body = [&](auto id, std::size_t lo, std::size_t hi) {
+      Summary sum;
       for (std::size_t k = lo; k < hi; ++k) {
-        const auto i = std::size_t(mem[k]);
+        const std::size_t i = id(k);
         const float ax = rx_[i], ay = ry_[i], az = rz_[i];
         const float r0 = R(0, 0) * ax + R(0, 1) * ay + R(0, 2) * az;
         const float r1 = R(1, 0) * ax + R(1, 1) * ay + R(1, 2) * az;
         const float r2 = R(2, 0) * ax + R(2, 1) * ay + R(2, 2) * az;
-        parts_.x[i] = static_cast<float>(c.x() + r0);
-        parts_.y[i] = static_cast<float>(c.y() + r1);
-        parts_.z[i] = static_cast<float>(c.z() + r2);
-        parts_.vx[i] = v.x() + (w.y() * r2 - w.z() * r1);
-        parts_.vy[i] = v.y() + (w.z() * r0 - w.x() * r2);
-        parts_.vz[i] = v.z() + (w.x() * r1 - w.y() * r0);
+        const auto px = static_cast<float>(c.x() + r0), py = static_cast<float>(c.y() + r1),
+                   pz = static_cast<float>(c.z() + r2);
+        const float ux = v.x() + (w.y() * r2 - w.z() * r1), uy = v.y() + (w.z() * r0 - w.x() * r2),
+                    uz = v.z() + (w.x() * r1 - w.y() * r0);
+        parts_.x[i] = px;
+        parts_.y[i] = py;
+        parts_.z[i] = pz;
+        parts_.vx[i] = ux;
+        parts_.vy[i] = uy;
+        parts_.vz[i] = uz;
+        sum.nonFinite += (px - px) + (py - py) + (pz - pz) + (ux - ux) + (uy - uy) + (uz - uz);
+        const float v2 = ux * ux + uy * uy + uz * uz;
+        sum.maxV2 = v2 > sum.maxV2 ? v2 : sum.maxV2;
+        sum.minY = py < sum.minY ? py : sum.minY;
       }
+      chunks[lo / kChunk] = sum;  // forRange's chunks start at multiples of kChunk
+    };
+    forRange(mem.size(), [&](std::size_t lo, std::size_t hi) {
+      if (contiguous) body([&](std::size_t k) { return first + k; }, lo, hi);
+      else body([&](std::size_t k) { return std::size_t(mem[k]); }, lo, hi);
     });
+    const bool dynamic = mode_[b] == BodyMode::kDynamic;
+    for (const Summary& s : chunks)
+      suspect = suspect || s.nonFinite != 0.0f ||
+                (dynamic && (!(s.maxV2 <= 0.999f * max2) || !(s.minY >= floorY - bound)));
   }
+  writtenSuspect_ = suspect;
 }
 
 std::uint64_t PbdWorld::stateHash() const {

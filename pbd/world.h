@@ -161,6 +161,7 @@ class PbdWorld final : public Solver {
   std::vector<GroundCache> groundCache_;
   std::int64_t steps_ = 0;
   bool validate_ = false;
+  bool writtenSuspect_ = true;  // write_particles' summary: some particle may fail the guard
   Profile profile_{kPbdPasses};
   GuardRecord guard_;
 };
