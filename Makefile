@@ -39,7 +39,7 @@ bench: build
 
 # ASan + UBSan build of the whole test suite.
 sanitize: deps
-	cmake -S . -B $(BUILD_ASAN) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPHYSKETCH_SANITIZE=ON -DPHYSKETCH_BUILD_BENCH=OFF $(LAUNCHER)
+	cmake -S . -B $(BUILD_ASAN) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPHYSKETCH_SANITIZE=ON -DPHYSKETCH_BUILD_BENCH=OFF $(LAUNCHER) $(CMAKE_ARGS)
 	cmake --build $(BUILD_ASAN) -j $(JOBS)
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS)
 
