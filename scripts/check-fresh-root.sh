@@ -164,7 +164,10 @@ t_check=$(($(secs) - t0))
 unmount_all
 
 # make demo must actually have written frames and a report.
-frames=$(find "$run/root/physketch/out/hello/frames" -name '*.png' 2>/dev/null | wc -l)
+frames=0
+if [[ -d "$run/root/physketch/out/hello/frames" ]]; then
+  frames=$(find "$run/root/physketch/out/hello/frames" -name '*.png' | wc -l)
+fi
 if ((rc == 0)) && { ((frames == 0)) || [[ ! -s "$run/root/physketch/out/hello/report.json" ]]; }; then
   log "make demo exited 0 but wrote no frames or no report.json"
   rc=1
