@@ -37,9 +37,12 @@ test: build
 bench: build
 	@bash bench/run_all.sh $(BUILD)
 
-# ASan + UBSan build of the whole test suite.
+# ASan + UBSan build of the whole test suite, leak checks on.
+# -O1 -g1 instead of RelWithDebInfo's -O2 -g: ASan's recommended level, and line tables are all
+# its stack traces need. It halves the compile time of the CGAL translation unit that bounds this
+# build (sketch/mesh_stamp.cpp: 155 -> 76 s CPU, 3.5 -> 2.5 GB) and so of CI.
 sanitize: deps
-	cmake -S . -B $(BUILD_ASAN) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPHYSKETCH_SANITIZE=ON -DPHYSKETCH_BUILD_BENCH=OFF $(LAUNCHER)
+	cmake -S . -B $(BUILD_ASAN) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DPHYSKETCH_SANITIZE=ON -DPHYSKETCH_BUILD_BENCH=OFF $(LAUNCHER) $(CMAKE_ARGS)
 	cmake --build $(BUILD_ASAN) -j $(JOBS)
 	ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS)
 

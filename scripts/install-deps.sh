@@ -5,12 +5,17 @@
 set -euo pipefail
 
 PACKAGES=(
+  # Toolchain. `make bench` times each benchmark with GNU time (/usr/bin/time, package time).
+  # g++ pulls in libasan/libubsan, which `make sanitize` needs.
   cmake ninja-build g++ make pkg-config ccache time
   libeigen3-dev
   libopenvdb-dev libboost-iostreams-dev   # FindOpenVDB needs Boost.Iostreams but the package does not pull it in
   libtbb-dev
-  libcgal-dev libbullet-dev
-  libegl-dev libegl-mesa0 libgl1-mesa-dri libgles-dev libgl-dev   # EGL surfaceless + Mesa llvmpipe
+  libcgal-dev
+  # EGL surfaceless + Mesa llvmpipe. find_package(OpenGL COMPONENTS EGL OpenGL) needs glvnd's
+  # libOpenGL.so (libopengl-dev): libgl-dev and libegl-dev do not pull it in, so a minimal root
+  # without it stops at configure with "missing: OPENGL_opengl_LIBRARY".
+  libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libpng-dev
   libgtest-dev
   nlohmann-json3-dev libcli11-dev
