@@ -19,18 +19,14 @@
 
 #include <tbb/global_control.h>
 
+#include "bench/bench_common.h"
 #include "core/neighbor_grid.h"
 #include "core/profile.h"
 
 using namespace physketch;
+using physketch::bench::median;
 
 namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 template <class F>
 double medianMs(int repeats, F&& f) {

@@ -13,6 +13,7 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
+#include "bench/bench_common.h"
 #include "core/profile.h"
 #include "core/scene.h"
 #include "pbd/world.h"
@@ -21,19 +22,10 @@
 #include "sketch/voxelize.h"
 
 using namespace physketch;
+using physketch::bench::median;
+using physketch::bench::row;
 
 namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-void row(const char* bench, const char* kase, std::size_t particles, int threads, const char* metric, double value,
-         const char* unit) {
-  std::printf("%s,%s,%zu,%d,%s,%.4f,%s\n", bench, kase, particles, threads, metric, value, unit);
-}
 
 }  // namespace
 

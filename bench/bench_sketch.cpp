@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_common.h"
 #include "core/profile.h"
 #include "sketch/mesh_stamp.h"
 #include "sketch/voxelize.h"
@@ -21,15 +22,10 @@
 #include <tbb/global_control.h>
 
 using namespace physketch;
+using physketch::bench::median;
 using namespace physketch::sketch;
 
 namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 // A 10,000-sample helix through the workspace, sampled at 90 Hz: about 0.7 voxel per sample.
 std::string helixStroke(const std::string& brush, int samples) {
