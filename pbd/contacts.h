@@ -23,12 +23,18 @@ struct Plane {
 
 // Rigid body against a plane: candidates[first, first + count) are the body's particles
 // within a margin of the plane when the contacts were found.
+// What the contact solve leaves for the velocity passes, per contact: whether it touched,
+// where (world, after the solve), and the normal speed of that point before the solve.
 struct BodyPlaneContacts {
   std::vector<std::int32_t> body, plane, first, count;
   std::vector<std::int32_t> candidates;
+  std::vector<std::uint8_t> touched;
+  std::vector<Vec3> point;
+  std::vector<double> approachSpeed;  // n . v of the contact point before the solve (m/s, < 0 approaching)
   std::size_t size() const { return body.size(); }
   void clear() {
     body.clear(), plane.clear(), first.clear(), count.clear(), candidates.clear();
+    touched.clear(), point.clear(), approachSpeed.clear();
   }
 };
 

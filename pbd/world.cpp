@@ -20,6 +20,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"find_contacts", Cadence::kPerSubstep, "per dynamic body near the ground: its particles within a margin of it"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
     {"update", Cadence::kPerSubstep, "velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
+    {"restitution", Cadence::kPerSubstep, "bodies that touched leave at e times their approach speed (Müller 2020 Eq. 34)"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
     {"guard", Cadence::kPerStep, "first NaN, explosion or ground penetration"},
 };
@@ -142,6 +143,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   invInertiaRest_.push_back(Mat3::Zero());
   staticFriction_.push_back(0.0);
   dynamicFriction_.push_back(0.0);
+  restitution_.push_back(0.0);
   reach_.push_back(0.0);
   mode_.push_back(mode);
   groundCache_.emplace_back();
@@ -179,7 +181,7 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
 // Mass, inertia, friction and reach of a body from its members' rest offsets.
 void PbdWorld::refreshMassProperties(std::size_t b) {
   const auto& mem = members_[b];
-  double m = 0.0, mus = 0.0, muk = 0.0, reach = 0.0;
+  double m = 0.0, mus = 0.0, muk = 0.0, e = 0.0, reach = 0.0;
   for (std::int32_t i : mem) {
     const auto k = std::size_t(i);
     const double mi = parts_.mass[k];
@@ -187,6 +189,7 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
     m += mi;
     mus += mi * mat.staticFriction;
     muk += mi * mat.dynamicFriction;
+    e += mi * mat.restitution;
     reach = std::max(reach, Vec3(rx_[k], ry_[k], rz_[k]).norm());
   }
   if (mem.empty() || !(m > 0.0)) {
@@ -200,6 +203,7 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
   invInertiaRest_[b] = inertiaRest_[b].inverse();
   staticFriction_[b] = mus / m;
   dynamicFriction_[b] = muk / m;
+  restitution_[b] = e / m;
   reach_[b] = reach + params_.particleRadius;
 }
 
@@ -415,6 +419,9 @@ std::vector<bool> PbdWorld::work() const {
   on[int(PbdPass::kFindContacts)] = dynamic;
   on[int(PbdPass::kRigidContact)] = dynamic;
   on[int(PbdPass::kUpdate)] = dynamic || kinematic;
+  bool bouncy = false;
+  for (std::size_t b = 0; b < mode_.size(); ++b) bouncy = bouncy || (mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0);
+  on[int(PbdPass::kRestitution)] = bouncy;
   on[int(PbdPass::kWriteParticles)] = dynamic || kinematic;
   on[int(PbdPass::kGuard)] = any;
   return on;
@@ -430,6 +437,11 @@ std::string PbdWorld::reason(PbdPass pass) const {
     case PbdPass::kKinematic: return std::to_string(kin) + " bodies held or carried by a stroke";
     case PbdPass::kUpdate:
     case PbdPass::kWriteParticles: return std::to_string(dyn + kin) + " moving bodies";
+    case PbdPass::kRestitution: {
+      long n = 0;
+      for (std::size_t b = 0; b < mode_.size(); ++b) n += mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0;
+      return std::to_string(n) + " dynamic bodies with restitution > 0";
+    }
     case PbdPass::kGuard: return std::to_string(parts_.size()) + " particles";
     case PbdPass::kCount: break;
   }
@@ -490,6 +502,8 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (runs(PbdPass::kRigidContact) && !runPass(PbdPass::kRigidContact, s, checkEachPass, [&] { rigidContact(); }))
       return false;
     if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
+    if (runs(PbdPass::kRestitution) && !runPass(PbdPass::kRestitution, s, checkEachPass, [&] { restitution(h); }))
+      return false;
   }
   if (runs(PbdPass::kWriteParticles) &&
       !runPass(PbdPass::kWriteParticles, -1, checkEachPass, [&] { writeParticles(); }))
@@ -695,12 +709,15 @@ void PbdWorld::findContacts() {
     bp.plane.push_back(0);
     bp.first.push_back(static_cast<std::int32_t>(bp.candidates.size()));
     bp.count.push_back(static_cast<std::int32_t>(cache.candidates.size()));
+    bp.touched.push_back(0);
+    bp.point.push_back(Vec3::Zero());
+    bp.approachSpeed.push_back(0.0);
     bp.candidates.insert(bp.candidates.end(), cache.candidates.begin(), cache.candidates.end());
   }
 }
 
 void PbdWorld::rigidContact() {
-  const BodyPlaneContacts& bp = contacts_.bodyPlane;
+  BodyPlaneContacts& bp = contacts_.bodyPlane;  // each task writes only its own contact's entries
   forBodies(bp.size(), [&](std::size_t c) {
     const auto b = std::size_t(bp.body[c]);
     const Plane& plane = contacts_.planes[std::size_t(bp.plane[c])];
@@ -733,6 +750,12 @@ void PbdWorld::rigidContact() {
       }
       if (wsum == 0.0) break;
       const Vec3 pc = psum / wsum;  // contact point
+      if (it == 0) {
+        // For restitution: the point's normal speed before the solve, and where it is on the body.
+        bp.touched[c] = 1;
+        bp.approachSpeed[c] = up.dot(mo.v + mo.w.cross(pc - pose.c));
+        bp.point[c] = R.transpose() * (pc - pose.c);  // body frame until the solve ends
+      }
       // Lift the patch by its deepest penetration, at its depth-weighted centroid: one
       // sweep then resolves a landing (a mean depth left a third of it, which compounded
       // into a guard trip at 1-2 iterations), and the centroid keeps the lift from
@@ -758,6 +781,35 @@ void PbdWorld::rigidContact() {
     }
     mo.c = pose.c;
     mo.q = pose.q;
+    if (bp.touched[c]) bp.point[c] = pose.q.toRotationMatrix() * bp.point[c] + pose.c;
+  });
+}
+
+// Restitution (Müller et al. 2020 §3.6, Eq. 34, at body level): a contact point that
+// approached the plane at normal speed u < 0 before the solve leaves it at -e u; the
+// velocity update has left it at about 0, so a velocity impulse along the normal at the
+// contact point, through the body's generalized inverse mass, makes up the difference.
+// Slow contacts (|u| <= 2 |g| h, a body at rest or rolling) get none, so resting bodies
+// do not jitter.
+void PbdWorld::restitution(double h) {
+  const BodyPlaneContacts& bp = contacts_.bodyPlane;
+  const double slow = 2.0 * params_.gravity.norm() * h;
+  forBodies(bp.size(), [&](std::size_t c) {
+    const auto b = std::size_t(bp.body[c]);
+    if (!bp.touched[c] || restitution_[b] <= 0.0 || mode_[b] != BodyMode::kDynamic) return;
+    const double u = bp.approachSpeed[c];
+    if (u >= -slow) return;
+    Motion& mo = motion_[b];
+    const Vec3 n = contacts_.planes[std::size_t(bp.plane[c])].normal;
+    const Vec3 r = bp.point[c] - mo.c;
+    const double vn = n.dot(mo.v + mo.w.cross(r));
+    const double dv = -restitution_[b] * u - vn;
+    if (dv <= 0.0) return;  // already leaving faster than that
+    const RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
+    const double p = dv / generalizedInverseMass(pose, bp.point[c], n);  // impulse (N s)
+    const Mat3 R = mo.q.toRotationMatrix();
+    mo.v += (p * invMass_[b]) * n;
+    mo.w += R * invInertiaRest_[b] * R.transpose() * r.cross(p * n);
   });
 }
 

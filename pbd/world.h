@@ -11,6 +11,8 @@
 //                    position correction at the contact patch's depth-weighted
 //                    centroid, then static/dynamic Coulomb friction (Müller 2020 §3.5)
 //     update         v = (c - c_prev) / h; w = 2 vec(q q_prev^-1) / h   (Müller 2020, Alg. 2)
+//     restitution    bodies that touched: the contact point leaves at e times its approach
+//                    speed (Müller 2020 §3.6, Eq. 34), only when some material bounces
 //   write_particles  x_i = R r_i + c, v_i = v + w x R r_i, once per step
 //   guard            first NaN / explosion / penetration, once per step
 //
@@ -54,6 +56,7 @@ enum class PbdPass : int {
   kFindContacts,
   kRigidContact,
   kUpdate,
+  kRestitution,
   kWriteParticles,
   kGuard,
   kCount
@@ -121,6 +124,7 @@ class PbdWorld final : public Solver {
   void findContacts();
   void rigidContact();
   void update(double h);
+  void restitution(double h);
   void writeParticles();
 
   std::size_t pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
@@ -146,6 +150,7 @@ class PbdWorld final : public Solver {
   std::vector<double> invMass_;             // 1/kg, whole body
   std::vector<Mat3> inertiaRest_, invInertiaRest_;  // rest frame (kg m^2 and inverse)
   std::vector<double> staticFriction_, dynamicFriction_;  // mass-weighted means over the body's materials
+  std::vector<double> restitution_;         // mass-weighted mean over the body's materials
   std::vector<double> reach_;               // m, max |rest offset| + particle radius
   std::vector<BodyMode> mode_;
   std::vector<std::int32_t> active_;        // dynamic bodies this step

@@ -15,7 +15,6 @@ SolverSupport supportOf(SolverKind solver) {
       s.kinds = {MaterialKind::kRigid};
       s.initialMotion = true;
       s.fixedBodies = true;
-      s.paramsNotYet = {"restitution"};  // the PBD issue adds bouncing
       break;
     case SolverKind::kMpm:
       break;  // the MPM issue

@@ -334,9 +334,6 @@ TEST(Cli, WhatTheSolverDoesNotSimulateYetIsAnErrorAtLoadTimeNamingTheRecord) {
   EXPECT_NE(r.err.find("fluid.scene:3: field 'kind': material 'water' is kind fluid: solver pbd does not simulate fluid yet"),
             std::string::npos)
       << r.err;
-  r = runCli(scene("bounce.scene", "material water rigid restitution=0.5\n"), dir);
-  EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.err.find("bounce.scene:3: field 'restitution'"), std::string::npos) << r.err;
   r = runCli(scene("mpm.scene", "solver mpm\nmaterial water elastic preset=soft\n"), dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("solver mpm does not simulate elastic yet"), std::string::npos) << r.err;

@@ -621,3 +621,19 @@ TEST(Docs, TheSceneExampleParses) {
   EXPECT_EQ(s.colliders.size(), 2u);
   EXPECT_EQ(s.colliders[1].keyframes.size(), 2u);
 }
+
+TEST(Support, AParameterTheSolverDoesNotSimulateYetIsAnErrorNamingIt) {
+  // A solver that runs a kind may still lack one of its parameters (paramsNotYet): a
+  // material that sets it is refused at its record and field, not silently run without it.
+  const SceneDesc scene = parseScene("physketch-scene 1\nstrokes s.strokes\nmaterial ball rigid restitution=0.5\n"
+                                     "material brick rigid\n",
+                                     "scenes/y.scene");
+  SolverSupport noBounce = pbdToday();
+  noBounce.paramsNotYet = {"restitution"};
+  EXPECT_NO_THROW(checkSupport(scene, usesOfMaterials({{"brick", 2}}), noBounce));  // the default is not "set"
+  const InputError e = supportError(scene, usesOfMaterials({{"ball", 3}}), noBounce);
+  EXPECT_EQ(e.line(), 3);
+  EXPECT_EQ(e.field(), "restitution");
+  EXPECT_TRUE(mentions(e, "solver pbd does not simulate restitution yet")) << e.what();
+  EXPECT_NO_THROW(checkSupport(scene, usesOfMaterials({{"ball", 3}}), pbdToday()));
+}
