@@ -19,14 +19,17 @@ struct PassSpec {
   const char* does;   // one line: what the pass computes (paper, equation)
 };
 
-// One pass of the plan: a pass that has work in the current state.
+// One pass of the plan. plan() lists the passes that have work in the current state;
+// planAll() lists every pass of the table, the others with on = false and why.
 struct PlanEntry {
   int pass = 0;            // the solver's enum value
   std::string name;
-  long perStep = 0;        // calls per step
+  bool on = true;          // has work now: the step runs it
+  long perStep = 0;        // calls per step (0 when off)
   std::string runs;        // how often, in words ("substeps = 4")
   std::string does;        // from the PassSpec
-  std::string reason;      // why it is on (which bodies, materials or options need it)
+  std::string reason;      // why it is on (which bodies, materials or options need it), or why it is off
+  std::string touches;     // what it works on ("31655 particles in 3 bodies"); empty when off
 };
 
 // Per-pass wall time and call counts, owned by the world that runs the passes (never a global).

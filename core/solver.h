@@ -23,6 +23,9 @@ class Solver {
   virtual bool step() = 0;
   // The passes one step runs in the current state, in order: exactly what step() runs.
   virtual std::vector<PlanEntry> plan() const = 0;
+  // Every pass of the solver's table, in order: those of plan() and the ones that are off,
+  // each with why (physketch plan --all). An off pass is neither run nor allocated.
+  virtual std::vector<PlanEntry> planAll() const = 0;
   virtual const Profile& profile() const = 0;
   virtual const GuardRecord& guard() const = 0;
   // Check after every pass, not only once per step (physketch run --validate).

@@ -427,45 +427,83 @@ std::vector<bool> PbdWorld::work() const {
   return on;
 }
 
-std::string PbdWorld::reason(PbdPass pass) const {
+std::string PbdWorld::reason(PbdPass pass, bool on) const {
   const auto count = [&](BodyMode m) { return long(std::count(mode_.begin(), mode_.end(), m)); };
   const long dyn = count(BodyMode::kDynamic), kin = count(BodyMode::kKinematic);
+  long bouncy = 0;
+  for (std::size_t b = 0; b < mode_.size(); ++b) bouncy += mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0;
   switch (pass) {
     case PbdPass::kIntegrate:
     case PbdPass::kFindContacts:
-    case PbdPass::kRigidContact: return std::to_string(dyn) + " dynamic rigid bodies";
-    case PbdPass::kKinematic: return std::to_string(kin) + " bodies held or carried by a stroke";
+    case PbdPass::kRigidContact:
+      return on ? std::to_string(dyn) + " dynamic rigid bodies" : "no dynamic body (all fixed, held or emptied)";
+    case PbdPass::kKinematic:
+      return on ? std::to_string(kin) + " bodies held or carried by a stroke"
+                : "no body is held while drawn or carried by a move now";
     case PbdPass::kUpdate:
-    case PbdPass::kWriteParticles: return std::to_string(dyn + kin) + " moving bodies";
-    case PbdPass::kRestitution: {
-      long n = 0;
-      for (std::size_t b = 0; b < mode_.size(); ++b) n += mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0;
-      return std::to_string(n) + " dynamic bodies with restitution > 0";
-    }
-    case PbdPass::kGuard: return std::to_string(parts_.size()) + " particles";
+    case PbdPass::kWriteParticles: return on ? std::to_string(dyn + kin) + " moving bodies" : "no body moves";
+    case PbdPass::kRestitution:
+      return on ? std::to_string(bouncy) + " dynamic bodies with restitution > 0"
+                : "no dynamic body's material has restitution > 0";
+    case PbdPass::kGuard: return on ? "checks every step" : "no particles";
     case PbdPass::kCount: break;
   }
   return "";
 }
 
-std::vector<PlanEntry> PbdWorld::plan() const {
+std::string PbdWorld::touches(PbdPass pass) const {
+  long particles = 0, bodies = 0;
+  for (std::size_t b = 0; b < mode_.size(); ++b) {
+    bool counts = false;
+    switch (pass) {
+      case PbdPass::kIntegrate:
+      case PbdPass::kFindContacts:
+      case PbdPass::kRigidContact: counts = mode_[b] == BodyMode::kDynamic; break;
+      case PbdPass::kRestitution: counts = mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0; break;
+      case PbdPass::kKinematic: counts = mode_[b] == BodyMode::kKinematic; break;
+      case PbdPass::kUpdate:
+      case PbdPass::kWriteParticles:
+        counts = mode_[b] == BodyMode::kDynamic || mode_[b] == BodyMode::kKinematic;
+        break;
+      case PbdPass::kGuard: counts = mode_[b] != BodyMode::kEmpty; break;
+      case PbdPass::kCount: break;
+    }
+    if (!counts) continue;
+    ++bodies;
+    particles += long(members_[b].size());
+  }
+  std::string t = std::to_string(particles) + " particles in " + std::to_string(bodies) + " bodies";
+  if (pass == PbdPass::kFindContacts || pass == PbdPass::kRigidContact)
+    t += " (the sweeps touch only particles near the ground)";
+  return t;
+}
+
+std::vector<PlanEntry> PbdWorld::planAll() const {
   std::vector<PlanEntry> out;
   const std::vector<bool> on = work();
   const long s = params_.substeps;
   for (int k = 0; k < int(PbdPass::kCount); ++k) {
-    if (!on[std::size_t(k)]) continue;
     const PassSpec& spec = kPbdPasses[k];
     PlanEntry e;
     e.pass = k;
     e.name = spec.name;
     e.does = spec.does;
-    e.perStep = spec.cadence == Cadence::kPerSubstep ? s : 1;
+    e.on = on[std::size_t(k)];
     e.runs = spec.cadence == Cadence::kPerSubstep ? "substeps = " + std::to_string(s) : "once";
     if (PbdPass(k) == PbdPass::kRigidContact)
       e.runs += ", up to " + std::to_string(params_.iterations) + " sweeps each";
-    e.reason = reason(PbdPass(k));
+    e.perStep = e.on ? (spec.cadence == Cadence::kPerSubstep ? s : 1) : 0;
+    e.reason = reason(PbdPass(k), e.on);
+    if (e.on) e.touches = touches(PbdPass(k));
     out.push_back(std::move(e));
   }
+  return out;
+}
+
+std::vector<PlanEntry> PbdWorld::plan() const {
+  std::vector<PlanEntry> out;
+  for (PlanEntry& e : planAll())
+    if (e.on) out.push_back(std::move(e));
   return out;
 }
 

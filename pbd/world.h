@@ -73,6 +73,7 @@ class PbdWorld final : public Solver {
   const char* name() const override { return "pbd"; }
   bool step() override;
   std::vector<PlanEntry> plan() const override;
+  std::vector<PlanEntry> planAll() const override;
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool on) override { validate_ = on; }
@@ -113,7 +114,8 @@ class PbdWorld final : public Solver {
   };
   // Which passes have work in the current state (the plan and the step both read it).
   std::vector<bool> work() const;
-  std::string reason(PbdPass pass) const;
+  std::string reason(PbdPass pass, bool on) const;
+  std::string touches(PbdPass pass) const;
   bool runStep(bool checkEachPass);
   template <class F>
   bool runPass(PbdPass pass, int substep, bool check, F&& f);

@@ -21,7 +21,12 @@ struct RunOptions {
 };
 
 int runScene(const RunOptions& options);
-int printPlan(const std::string& scene);
+struct PlanOptions {
+  std::string scene;
+  bool all = false;      // also the passes that are off, each with why
+  std::string afterDir;  // a run's output folder: add the measured ms per pass from its report.json
+};
+int printPlan(const PlanOptions& options);
 // Parse and voxelize only: particles per operation, material and body, memory estimate, warnings.
 int lintScene(const std::string& scene);
 

@@ -43,9 +43,11 @@ int main(int argc, char** argv) {
   runCmd->add_flag("--validate", run.validate,
                    "Check the solver's state after every pass (not once per step): slower, names the pass at once");
 
-  std::string planScene;
-  auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, and how often");
-  planCmd->add_option("scene", planScene, "Scene file")->required();
+  PlanOptions plan;
+  auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, how often and why");
+  planCmd->add_option("scene", plan.scene, "Scene file")->required();
+  planCmd->add_flag("--all", plan.all, "Also list the passes that are off, each with why (nothing is run or allocated for them)");
+  planCmd->add_option("--after", plan.afterDir, "Output folder of a finished run: add its measured ms per frame to each pass");
 
   std::string lintPath;
   auto* lintCmd = cli.add_subcommand("lint", "Parse and voxelize only: particles per stroke and material, memory estimate, warnings; exit 1 on any error");
@@ -71,7 +73,7 @@ int main(int argc, char** argv) {
     return rc == 0 ? kExitOk : kExitBadInput;
   }
   if (*runCmd) return runScene(run);
-  if (*planCmd) return printPlan(planScene);
+  if (*planCmd) return printPlan(plan);
   if (*lintCmd) return lintScene(lintPath);
   return kExitBadInput;
 }

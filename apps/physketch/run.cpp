@@ -121,17 +121,53 @@ int lintScene(const std::string& scenePath) {
   });
 }
 
-int printPlan(const std::string& scenePath) {
+namespace {
+
+// ms per frame of each pass in a finished run's report.json (physketch plan --after DIR).
+std::map<std::string, double> measuredMs(const std::string& dir) {
+  const fs::path path = fs::path(dir) / "report.json";
+  std::ifstream in(path);
+  if (!in) throw InputError(path.string(), 0, "", "cannot open the report of a run (physketch run SCENE --out DIR writes it)");
+  json rep;
+  try {
+    in >> rep;
+  } catch (const json::exception& e) {
+    throw InputError(path.string(), 0, "", std::string("not a physketch report: ") + e.what());
+  }
+  std::map<std::string, double> ms;
+  if (rep.contains("passes") && rep["passes"].is_array())
+    for (const auto& p : rep["passes"])
+      if (p.contains("pass") && p.contains("ms_per_frame") && p["ms_per_frame"].is_number())
+        ms[p["pass"].get<std::string>()] = p["ms_per_frame"].get<double>();
+  return ms;
+}
+
+}  // namespace
+
+int printPlan(const PlanOptions& opt) {
   return withExitCodes([&] {
-    const Prepared p = prepare(scenePath);
+    const Prepared p = prepare(opt.scene);
     const std::unique_ptr<Solver> solver = makeSolver(p);
     const SceneDesc& sc = p.scene;
+    const std::map<std::string, double> ms = opt.afterDir.empty() ? std::map<std::string, double>{} : measuredMs(opt.afterDir);
     std::cout << "scene " << sc.path << ": " << p.sketch->particles.size() << " particles, " << solver->bodyCount()
               << " bodies; solver " << solver->name() << ", dt " << sc.dt << " s, " << sc.substeps << " substeps, "
               << sc.iterations << " iterations\n";
-    std::cout << "per step, at play:\n";
-    for (const auto& pass : solver->plan())
-      std::cout << "  " << pass.name << "  (" << pass.runs << "; " << pass.reason << ")\n";
+    std::cout << (opt.all ? "every pass of the step, at play:\n" : "per step, at play:\n");
+    for (const auto& pass : opt.all ? solver->planAll() : solver->plan()) {
+      std::cout << "  " << (opt.all ? (pass.on ? "on   " : "off  ") : "") << pass.name;
+      if (pass.on) {
+        std::cout << "  (" << pass.runs << "; " << pass.reason << ")";
+        if (opt.all) std::cout << "\n        touches " << pass.touches << "; " << pass.does;
+      } else {
+        std::cout << "  (" << pass.reason << "; nothing allocated)";
+      }
+      if (const auto it = ms.find(pass.name); it != ms.end()) std::printf("  measured %.3f ms/frame", it->second);
+      std::cout << "\n";
+      std::cout.flush();
+    }
+    for (const auto& [name, v] : ms)
+      if (name.rfind("render.", 0) == 0) std::printf("  %s  measured %.3f ms/frame\n", name.c_str(), v);
     std::cout << "per frame: " << sc.stepsPerFrame() << " steps, then mesh transform, draw, png\n";
     if (!p.sketch->runtime.empty()) {
       // Strokes after play change the plan while the simulation runs: say which pass

@@ -340,3 +340,31 @@ TEST(Cli, WhatTheSolverDoesNotSimulateYetIsAnErrorAtLoadTimeNamingTheRecord) {
   EXPECT_FALSE(fs::exists(dir / "o"));
   fs::remove_all(dir);
 }
+
+TEST(Cli, PlanAllListsThePassesThatAreOffWithWhyAndPlanAfterAddsMeasuredTimes) {
+  // Only the effects a scene calls for: hello has no carried body and no bouncing
+  // material, so kinematic and restitution are off, and --all says why; --after DIR adds
+  // the ms per frame a finished run measured for each pass.
+  const fs::path dir = freshDir("planall");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
+  ASSERT_EQ(runCli("run '" + scene + "' -q --frames 3 --out '" + (dir / "o").string() + "'", dir).code, 0);
+  const std::string out = (dir / "plan.txt").string();
+  ASSERT_EQ(std::system((std::string(PHYSKETCH_CLI) + " plan '" + scene + "' --all --after '" + (dir / "o").string() +
+                         "' > '" + out + "'")
+                            .c_str()),
+            0);
+  const std::string text = slurp(out);
+  EXPECT_NE(text.find("off  kinematic  (no body is held"), std::string::npos) << text;
+  EXPECT_NE(text.find("off  restitution  (no dynamic body's material has restitution > 0"), std::string::npos) << text;
+  EXPECT_NE(text.find("on   rigid_contact"), std::string::npos) << text;
+  EXPECT_NE(text.find("touches 31655 particles in 3 bodies"), std::string::npos) << text;
+  EXPECT_NE(text.find("measured"), std::string::npos) << text;
+  EXPECT_NE(text.find("render.png  measured"), std::string::npos) << text;
+  // Without --all the off passes are not listed; a folder without a report is an input error.
+  ASSERT_EQ(std::system((std::string(PHYSKETCH_CLI) + " plan '" + scene + "' > '" + out + "'").c_str()), 0);
+  EXPECT_EQ(slurp(out).find("restitution"), std::string::npos);
+  const Result r = runCli("plan '" + scene + "' --after '" + (dir / "nothing").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("report.json"), std::string::npos) << r.err;
+  fs::remove_all(dir);
+}

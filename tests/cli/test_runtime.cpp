@@ -216,6 +216,7 @@ class StretchingBlock final : public Solver {
     return true;
   }
   std::vector<PlanEntry> plan() const override { return {}; }
+  std::vector<PlanEntry> planAll() const override { return {}; }
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool) override {}

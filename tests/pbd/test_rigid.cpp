@@ -455,6 +455,16 @@ TEST(RigidBody, PlanIsWhatTheStepRuns) {
       if (e.pass == k) expect = 5 * e.perStep;
     EXPECT_EQ(w.profile().entries()[std::size_t(k)].calls, expect) << kPbdPasses[k].name;
   }
+  // planAll is the whole table in order; its "on" entries are exactly plan().
+  const auto all = w.planAll();
+  ASSERT_EQ(all.size(), std::size_t(PbdPass::kCount));
+  std::vector<std::string> on;
+  for (int k = 0; k < int(PbdPass::kCount); ++k) {
+    EXPECT_EQ(all[std::size_t(k)].name, kPbdPasses[k].name);
+    if (all[std::size_t(k)].on) on.push_back(all[std::size_t(k)].name);
+    else EXPECT_EQ(all[std::size_t(k)].perStep, 0);
+  }
+  EXPECT_EQ(on, names);
   PbdWorld empty(ParticleArrays{}, {}, rigidMaterial(), params(2, 3));
   EXPECT_TRUE(empty.plan().empty());
 }
