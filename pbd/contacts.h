@@ -38,6 +38,15 @@ struct BodyPlaneContacts {
   }
 };
 
+// Rigid body a against rigid body b: particle pairs (pa[k] of a, pb[k] of b) within a
+// margin of touching when found, pairs [first, first + count) of each body pair.
+struct BodyPairContacts {
+  std::vector<std::int32_t> a, b, first, count;
+  std::vector<std::int32_t> pa, pb;
+  std::size_t size() const { return a.size(); }
+  void clear() { a.clear(), b.clear(), first.clear(), count.clear(), pa.clear(), pb.clear(); }
+};
+
 // Particle i against particle j (different groups, or one self-colliding group).
 struct ParticlePairContacts {
   std::vector<std::int32_t> i, j;
@@ -56,10 +65,11 @@ struct ParticleSurfaceContacts {
 struct ContactSet {
   std::vector<Plane> planes;             // the ground is planes[0]
   BodyPlaneContacts bodyPlane;
+  BodyPairContacts bodyPair;
   ParticlePairContacts particlePair;     // filled by the PBD issue's particle contacts
   ParticleSurfaceContacts particlePlane, particleMesh;
   void clearFound() {
-    bodyPlane.clear(), particlePair.clear(), particlePlane.clear(), particleMesh.clear();
+    bodyPlane.clear(), bodyPair.clear(), particlePair.clear(), particlePlane.clear(), particleMesh.clear();
   }
 };
 

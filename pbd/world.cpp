@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/lattice.h"
+#include "core/neighbor_grid.h"
 #include "pbd/shape_matching.h"
 
 namespace physketch::pbd {
@@ -19,6 +20,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
     {"find_contacts", Cadence::kPerSubstep, "per dynamic body near the ground: its particles within a margin of it"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
+    {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps"},
     {"update", Cadence::kPerSubstep, "velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched leave at e times their approach speed (Müller 2020 Eq. 34)"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
@@ -418,6 +420,7 @@ std::vector<bool> PbdWorld::work() const {
   on[int(PbdPass::kKinematic)] = kinematic;
   on[int(PbdPass::kFindContacts)] = dynamic;
   on[int(PbdPass::kRigidContact)] = dynamic;
+  on[int(PbdPass::kBodyContact)] = dynamic && bodiesMayTouch();
   on[int(PbdPass::kUpdate)] = dynamic || kinematic;
   bool bouncy = false;
   for (std::size_t b = 0; b < mode_.size(); ++b) bouncy = bouncy || (mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0);
@@ -437,6 +440,9 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
     case PbdPass::kFindContacts:
     case PbdPass::kRigidContact:
       return on ? std::to_string(dyn) + " dynamic rigid bodies" : "no dynamic body (all fixed, held or emptied)";
+    case PbdPass::kBodyContact:
+      return on ? "a dynamic body and another body within reach of each other"
+                : (dyn == 0 ? "no dynamic body" : "no two bodies are within reach of each other");
     case PbdPass::kKinematic:
       return on ? std::to_string(kin) + " bodies held or carried by a stroke"
                 : "no body is held while drawn or carried by a move now";
@@ -459,6 +465,7 @@ std::string PbdWorld::touches(PbdPass pass) const {
       case PbdPass::kIntegrate:
       case PbdPass::kFindContacts:
       case PbdPass::kRigidContact: counts = mode_[b] == BodyMode::kDynamic; break;
+      case PbdPass::kBodyContact: counts = mode_[b] != BodyMode::kEmpty; break;
       case PbdPass::kRestitution: counts = mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0; break;
       case PbdPass::kKinematic: counts = mode_[b] == BodyMode::kKinematic; break;
       case PbdPass::kUpdate:
@@ -538,6 +545,8 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (runs(PbdPass::kFindContacts) && !runPass(PbdPass::kFindContacts, s, checkEachPass, [&] { findContacts(); }))
       return false;
     if (runs(PbdPass::kRigidContact) && !runPass(PbdPass::kRigidContact, s, checkEachPass, [&] { rigidContact(); }))
+      return false;
+    if (runs(PbdPass::kBodyContact) && !runPass(PbdPass::kBodyContact, s, checkEachPass, [&] { bodyContact(); }))
       return false;
     if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
     if (runs(PbdPass::kRestitution) && !runPass(PbdPass::kRestitution, s, checkEachPass, [&] { restitution(h); }))
@@ -752,6 +761,132 @@ void PbdWorld::findContacts() {
     bp.approachSpeed.push_back(0.0);
     bp.candidates.insert(bp.candidates.end(), cache.candidates.begin(), cache.candidates.end());
   }
+  if (bodiesMayTouch()) findBodyPairs();
+}
+
+// Two bodies may touch when one of them is dynamic and their bounding spheres (reach plus
+// a margin of one particle spacing) overlap. O(bodies^2) sphere tests per substep.
+bool PbdWorld::bodiesMayTouch() const {
+  const double margin = 2.0 * params_.particleRadius;
+  for (std::size_t a = 0; a < members_.size(); ++a)
+    for (std::size_t b = a + 1; b < members_.size(); ++b) {
+      if (mode_[a] == BodyMode::kEmpty || mode_[b] == BodyMode::kEmpty) continue;
+      if (mode_[a] != BodyMode::kDynamic && mode_[b] != BodyMode::kDynamic) continue;
+      if ((motion_[a].c - motion_[b].c).norm() < reach_[a] + reach_[b] + margin) return true;
+    }
+  return false;
+}
+
+// For every pair of bodies that may touch: the particle pairs (one of each body) closer
+// than one spacing plus a margin, found with a NeighborGrid over the particles of each
+// body that lie within the other's reach. Pairs are in a fixed order (body pair, then
+// a's particle, then b's by rank): the same for any thread count.
+void PbdWorld::findBodyPairs() {
+  BodyPairContacts& pairs = contacts_.bodyPair;
+  const double r = params_.particleRadius, margin = 2.0 * r;
+  const float radius = static_cast<float>(2.0 * r + margin);
+  std::vector<float> x, y, z;
+  std::vector<std::int32_t> id;
+  NeighborGrid grid;
+  for (std::size_t a = 0; a < members_.size(); ++a)
+    for (std::size_t b = a + 1; b < members_.size(); ++b) {
+      if (mode_[a] == BodyMode::kEmpty || mode_[b] == BodyMode::kEmpty) continue;
+      if (mode_[a] != BodyMode::kDynamic && mode_[b] != BodyMode::kDynamic) continue;
+      const Motion &ma = motion_[a], &mb = motion_[b];
+      if ((ma.c - mb.c).norm() >= reach_[a] + reach_[b] + margin) continue;
+      x.clear(), y.clear(), z.clear(), id.clear();
+      std::size_t na = 0;
+      for (int side = 0; side < 2; ++side) {
+        const std::size_t self = side ? b : a, other = side ? a : b;
+        const Motion& m = motion_[self];
+        const Mat3 R = m.q.toRotationMatrix();
+        const double within = reach_[other] + margin;
+        for (std::int32_t i : members_[self]) {
+          const auto k = std::size_t(i);
+          const Vec3 p = R * Vec3(rx_[k], ry_[k], rz_[k]) + m.c;
+          if ((p - motion_[other].c).norm() > within) continue;
+          x.push_back(float(p.x())), y.push_back(float(p.y())), z.push_back(float(p.z()));
+          id.push_back(i);
+        }
+        if (side == 0) na = id.size();
+      }
+      if (na == 0 || na == id.size()) continue;
+      grid.build(x.data(), y.data(), z.data(), x.size(), radius);
+      const std::size_t first = pairs.pa.size();
+      for (std::size_t k = 0; k < na; ++k)
+        grid.forEachNeighbor(static_cast<std::int32_t>(k), radius, [&](std::int32_t j) {
+          if (std::size_t(j) < na) return;  // a particle of the same body
+          pairs.pa.push_back(id[k]);
+          pairs.pb.push_back(id[std::size_t(j)]);
+        });
+      if (pairs.pa.size() == first) continue;
+      pairs.a.push_back(static_cast<std::int32_t>(a));
+      pairs.b.push_back(static_cast<std::int32_t>(b));
+      pairs.first.push_back(static_cast<std::int32_t>(first));
+      pairs.count.push_back(static_cast<std::int32_t>(pairs.pa.size() - first));
+    }
+}
+
+// Body against body (Müller et al. 2020, positional constraints between two bodies, at
+// body level as for the ground): per pair and sweep, the touching particle pairs (closer
+// than one spacing) form a patch; one correction of the patch's deepest overlap along its
+// depth-weighted normal at its depth-weighted centre, split between the two bodies by
+// their generalized inverse masses (a fixed or carried body has none), then Coulomb
+// friction on impulses with the mean of the two bodies' coefficients. Pairs are swept in
+// order, serially (Gauss-Seidel), so the result does not depend on threads.
+void PbdWorld::bodyContact() {
+  const BodyPairContacts& pairs = contacts_.bodyPair;
+  const double touch = 2.0 * params_.particleRadius;
+  for (int it = 0; it < params_.iterations; ++it)
+    for (std::size_t c = 0; c < pairs.size(); ++c) {
+      const auto a = std::size_t(pairs.a[c]), b = std::size_t(pairs.b[c]);
+      Motion &ma = motion_[a], &mb = motion_[b];
+      const bool da = mode_[a] == BodyMode::kDynamic, db = mode_[b] == BodyMode::kDynamic;
+      RigidPose pa{ma.c, ma.q, invMass_[a], invInertiaRest_[a]}, pb{mb.c, mb.q, invMass_[b], invInertiaRest_[b]};
+      const Mat3 Ra = pa.q.toRotationMatrix(), Rb = pb.q.toRotationMatrix();
+      const Mat3 RaPrev = ma.qPrev.toRotationMatrix(), RbPrev = mb.qPrev.toRotationMatrix();
+      double wsum = 0.0, dmax = 0.0;
+      Vec3 psum = Vec3::Zero(), nsum = Vec3::Zero(), ssum = Vec3::Zero();
+      for (std::int32_t k = pairs.first[c]; k < pairs.first[c] + pairs.count[c]; ++k) {
+        const auto i = std::size_t(pairs.pa[std::size_t(k)]), j = std::size_t(pairs.pb[std::size_t(k)]);
+        const Vec3 ri(rx_[i], ry_[i], rz_[i]), rj(rx_[j], ry_[j], rz_[j]);
+        const Vec3 pi = Ra * ri + pa.c, pj = Rb * rj + pb.c;
+        const Vec3 dvec = pi - pj;
+        const double dist = dvec.norm();
+        const double d = touch - dist;
+        if (d <= 0.0 || dist == 0.0) continue;
+        wsum += d;
+        dmax = std::max(dmax, d);
+        psum += d * 0.5 * (pi + pj);
+        nsum += (d / dist) * dvec;
+        ssum += d * ((pi - (RaPrev * ri + ma.cPrev)) - (pj - (RbPrev * rj + mb.cPrev)));
+      }
+      if (wsum == 0.0 || nsum.norm() == 0.0) continue;
+      const Vec3 n = nsum.normalized();  // from b towards a
+      const Vec3 pc = psum / wsum;
+      const double wa = da ? generalizedInverseMass(pa, pc, n) : 0.0, wb = db ? generalizedInverseMass(pb, pc, n) : 0.0;
+      if (wa + wb <= 0.0) continue;
+      const double lambdaN = dmax / (wa + wb);
+      if (da) applyPointCorrection(pa, pc, n, lambdaN * wa);
+      if (db) applyPointCorrection(pb, pc, -n, lambdaN * wb);
+      Vec3 slide = ssum / wsum;
+      slide -= n.dot(slide) * n;
+      const double len = slide.norm();
+      if (len > 0.0) {
+        const Vec3 t = -slide / len;  // against a's motion relative to b
+        const double wta = da ? generalizedInverseMass(pa, pc, t) : 0.0, wtb = db ? generalizedInverseMass(pb, pc, t) : 0.0;
+        const double mus = 0.5 * (staticFriction_[a] + staticFriction_[b]);
+        const double muk = 0.5 * (dynamicFriction_[a] + dynamicFriction_[b]);
+        if (wta + wtb > 0.0) {
+          const double full = len / (wta + wtb);
+          const double lambdaT = full <= mus * lambdaN ? full : std::min(full, muk * lambdaN);
+          if (da && lambdaT > 0.0) applyPointCorrection(pa, pc, t, lambdaT * wta);
+          if (db && lambdaT > 0.0) applyPointCorrection(pb, pc, -t, lambdaT * wtb);
+        }
+      }
+      if (da) ma.c = pa.c, ma.q = pa.q;
+      if (db) mb.c = pb.c, mb.q = pb.q;
+    }
 }
 
 void PbdWorld::rigidContact() {

@@ -10,6 +10,8 @@
 //     rigid_contact  per body near the ground, `iterations` sweeps over those: one exact rigid
 //                    position correction at the contact patch's depth-weighted
 //                    centroid, then static/dynamic Coulomb friction (Müller 2020 §3.5)
+//     body_contact   pairs of bodies whose particles touch, `iterations` Gauss-Seidel sweeps:
+//                    one two-body correction per pair and sweep, then friction
 //     update         v = (c - c_prev) / h; w = 2 vec(q q_prev^-1) / h   (Müller 2020, Alg. 2)
 //     restitution    bodies that touched: the contact point leaves at e times its approach
 //                    speed (Müller 2020 §3.6, Eq. 34), only when some material bounces
@@ -55,6 +57,7 @@ enum class PbdPass : int {
   kKinematic,
   kFindContacts,
   kRigidContact,
+  kBodyContact,
   kUpdate,
   kRestitution,
   kWriteParticles,
@@ -114,6 +117,7 @@ class PbdWorld final : public Solver {
   };
   // Which passes have work in the current state (the plan and the step both read it).
   std::vector<bool> work() const;
+  bool bodiesMayTouch() const;
   std::string reason(PbdPass pass, bool on) const;
   std::string touches(PbdPass pass) const;
   bool runStep(bool checkEachPass);
@@ -125,6 +129,8 @@ class PbdWorld final : public Solver {
   void kinematic(int substep);
   void findContacts();
   void rigidContact();
+  void findBodyPairs();
+  void bodyContact();
   void update(double h);
   void restitution(double h);
   void writeParticles();

@@ -405,6 +405,7 @@ TEST(RigidBody, SameStateForOneAndTwoThreadsBitwiseEveryStep) {
   bodies.push_back(addTiltedBar(p, Vec3(0.2, 0.1, 0.0), 50, 0.7, 1));
   bodies.push_back(addBox(p, Vec3(0.0, 0.4, 0.3), 5, 5, 5, 2));
   bodies[2].init.spin = Vec3(1.0, 2.0, 3.0);
+  bodies.push_back(addBox(p, Vec3(-0.25, 0.5, 0.05), 4, 4, 4, 3));  // lands on body 0: body_contact runs
   std::vector<Material> bouncy = rigidMaterial();
   bouncy[0].restitution = 0.4;  // the restitution pass runs too
   auto run = [&](int threads) {
@@ -421,6 +422,8 @@ TEST(RigidBody, SameStateForOneAndTwoThreadsBitwiseEveryStep) {
       w.step();
       hashes.push_back(w.stateHash());
     }
+    EXPECT_GT(w.profile()[PbdPass::kBodyContact].calls, 0);
+    EXPECT_GT(w.profile()[PbdPass::kRestitution].calls, 0);
     return hashes;
   };
   const auto one = run(1), two = run(2);
@@ -584,4 +587,76 @@ TEST(RigidBody, ABallBouncesToRestitutionSquaredTimesItsDropHeight) {
   std::vector<BodyRange> bodies{addBall(p, Vec3(0.0, 0.3, 0.0), 3)};
   PbdWorld w(p, bodies, rigidMaterial(), params(2, 2));
   for (const auto& e : w.plan()) EXPECT_NE(e.name, "restitution");
+}
+
+namespace {
+// The smallest distance between a particle of body a and one of body b (brute force).
+double closest(const PbdWorld& w, int a, int b) {
+  const auto& p = w.particles();
+  double best = 1e300;
+  for (std::int32_t i : w.bodyParticles(a))
+    for (std::int32_t j : w.bodyParticles(b)) {
+      const auto u = std::size_t(i), v = std::size_t(j);
+      best = std::min(best, Vec3(p.x[u] - p.x[v], p.y[u] - p.y[v], p.z[u] - p.z[v]).norm());
+    }
+  return best;
+}
+}  // namespace
+
+TEST(RigidBody, ABoxDroppedOnAnotherComesToRestOnItInsteadOfPassingThrough) {
+  // Issue 8: two sketched bodies passed through each other. A 6^3 box dropped 10 cm onto
+  // a 10x4x10 box resting on the ground must land on it and stay: after 2 s the closest
+  // particles of the two bodies touch (2r apart, to 10 % of r: a resting contact holds
+  // about one substep of gravity, g h^2 = 0.04 mm), the upper box is above the lower one
+  // and at rest, and the lower box still rests on the ground. (The boxes' lattices are
+  // half a spacing apart in x and z, so the upper box's spheres nest into the gaps of
+  // the top layer below.) Without body contact it falls through to the ground.
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(-0.05, kRadius, -0.05), 10, 4, 10, 0),
+                                addBox(p, Vec3(-0.025, kRadius + 4 * kSpacing + 0.1, -0.025), 6, 6, 6, 1)};
+  PbdWorld w(p, bodies, rigidMaterial(), params(8, 4));
+  for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  double lowTop = -1e9, highBottom = 1e9;
+  for (std::int32_t i : w.bodyParticles(0)) lowTop = std::max(lowTop, double(w.particles().y[std::size_t(i)]));
+  for (std::int32_t i : w.bodyParticles(1)) highBottom = std::min(highBottom, double(w.particles().y[std::size_t(i)]));
+  EXPECT_GT(highBottom, lowTop);
+  EXPECT_NEAR(closest(w, 0, 1), 2.0 * kRadius, 0.1 * kRadius);
+  EXPECT_LT(w.velocity(1).norm(), 0.01);
+  EXPECT_NEAR(minY(w.particles()), kRadius, 0.05 * kRadius);  // the lower box still rests on the ground
+}
+
+TEST(RigidBody, AZeroGravityCollisionConservesMomentumAndLosesEnergy) {
+  // Two equal boxes flying at each other (+-0.5 m/s), slightly off centre, with no gravity
+  // and no ground in reach: the contact impulses are equal and opposite, so the total
+  // momentum stays 0 (to double rounding of the poses: 1e-12 kg m/s here); the contact
+  // is inelastic, so the kinetic energy (translation and rotation) never grows; and no
+  // particle of one comes closer than 1.8 r to a particle of the other at any step.
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(-0.1, 1.0, 0.0), 5, 5, 5, 0), addBox(p, Vec3(0.05, 1.01, 0.005), 5, 5, 5, 1)};
+  bodies[0].init.velocity = Vec3(0.5, 0.0, 0.0);
+  bodies[1].init.velocity = Vec3(-0.5, 0.0, 0.0);
+  PbdParams prm = params(8, 4, -100.0);
+  prm.gravity = Vec3::Zero();
+  PbdWorld w(p, bodies, rigidMaterial(), prm);
+  const double m = w.bodyMass(0);
+  const auto energy = [&] {
+    double e = 0.0;
+    for (int b : {0, 1}) {
+      const Mat3 R = w.pose(b).rotation.toRotationMatrix();
+      const Vec3 om = w.angularVelocity(b);
+      e += 0.5 * m * w.velocity(b).squaredNorm() + 0.5 * om.dot(R * w.bodyInertiaRest(b) * R.transpose() * om);
+    }
+    return e;
+  };
+  const double e0 = energy();
+  bool touched = false;
+  for (int s = 0; s < 60; ++s) {
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    const Vec3 momentum = m * (w.velocity(0) + w.velocity(1));
+    ASSERT_LT(momentum.norm(), 1e-12) << "step " << s;
+    ASSERT_LE(energy(), e0 * (1.0 + 1e-9)) << "step " << s;
+    ASSERT_GT(closest(w, 0, 1), 1.8 * kRadius) << "step " << s;
+    touched = touched || w.velocity(0).x() < 0.49;
+  }
+  EXPECT_TRUE(touched);  // they did collide
 }
