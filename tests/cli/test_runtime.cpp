@@ -272,3 +272,19 @@ TEST(Frames, ADeformingMaterialIsMeshedFromItsParticlesEveryFrameInPlace) {
   EXPECT_EQ(fw.meshings(), 3);
   EXPECT_LT(tris[0], tris[1]);
 }
+
+TEST(Runtime, AFixedBodyCarriedByAMoveStaysFixedWhereItIsPutDown) {
+  // A fixed table top is moved 0.1 m up by a stroke after play: it follows the brush and,
+  // released, stays fixed there (it does not fall).
+  Sim r("primitive box wood 0  0 0.3 0  0.1 0.02 0.1 fixed\nplay 0\n"
+        "stroke move sphere 0.03\nsample 0.1 0 0.3 0\nsample 0.2 0 0.4 0\n");
+  ASSERT_EQ(r.world.mode(0), BodyMode::kFixed);
+  const Vec3 c0 = r.centre(0);
+  r.steps(15);  // t = 0.15: carried
+  EXPECT_EQ(r.world.mode(0), BodyMode::kKinematic);
+  r.steps(20);  // t = 0.35: released at 0.2
+  EXPECT_EQ(r.world.mode(0), BodyMode::kFixed);
+  EXPECT_NEAR(r.centre(0).y() - c0.y(), 0.1, 1e-6);
+  r.steps(20);
+  EXPECT_NEAR(r.centre(0).y() - c0.y(), 0.1, 1e-6);  // did not fall
+}
