@@ -64,6 +64,13 @@ Quat rotateBy(const Quat& q, const Vec3& dtheta) {
   return (Quat(Eigen::AngleAxisd(a, dtheta / a)) * q).normalized();
 }
 
+// Coulomb's law on position impulses (Müller 2020 §3.5): the tangential impulse that would
+// stop the contact point (`stop`) is applied whole while it is within mu_s lambda_n
+// (static), else mu_k lambda_n opposes the sliding (dynamic, never more than `stop`).
+double coulomb(double stop, double lambdaN, double mus, double muk) {
+  return stop <= mus * lambdaN ? stop : std::min(stop, muk * lambdaN);
+}
+
 // The rotation vector of a unit quaternion (the inverse of rotateBy from identity).
 Vec3 rotationVector(Quat dq) {
   if (dq.w() < 0.0) dq.coeffs() = -dq.coeffs();
@@ -535,7 +542,7 @@ bool PbdWorld::runPass(PbdPass pass, int substep, bool check, F&& f) {
 }
 
 bool PbdWorld::runStep(bool checkEachPass) {
-  const std::vector<bool> on = work();
+  const std::vector<bool>& on = work_;
   const double h = params_.dt / params_.substeps;
   const auto runs = [&](PbdPass p) { return bool(on[std::size_t(p)]); };
   for (int s = 0; s < params_.substeps; ++s) {
@@ -560,6 +567,7 @@ bool PbdWorld::runStep(bool checkEachPass) {
 
 bool PbdWorld::step() {
   if (guard_.tripped()) return false;
+  work_ = work();  // once per step: the replay below restores the same start, so the same passes
   active_.clear();
   for (std::size_t b = 0; b < mode_.size(); ++b)
     if (mode_[b] == BodyMode::kDynamic) active_.push_back(static_cast<std::int32_t>(b));
@@ -569,13 +577,13 @@ bool PbdWorld::step() {
     const std::vector<Motion> start = motion_;  // per body: cheap to keep
     const std::vector<GroundCache> cacheStart = groundCache_;
     runStep(false);
-    if (work()[std::size_t(PbdPass::kGuard)]) {
+    if (work_[std::size_t(PbdPass::kGuard)]) {
       GuardRecord r;
       {
         ScopedPass t(profile_, PbdPass::kGuard);
         // write_particles summarized what it wrote: scan particle by particle only when
         // that summary is suspect (or nothing was written this step).
-        if (writtenSuspect_ || !work()[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
+        if (writtenSuspect_ || !work_[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
       }
       if (r.tripped()) {
         // Replay the step from its start with a check after every pass, so the record
@@ -761,19 +769,31 @@ void PbdWorld::findContacts() {
     bp.approachSpeed.push_back(0.0);
     bp.candidates.insert(bp.candidates.end(), cache.candidates.begin(), cache.candidates.end());
   }
-  if (bodiesMayTouch()) findBodyPairs();
+  if (work_[std::size_t(PbdPass::kBodyContact)]) findBodyPairs();
 }
 
-// Two bodies may touch when one of them is dynamic and their bounding spheres (reach plus
-// a margin of one particle spacing) overlap. O(bodies^2) sphere tests per substep.
+// Whether bodies a and b can touch within `horizon` seconds: one of them is dynamic, and
+// their bounding spheres (reach plus one particle spacing), each grown by how far the body
+// can travel in that time (speed, spin times reach, and gravity), overlap. The step decides
+// whether body_contact runs with horizon dt, so a body that comes within reach during the
+// step is not missed; find_contacts looks one substep ahead.
+bool PbdWorld::mayTouch(std::size_t a, std::size_t b, double horizon) const {
+  if (mode_[a] == BodyMode::kEmpty || mode_[b] == BodyMode::kEmpty) return false;
+  if (mode_[a] != BodyMode::kDynamic && mode_[b] != BodyMode::kDynamic) return false;
+  const double g = params_.gravity.norm();
+  const auto travel = [&](std::size_t k) {
+    const Motion& m = motion_[k];
+    return horizon * (m.v.norm() + m.w.norm() * reach_[k] + g * horizon);
+  };
+  return (motion_[a].c - motion_[b].c).norm() <
+         reach_[a] + reach_[b] + 2.0 * params_.particleRadius + travel(a) + travel(b);
+}
+
+// O(bodies^2) sphere tests: once per step, from work().
 bool PbdWorld::bodiesMayTouch() const {
-  const double margin = 2.0 * params_.particleRadius;
   for (std::size_t a = 0; a < members_.size(); ++a)
-    for (std::size_t b = a + 1; b < members_.size(); ++b) {
-      if (mode_[a] == BodyMode::kEmpty || mode_[b] == BodyMode::kEmpty) continue;
-      if (mode_[a] != BodyMode::kDynamic && mode_[b] != BodyMode::kDynamic) continue;
-      if ((motion_[a].c - motion_[b].c).norm() < reach_[a] + reach_[b] + margin) return true;
-    }
+    for (std::size_t b = a + 1; b < members_.size(); ++b)
+      if (mayTouch(a, b, params_.dt)) return true;
   return false;
 }
 
@@ -783,17 +803,14 @@ bool PbdWorld::bodiesMayTouch() const {
 // a's particle, then b's by rank): the same for any thread count.
 void PbdWorld::findBodyPairs() {
   BodyPairContacts& pairs = contacts_.bodyPair;
-  const double r = params_.particleRadius, margin = 2.0 * r;
+  const double r = params_.particleRadius, margin = 2.0 * r, h = params_.dt / params_.substeps;
   const float radius = static_cast<float>(2.0 * r + margin);
   std::vector<float> x, y, z;
   std::vector<std::int32_t> id;
   NeighborGrid grid;
   for (std::size_t a = 0; a < members_.size(); ++a)
     for (std::size_t b = a + 1; b < members_.size(); ++b) {
-      if (mode_[a] == BodyMode::kEmpty || mode_[b] == BodyMode::kEmpty) continue;
-      if (mode_[a] != BodyMode::kDynamic && mode_[b] != BodyMode::kDynamic) continue;
-      const Motion &ma = motion_[a], &mb = motion_[b];
-      if ((ma.c - mb.c).norm() >= reach_[a] + reach_[b] + margin) continue;
+      if (!mayTouch(a, b, h)) continue;
       x.clear(), y.clear(), z.clear(), id.clear();
       std::size_t na = 0;
       for (int side = 0; side < 2; ++side) {
@@ -878,8 +895,7 @@ void PbdWorld::bodyContact() {
         const double mus = 0.5 * (staticFriction_[a] + staticFriction_[b]);
         const double muk = 0.5 * (dynamicFriction_[a] + dynamicFriction_[b]);
         if (wta + wtb > 0.0) {
-          const double full = len / (wta + wtb);
-          const double lambdaT = full <= mus * lambdaN ? full : std::min(full, muk * lambdaN);
+          const double lambdaT = coulomb(len / (wta + wtb), lambdaN, mus, muk);
           if (da && lambdaT > 0.0) applyPointCorrection(pa, pc, t, lambdaT * wta);
           if (db && lambdaT > 0.0) applyPointCorrection(pb, pc, -t, lambdaT * wtb);
         }
@@ -947,8 +963,7 @@ void PbdWorld::rigidContact() {
       if (len > 0.0 && lambdaN > 0.0) {
         const Vec3 t = -slide / len;
         const double wt = generalizedInverseMass(pose, pcAfter, t);
-        const double full = len / wt;  // impulse that stops the contact point
-        const double lambdaT = full <= mus * lambdaN ? full : std::min(full, muk * lambdaN);
+        const double lambdaT = coulomb(len / wt, lambdaN, mus, muk);
         if (lambdaT > 0.0) applyPointCorrection(pose, pcAfter, t, lambdaT * wt);
       }
     }

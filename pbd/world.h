@@ -117,6 +117,7 @@ class PbdWorld final : public Solver {
   };
   // Which passes have work in the current state (the plan and the step both read it).
   std::vector<bool> work() const;
+  bool mayTouch(std::size_t a, std::size_t b, double horizon) const;
   bool bodiesMayTouch() const;
   std::string reason(PbdPass pass, bool on) const;
   std::string touches(PbdPass pass) const;
@@ -174,6 +175,7 @@ class PbdWorld final : public Solver {
   std::vector<GroundCache> groundCache_;
   std::int64_t steps_ = 0;
   bool validate_ = false;
+  std::vector<bool> work_;      // the passes this step runs (work() at its start)
   bool writtenSuspect_ = true;  // write_particles' summary: some particle may fail the guard
   Profile profile_{kPbdPasses};
   GuardRecord guard_;
