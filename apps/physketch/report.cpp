@@ -6,6 +6,13 @@ namespace physketch::app {
 
 using nlohmann::json;
 
+std::map<std::string, std::int64_t> particlesPerMaterial(const Prepared& p) {
+  std::map<std::string, std::int64_t> n;
+  for (const auto& m : p.scene.materials) n[m.name] = 0;
+  for (auto m : p.sketch->particles.material) ++n[p.scene.materials[static_cast<std::size_t>(m)].name];
+  return n;
+}
+
 json sketchJson(const Prepared& p) {
   const SceneDesc& sc = p.scene;
   const sketch::Sketch& sk = *p.sketch;
@@ -18,9 +25,7 @@ json sketchJson(const Prepared& p) {
     j["body"] = o.body >= 0 ? json(sk.bodyNames[static_cast<std::size_t>(o.body)]) : json(nullptr);
     ops.push_back(j);
   }
-  std::map<std::string, std::int64_t> perMaterial;
-  for (const auto& m : sc.materials) perMaterial[m.name] = 0;
-  for (auto m : sk.particles.material) ++perMaterial[sc.materials[static_cast<std::size_t>(m)].name];
+  const std::map<std::string, std::int64_t> perMaterial = particlesPerMaterial(p);
   json bodies = json::array();
   for (std::size_t b = 0; b < sk.bodies.size(); ++b)
     bodies.push_back({{"name", sk.bodyNames[b]}, {"particles", sk.bodies[b].count}, {"first", sk.bodies[b].first}});

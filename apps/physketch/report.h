@@ -2,6 +2,8 @@
 // images (docs/formats.md, "Outputs").
 #pragma once
 
+#include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -13,6 +15,8 @@
 
 namespace physketch::app {
 
+// Particles per material name (every material of the scene, 0 if unused).
+std::map<std::string, std::int64_t> particlesPerMaterial(const Prepared& p);
 // Provenance of the sketch: particles per operation, per material and per body, and lint warnings.
 nlohmann::json sketchJson(const Prepared& p);
 nlohmann::json planJson(const std::vector<PlanEntry>& plan);

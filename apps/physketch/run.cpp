@@ -111,8 +111,7 @@ int lintScene(const std::string& scenePath) {
                   body.c_str());
     }
     std::printf("materials:\n");
-    std::map<std::string, std::int64_t> perMaterial;
-    for (auto m : sk.particles.material) ++perMaterial[sc.materials[static_cast<std::size_t>(m)].name];
+    std::map<std::string, std::int64_t> perMaterial = particlesPerMaterial(p);
     for (const auto& m : sc.materials)
       std::printf("  %-12s %lld particles\n", m.name.c_str(), static_cast<long long>(perMaterial[m.name]));
     for (const auto& w : sk.warnings) std::printf("warning: %s\n", w.c_str());
