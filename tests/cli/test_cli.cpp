@@ -368,3 +368,22 @@ TEST(Cli, PlanAllListsThePassesThatAreOffWithWhyAndPlanAfterAddsMeasuredTimes) {
   EXPECT_NE(r.err.find("report.json"), std::string::npos) << r.err;
   fs::remove_all(dir);
 }
+
+TEST(Cli, TheCollideExampleKeepsBodiesOnEachOther) {
+  // scenes/collide.scene (the README's example of what rigid bodies do): after 2 s the
+  // box thrown onto the fixed table top lies on it (centre above the top at 0.265 m, not
+  // on the ground at 0.03 m), and the block dropped onto the other block rests on it
+  // (centre above the lower block's top at 0.08 m).
+  const fs::path dir = freshDir("collide");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/collide.scene";
+  const Result r = runCli("run '" + scene + "' -q --out '" + (dir / "o").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rep = readJson(dir / "o" / "report.json");
+  EXPECT_EQ(rep["status"], "ok");
+  const auto& last = rep["poses"].back()["bodies"];
+  ASSERT_EQ(last.size(), 5u);
+  EXPECT_EQ(rep["poses"][0]["bodies"][0], last[0]);  // the fixed table top
+  EXPECT_GT(last[1][1].get<double>(), 0.265);         // the thrown box, on the table
+  EXPECT_GT(last[4][1].get<double>(), 0.08);          // the dropped block, on the other
+  fs::remove_all(dir);
+}
