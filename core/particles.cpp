@@ -49,4 +49,13 @@ const char* toString(BodyMode mode) {
   return "?";
 }
 
+const char* toString(BodyLayout layout) {
+  switch (layout) {
+    case BodyLayout::kVoxels: return "voxels";
+    case BodyLayout::kChain: return "chain";
+    case BodyLayout::kLattice: return "lattice";
+  }
+  return "?";
+}
+
 }  // namespace physketch

@@ -63,14 +63,29 @@ struct BodyInit {
   bool fixed = false;            // never moves: walls, slopes, table tops
 };
 
-// A rigid body: a contiguous range of particles simulated together. One per
-// create operation, per named body (body=NAME, whose parts may mix materials:
-// each particle keeps its own material and mass), or per piece a cut left.
+// How the particles of a body are laid out, which says how they hang together:
+// - kVoxels: one particle per voxel of the sketch grid (rigid and soft bodies, fluid fills,
+//   every MPM kind); neighbours are found by position.
+// - kChain: a rope, the brush path's centreline resampled at the particle spacing; particle
+//   first + k is linked to first + k + 1 (one particle across).
+// - kLattice: a cloth, the surface the brush swept resampled as a rows x cols lattice at the
+//   particle spacing, row-major: particle first + r * cols + c is lattice node (r, c);
+//   count == rows * cols.
+enum class BodyLayout : std::uint8_t { kVoxels, kChain, kLattice };
+const char* toString(BodyLayout layout);
+
+// A body: a contiguous range of particles simulated together. One per create operation,
+// per named body (body=NAME, whose parts may mix materials: each particle keeps its own
+// material and mass), or per piece a cut left. What the solver makes of it follows from its
+// material's kind (rigid: shape matching; soft: clusters; fluid: free particles; rope and
+// cloth: distance and bending constraints along the layout).
 struct BodyRange {
   std::int32_t first = 0;     // first particle id
   std::int32_t count = 0;     // number of particles
   std::int32_t stroke = 0;    // id of the operation that created its first particle
   BodyInit init;
+  BodyLayout layout = BodyLayout::kVoxels;
+  std::int32_t rows = 0, cols = 0;  // kLattice only: rows * cols == count
 };
 
 // Pose of a rigid body: world = R (rest - restCentre) + centre.
