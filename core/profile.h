@@ -10,8 +10,9 @@
 
 namespace physketch {
 
-// How often a pass runs within one solver step.
-enum class Cadence { kPerStep, kPerSubstep };
+// How often a pass runs within one solver step: once, once per substep, or once per
+// constraint iteration of every substep (the passes a PBD iteration interleaves).
+enum class Cadence { kPerStep, kPerSubstep, kPerIteration };
 
 struct PassSpec {
   const char* name;   // as printed in the plan, the profile and guard records

@@ -5,56 +5,35 @@
 #include <cstring>
 #include <map>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "core/error.h"
 #include "core/lattice.h"
 #include "core/neighbor_grid.h"
+#include "pbd/parallel.h"
 #include "pbd/shape_matching.h"
 
 namespace physketch::pbd {
 
 const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
-    {"integrate", Cadence::kPerSubstep, "dynamic bodies: v += g h, gyroscopic w update, c += v h, q += h/2 [w,0] q"},
+    {"integrate", Cadence::kPerSubstep, "dynamic rigid bodies: v += g h, gyroscopic w update, c += v h, q += h/2 [w,0] q"},
+    {"predict", Cadence::kPerSubstep, "soft, rope, cloth and fluid particles: v += g h, p = x + v h (Macklin 2014 Alg. 1)"},
     {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
-    {"find_contacts", Cadence::kPerSubstep, "per dynamic body near the ground: its particles within a margin of it"},
+    {"find_contacts", Cadence::kPerSubstep, "per dynamic rigid body near the ground: its particles within a margin of it"},
+    {"find_neighbors", Cadence::kPerSubstep, "particle pairs within reach (one NeighborGrid per substep), reused by every iteration"},
+    {"particle_contact", Cadence::kPerIteration, "particle pairs and the ground: projection and Coulomb friction (Macklin 2014 §6)"},
+    {"cluster_match", Cadence::kPerIteration, "soft bodies: clustered shape matching with XPBD compliance (Müller 2005, Macklin 2016)"},
+    {"distance", Cadence::kPerIteration, "rope and cloth: XPBD stretch and bending, attachments to bodies, tethers"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps"},
-    {"update", Cadence::kPerSubstep, "velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
+    {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
+    {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution"},
+    {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched leave at e times their approach speed (Müller 2020 Eq. 34)"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
     {"guard", Cadence::kPerStep, "first NaN, explosion or ground penetration"},
 };
 
 namespace {
-
-// Per-particle loops split into fixed chunks; below this size they run serially
-// (threads cost more than they save on small scenes). Results do not depend on
-// the split: every particle is written by exactly one task.
-constexpr std::size_t kChunk = 4096;
-
-// f(lo, hi) runs on the chunks [j kChunk, min(n, (j+1) kChunk)): fixed boundaries,
-// whatever the thread count, so a chunk's index is lo / kChunk.
-template <class F>
-void forRange(std::size_t n, F&& f) {
-  const std::size_t chunks = (n + kChunk - 1) / kChunk;
-  if (chunks <= 1) {
-    f(std::size_t(0), n);
-    return;
-  }
-  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) { f(j * kChunk, std::min(n, (j + 1) * kChunk)); });
-}
-
-// Runs f(k) for k in [0, n): bodies are independent, each is solved serially inside.
-template <class F>
-void forBodies(std::size_t n, F&& f) {
-  if (n == 1) {
-    f(std::size_t(0));
-  } else if (n > 1) {
-    tbb::parallel_for(std::size_t(0), n, f);
-  }
-}
 
 // q <- exp(dtheta / 2) q: the rotation by the vector dtheta (rad, world axes), exactly,
 // so that update()'s w = 2 log(q q_prev^-1) / h gives back the w that integrate used.
@@ -124,6 +103,10 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   ry_.assign(n, 0.0f);
   rz_.assign(n, 0.0f);
   design_.assign(n, 0);
+  px_ = parts_.x, py_ = parts_.y, pz_ = parts_.z;
+  invMassP_.assign(n, 0.0f);
+  pinned_.assign(n, 0);
+  groundApproach_.assign(n, 0.0f);
   const double spacing = 2.0 * params_.particleRadius;
   for (std::size_t i = 0; i < n; ++i) {
     const auto m = static_cast<std::size_t>(parts_.material[i]);
@@ -135,16 +118,32 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
       throw RuntimeError("PbdWorld: body " + std::to_string(members_.size()) + " has an invalid particle range");
     std::vector<std::int32_t> ids(static_cast<std::size_t>(br.count));
     for (std::int32_t k = 0; k < br.count; ++k) ids[std::size_t(k)] = br.first + k;
-    appendBody(std::move(ids), br.init, br.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic);
+    const MaterialKind kind = kindOf(parts_.material[std::size_t(br.first)]);
+    appendBody(std::move(ids), br.init, br.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic, kind);
+    if (kind != MaterialKind::kRigid) setupParticleBody(members_.size() - 1, br);
   }
+  // Strands attach to what they touch once every body exists (a rope drawn from a fixed
+  // beam to a bucket hangs from the beam and carries the bucket).
+  for (std::size_t b = 0; b < members_.size(); ++b)
+    if (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth) attachStrandEnds(b);
+  for (std::size_t b = 0; b < members_.size(); ++b) refreshInverseMasses(b);
   contacts_.planes.push_back(Plane{Vec3::UnitY(), params_.groundY});
   writeParticles();
 }
 
 // Appends one slot to every per-body array; mass properties are filled by refreshMassProperties.
+MaterialKind PbdWorld::kindOf(std::int16_t material) const {
+  const SolverModel model = solverModel(materials_.at(static_cast<std::size_t>(material)).kind, SolverKind::kPbd);
+  if (!model.simulated)
+    throw RuntimeError(std::string("PbdWorld: material '") + materials_[std::size_t(material)].name + "' is kind " +
+                       toString(materials_[std::size_t(material)].kind) + ", which solver pbd does not simulate");
+  return model.runsAs;
+}
+
 std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
-                                   BodyMode mode) {
+                                   BodyMode mode, MaterialKind kind) {
   members_.push_back(std::move(members));
+  kind_.push_back(kind);
   motion_.push_back(motion);
   restCentre_.push_back(restCentre);
   invMass_.push_back(0.0);
@@ -159,8 +158,8 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   return members_.size() - 1;
 }
 
-void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode) {
-  const std::size_t b = pushBodySlot(std::move(members), Motion{}, Vec3::Zero(), BodyMode::kDynamic);
+void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode, MaterialKind kind) {
+  const std::size_t b = pushBodySlot(std::move(members), Motion{}, Vec3::Zero(), BodyMode::kDynamic, kind);
   // Rest shape = the particles' current positions; the pose starts at identity.
   Vec3 c = Vec3::Zero();
   double m = 0.0;
@@ -178,12 +177,20 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
   }
   Motion& mo = motion_[b];
   mo.c = mo.cPrev = mo.kinStart = mo.kinTarget = restCentre_[b] = c;
-  labelDesignPieces(b);
+  if (kind == MaterialKind::kRigid) labelDesignPieces(b);
   refreshMassProperties(b);
   setMode(static_cast<int>(b), mode);
   if (mode_[b] == BodyMode::kDynamic) {
     mo.v = init.velocity;
     mo.w = init.spin;
+    if (kind != MaterialKind::kRigid) {
+      // A particle-level body starts with the rigid velocity field of vel= and spin=.
+      for (std::int32_t i : members_[b]) {
+        const auto k = std::size_t(i);
+        const Vec3 u = init.velocity + init.spin.cross(Vec3(rx_[k], ry_[k], rz_[k]));
+        parts_.vx[k] = float(u.x()), parts_.vy[k] = float(u.y()), parts_.vz[k] = float(u.z());
+      }
+    }
   }
 }
 
@@ -238,11 +245,25 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyInit& init, bool kinema
     ry_.push_back(0.0f);
     rz_.push_back(0.0f);
     design_.push_back(0);
+    px_.push_back(p.x[i]), py_.push_back(p.y[i]), pz_.push_back(p.z[i]);
+    invMassP_.push_back(0.0f);
+    pinned_.push_back(0);
+    groundApproach_.push_back(0.0f);
     ids.push_back(id);
   }
   const BodyMode mode = kinematic ? BodyMode::kKinematic : init.fixed ? BodyMode::kFixed : BodyMode::kDynamic;
-  appendBody(std::move(ids), init, mode);
-  return static_cast<int>(members_.size() - 1);
+  const MaterialKind kind = kindOf(p.material[0]);
+  appendBody(std::move(ids), init, mode, kind);
+  const std::size_t b = members_.size() - 1;
+  if (kind != MaterialKind::kRigid) {
+    BodyRange range;
+    range.first = members_[b].front();
+    range.count = static_cast<std::int32_t>(members_[b].size());
+    setupParticleBody(b, range);
+    if (kind == MaterialKind::kRope || kind == MaterialKind::kCloth) attachStrandEnds(b);
+    refreshInverseMasses(b);
+  }
+  return static_cast<int>(b);
 }
 
 void PbdWorld::setMode(int body, BodyMode mode) {
@@ -252,7 +273,10 @@ void PbdWorld::setMode(int body, BodyMode mode) {
   // Prescribed particles have infinite mass: the dynamic passes leave them alone.
   const std::int32_t group = static_cast<std::int32_t>(b);
   const std::uint32_t flags = mode == BodyMode::kDynamic ? 0u : phase::kPrescribed;
-  for (std::int32_t i : members_[b]) parts_.phase[std::size_t(i)] = phase::make(group, flags);
+  const std::uint32_t fluid = kind_[b] == MaterialKind::kFluid ? phase::kFluid : 0u;
+  for (std::int32_t i : members_[b])
+    parts_.phase[std::size_t(i)] = phase::make(group, flags | fluid | (pinned_[std::size_t(i)] ? phase::kPrescribed : 0u));
+  if (!isRigid(b)) refreshInverseMasses(b);
   Motion& mo = motion_[b];
   mo.kinStart = mo.kinTarget = mo.c;
   if (mode == BodyMode::kFixed) mo.v = mo.w = Vec3::Zero();
@@ -375,6 +399,12 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
     auto& mem = members_[bb];
     groundCache_[bb].valid = false;
     mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
+    if (!isRigid(bb)) {
+      // Particle-level bodies keep their index: their constraints to removed particles go
+      // (a cut rope hangs in two pieces; a cloth tears), their clusters lose the members.
+      refreshMassProperties(bb);
+      continue;
+    }
     if (mem.empty()) {
       refreshMassProperties(bb);
       continue;
@@ -404,6 +434,14 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
     setMode(b, mode);
   }
   std::sort(out.begin(), out.end());
+  bool loose = false;
+  for (int b : changed) loose = loose || !isRigid(std::size_t(b));
+  if (loose) {
+    for (std::int32_t i : ids)
+      if (i >= 0 && std::size_t(i) < parts_.size()) invMassP_[std::size_t(i)] = 0.0f;
+    dropRemovedConstraints();
+    looseDirty_ = true;
+  }
   return out;
 }
 
@@ -418,46 +456,92 @@ BodyPose PbdWorld::pose(int body) const {
 
 // --- the step -------------------------------------------------------------------
 
+PbdWorld::Census PbdWorld::census() const {
+  Census c;
+  for (std::size_t b = 0; b < mode_.size(); ++b) {
+    const BodyMode m = mode_[b];
+    if (m == BodyMode::kEmpty) continue;
+    ++c.bodies;
+    const bool dyn = m == BodyMode::kDynamic;
+    if (isRigid(b)) {
+      c.rigidDynamic += dyn;
+      c.bouncy += dyn && restitution_[b] > 0.0;
+    } else {
+      c.looseDynamic += dyn;
+      c.soft += dyn && kind_[b] == MaterialKind::kSoft;
+      c.strands += dyn && (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth);
+      c.fluid += dyn && kind_[b] == MaterialKind::kFluid;
+    }
+    c.kinematic += m == BodyMode::kKinematic;
+    c.kinematicLoose += m == BodyMode::kKinematic && !isRigid(b);
+  }
+  for (std::size_t k = 0; k < clusters_.creep.size(); ++k)
+    c.plastic += clusters_.creep[k] > 0.0f && mode_[std::size_t(clusters_.body[k])] == BodyMode::kDynamic;
+  for (std::size_t k = 0; k < distances_.size() && !c.distances; ++k)
+    c.distances = invMassP_[std::size_t(distances_.i[k])] > 0.0f || invMassP_[std::size_t(distances_.j[k])] > 0.0f;
+  c.distances = c.distances || !attachments_.empty() || !tethers_.empty();
+  return c;
+}
+
 std::vector<bool> PbdWorld::work() const {
   std::vector<bool> on(static_cast<std::size_t>(PbdPass::kCount), false);
-  const auto count = [&](BodyMode m) { return std::count(mode_.begin(), mode_.end(), m); };
-  const bool dynamic = count(BodyMode::kDynamic) > 0, kinematic = count(BodyMode::kKinematic) > 0;
-  const bool any = parts_.size() > 0;
-  on[int(PbdPass::kIntegrate)] = dynamic;
+  const Census c = census();
+  const bool rigid = c.rigidDynamic > 0, loose = c.looseDynamic > 0, kinematic = c.kinematic > 0;
+  on[int(PbdPass::kIntegrate)] = rigid;
+  on[int(PbdPass::kPredict)] = loose;
   on[int(PbdPass::kKinematic)] = kinematic;
-  on[int(PbdPass::kFindContacts)] = dynamic;
-  on[int(PbdPass::kRigidContact)] = dynamic;
-  on[int(PbdPass::kBodyContact)] = dynamic && bodiesMayTouch();
-  on[int(PbdPass::kUpdate)] = dynamic || kinematic;
-  bool bouncy = false;
-  for (std::size_t b = 0; b < mode_.size(); ++b) bouncy = bouncy || (mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0);
-  on[int(PbdPass::kRestitution)] = bouncy;
-  on[int(PbdPass::kWriteParticles)] = dynamic || kinematic;
-  on[int(PbdPass::kGuard)] = any;
+  on[int(PbdPass::kFindContacts)] = rigid;
+  // Particle pairs exist only with something to touch: another body, or a fluid's own particles.
+  on[int(PbdPass::kFindNeighbors)] = loose && (c.bodies > 1 || c.fluid > 0);
+  on[int(PbdPass::kParticleContact)] = loose;
+  on[int(PbdPass::kClusterMatch)] = c.soft > 0;
+  on[int(PbdPass::kDistance)] = loose && c.distances;
+  on[int(PbdPass::kRigidContact)] = rigid;
+  on[int(PbdPass::kBodyContact)] = rigid && bodiesMayTouch();
+  on[int(PbdPass::kUpdate)] = rigid || c.kinematic > c.kinematicLoose;
+  on[int(PbdPass::kParticleUpdate)] = loose || c.kinematicLoose > 0;
+  on[int(PbdPass::kPlasticity)] = c.plastic > 0;
+  on[int(PbdPass::kRestitution)] = c.bouncy > 0;
+  on[int(PbdPass::kWriteParticles)] = rigid || loose || kinematic;
+  on[int(PbdPass::kGuard)] = parts_.size() > 0;
   return on;
 }
 
 std::string PbdWorld::reason(PbdPass pass, bool on) const {
-  const auto count = [&](BodyMode m) { return long(std::count(mode_.begin(), mode_.end(), m)); };
-  const long dyn = count(BodyMode::kDynamic), kin = count(BodyMode::kKinematic);
-  long bouncy = 0;
-  for (std::size_t b = 0; b < mode_.size(); ++b) bouncy += mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0;
+  const Census c = census();
+  const auto n = [](long k, const char* what) { return std::to_string(k) + " " + what; };
   switch (pass) {
     case PbdPass::kIntegrate:
     case PbdPass::kFindContacts:
     case PbdPass::kRigidContact:
-      return on ? std::to_string(dyn) + " dynamic rigid bodies" : "no dynamic body (all fixed, held or emptied)";
+      return on ? n(c.rigidDynamic, "dynamic rigid bodies") : "no dynamic rigid body (none, or all fixed, held or emptied)";
     case PbdPass::kBodyContact:
-      return on ? "a dynamic body and another body within reach of each other"
-                : (dyn == 0 ? "no dynamic body" : "no two bodies are within reach of each other");
+      return on ? "a dynamic rigid body and another rigid body within reach of each other"
+                : (c.rigidDynamic == 0 ? "no dynamic rigid body" : "no two rigid bodies are within reach of each other");
     case PbdPass::kKinematic:
-      return on ? std::to_string(kin) + " bodies held or carried by a stroke"
+      return on ? n(c.kinematic, "bodies held or carried by a stroke")
                 : "no body is held while drawn or carried by a move now";
     case PbdPass::kUpdate:
-    case PbdPass::kWriteParticles: return on ? std::to_string(dyn + kin) + " moving bodies" : "no body moves";
+      return on ? n(c.rigidDynamic + c.kinematic - c.kinematicLoose, "moving rigid bodies") : "no rigid body moves";
+    case PbdPass::kPredict:
+    case PbdPass::kParticleContact:
+      return on ? n(c.looseDynamic, "dynamic soft, rope, cloth or fluid bodies")
+                : "no soft, rope, cloth or fluid material in the scene (or all of it fixed)";
+    case PbdPass::kParticleUpdate:
+      return on ? n(c.looseDynamic + c.kinematicLoose, "moving soft, rope, cloth or fluid bodies")
+                : "no soft, rope, cloth or fluid material moves";
+    case PbdPass::kFindNeighbors:
+      return on ? "particle-level material and another body (or a fluid) it can touch"
+                : (c.looseDynamic == 0 ? "no dynamic particle-level material" : "a single particle-level body with nothing else to touch");
+    case PbdPass::kClusterMatch: return on ? n(c.soft, "dynamic soft bodies") : "no dynamic soft body";
+    case PbdPass::kDistance:
+      return on ? n(c.strands, "dynamic ropes or cloths (or attachments)") : "no rope or cloth moves";
+    case PbdPass::kPlasticity:
+      return on ? n(c.plastic, "soft clusters with plastic_creep > 0") : "no soft material has plastic_creep > 0";
+    case PbdPass::kWriteParticles: return on ? "bodies move" : "no body moves";
     case PbdPass::kRestitution:
-      return on ? std::to_string(bouncy) + " dynamic bodies with restitution > 0"
-                : "no dynamic body's material has restitution > 0";
+      return on ? n(c.bouncy, "dynamic rigid bodies with restitution > 0")
+                : "no dynamic rigid body's material has restitution > 0";
     case PbdPass::kGuard: return on ? "checks every step" : "no particles";
     case PbdPass::kCount: break;
   }
@@ -467,19 +551,28 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
 std::string PbdWorld::touches(PbdPass pass) const {
   long particles = 0, bodies = 0;
   for (std::size_t b = 0; b < mode_.size(); ++b) {
+    const BodyMode m = mode_[b];
+    const bool rigid = isRigid(b), dyn = m == BodyMode::kDynamic;
     bool counts = false;
     switch (pass) {
       case PbdPass::kIntegrate:
       case PbdPass::kFindContacts:
-      case PbdPass::kRigidContact: counts = mode_[b] == BodyMode::kDynamic; break;
-      case PbdPass::kBodyContact: counts = mode_[b] != BodyMode::kEmpty; break;
-      case PbdPass::kRestitution: counts = mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0; break;
-      case PbdPass::kKinematic: counts = mode_[b] == BodyMode::kKinematic; break;
-      case PbdPass::kUpdate:
-      case PbdPass::kWriteParticles:
-        counts = mode_[b] == BodyMode::kDynamic || mode_[b] == BodyMode::kKinematic;
+      case PbdPass::kRigidContact: counts = rigid && dyn; break;
+      case PbdPass::kBodyContact: counts = rigid && m != BodyMode::kEmpty; break;
+      case PbdPass::kRestitution: counts = rigid && dyn && restitution_[b] > 0.0; break;
+      case PbdPass::kKinematic: counts = m == BodyMode::kKinematic; break;
+      case PbdPass::kUpdate: counts = rigid && (dyn || m == BodyMode::kKinematic); break;
+      case PbdPass::kPredict:
+      case PbdPass::kParticleContact: counts = !rigid && dyn; break;
+      case PbdPass::kFindNeighbors: counts = m != BodyMode::kEmpty; break;
+      case PbdPass::kParticleUpdate: counts = !rigid && (dyn || m == BodyMode::kKinematic); break;
+      case PbdPass::kClusterMatch:
+      case PbdPass::kPlasticity: counts = dyn && kind_[b] == MaterialKind::kSoft; break;
+      case PbdPass::kDistance:
+        counts = dyn && (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth);
         break;
-      case PbdPass::kGuard: counts = mode_[b] != BodyMode::kEmpty; break;
+      case PbdPass::kWriteParticles: counts = dyn || m == BodyMode::kKinematic; break;
+      case PbdPass::kGuard: counts = m != BodyMode::kEmpty; break;
       case PbdPass::kCount: break;
     }
     if (!counts) continue;
@@ -489,6 +582,11 @@ std::string PbdWorld::touches(PbdPass pass) const {
   std::string t = std::to_string(particles) + " particles in " + std::to_string(bodies) + " bodies";
   if (pass == PbdPass::kFindContacts || pass == PbdPass::kRigidContact)
     t += " (the sweeps touch only particles near the ground)";
+  if (pass == PbdPass::kClusterMatch) t += ", " + std::to_string(clusters_.members.size()) + " clusters";
+  if (pass == PbdPass::kDistance)
+    t += ", " + std::to_string(distances_.size()) + " distance constraints, " + std::to_string(attachments_.size()) +
+         " attachments, " + std::to_string(tethers_.size()) + " tethers";
+  if (pass == PbdPass::kFindNeighbors) t = "particle-level particles and the rigid particles near them";
   return t;
 }
 
@@ -503,10 +601,18 @@ std::vector<PlanEntry> PbdWorld::planAll() const {
     e.name = spec.name;
     e.does = spec.does;
     e.on = on[std::size_t(k)];
-    e.runs = spec.cadence == Cadence::kPerSubstep ? "substeps = " + std::to_string(s) : "once";
-    if (PbdPass(k) == PbdPass::kRigidContact)
-      e.runs += ", up to " + std::to_string(params_.iterations) + " sweeps each";
-    e.perStep = e.on ? (spec.cadence == Cadence::kPerSubstep ? s : 1) : 0;
+    const long it = params_.iterations;
+    switch (spec.cadence) {
+      case Cadence::kPerStep: e.runs = "once"; break;
+      case Cadence::kPerSubstep: e.runs = "substeps = " + std::to_string(s); break;
+      case Cadence::kPerIteration:
+        e.runs = "substeps x iterations = " + std::to_string(s) + " x " + std::to_string(it);
+        break;
+    }
+    if (PbdPass(k) == PbdPass::kRigidContact || PbdPass(k) == PbdPass::kBodyContact)
+      e.runs += ", up to " + std::to_string(it) + " sweeps each";
+    const long calls = spec.cadence == Cadence::kPerStep ? 1 : spec.cadence == Cadence::kPerSubstep ? s : s * it;
+    e.perStep = e.on ? calls : 0;
     e.reason = reason(PbdPass(k), e.on);
     if (e.on) e.touches = touches(PbdPass(k));
     out.push_back(std::move(e));
@@ -547,15 +653,32 @@ bool PbdWorld::runStep(bool checkEachPass) {
   const auto runs = [&](PbdPass p) { return bool(on[std::size_t(p)]); };
   for (int s = 0; s < params_.substeps; ++s) {
     if (runs(PbdPass::kIntegrate) && !runPass(PbdPass::kIntegrate, s, checkEachPass, [&] { integrate(h); })) return false;
+    if (runs(PbdPass::kPredict) && !runPass(PbdPass::kPredict, s, checkEachPass, [&] { predict(h); })) return false;
     if (runs(PbdPass::kKinematic) && !runPass(PbdPass::kKinematic, s, checkEachPass, [&] { kinematic(s); }))
       return false;
     if (runs(PbdPass::kFindContacts) && !runPass(PbdPass::kFindContacts, s, checkEachPass, [&] { findContacts(); }))
       return false;
+    if (runs(PbdPass::kFindNeighbors) && !runPass(PbdPass::kFindNeighbors, s, checkEachPass, [&] { findNeighbors(); }))
+      return false;
+    for (int it = 0; it < params_.iterations; ++it) {
+      if (runs(PbdPass::kParticleContact) &&
+          !runPass(PbdPass::kParticleContact, s, checkEachPass, [&] { particleContact(); }))
+        return false;
+      if (runs(PbdPass::kClusterMatch) && !runPass(PbdPass::kClusterMatch, s, checkEachPass, [&] { clusterMatch(h); }))
+        return false;
+      if (runs(PbdPass::kDistance) && !runPass(PbdPass::kDistance, s, checkEachPass, [&] { distanceConstraints(h); }))
+        return false;
+    }
     if (runs(PbdPass::kRigidContact) && !runPass(PbdPass::kRigidContact, s, checkEachPass, [&] { rigidContact(); }))
       return false;
     if (runs(PbdPass::kBodyContact) && !runPass(PbdPass::kBodyContact, s, checkEachPass, [&] { bodyContact(); }))
       return false;
     if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
+    if (runs(PbdPass::kParticleUpdate) &&
+        !runPass(PbdPass::kParticleUpdate, s, checkEachPass, [&] { particleUpdate(h); }))
+      return false;
+    if (runs(PbdPass::kPlasticity) && !runPass(PbdPass::kPlasticity, s, checkEachPass, [&] { plasticity(h); }))
+      return false;
     if (runs(PbdPass::kRestitution) && !runPass(PbdPass::kRestitution, s, checkEachPass, [&] { restitution(h); }))
       return false;
   }
@@ -570,12 +693,26 @@ bool PbdWorld::step() {
   work_ = work();  // once per step: the replay below restores the same start, so the same passes
   active_.clear();
   for (std::size_t b = 0; b < mode_.size(); ++b)
-    if (mode_[b] == BodyMode::kDynamic) active_.push_back(static_cast<std::int32_t>(b));
+    if (mode_[b] == BodyMode::kDynamic && isRigid(b)) active_.push_back(static_cast<std::int32_t>(b));
+  if (looseDirty_) {
+    loose_.clear();
+    for (std::size_t b = 0; b < members_.size(); ++b)
+      if (!isRigid(b)) loose_.insert(loose_.end(), members_[b].begin(), members_[b].end());
+    std::sort(loose_.begin(), loose_.end());
+    looseDirty_ = false;
+  }
   if (validate_) {
     runStep(true);
   } else {
     const std::vector<Motion> start = motion_;  // per body: cheap to keep
     const std::vector<GroundCache> cacheStart = groundCache_;
+    // Particle-level state at the start of the step (only when there is some).
+    std::vector<float> looseStart;
+    if (!loose_.empty()) {
+      looseStart.reserve(6 * loose_.size());
+      for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
+        for (std::int32_t i : loose_) looseStart.push_back((*a)[std::size_t(i)]);
+    }
     runStep(false);
     if (work_[std::size_t(PbdPass::kGuard)]) {
       GuardRecord r;
@@ -590,6 +727,9 @@ bool PbdWorld::step() {
         // names the pass that produced the bad value (the step is deterministic).
         motion_ = start;
         groundCache_ = cacheStart;
+        std::size_t at = 0;
+        for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
+          for (std::int32_t i : loose_) (*a)[std::size_t(i)] = looseStart[at++];
         if (runStep(true)) {  // cannot happen for a deterministic step; keep the first record
           r.pass = "guard";
           r.step = steps_;
@@ -629,10 +769,16 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
     if (m == BodyMode::kEmpty || m == BodyMode::kFixed) continue;
     const Motion& mo = motion_[b];
     const Mat3 R = mo.q.toRotationMatrix();
+    const bool rigid = isRigid(b);
     for (std::int32_t i : members_[b]) {
       const auto k = std::size_t(i);
       Vec3 p, v;
-      if (bodiesOnly) {
+      if (!rigid) {
+        // Particle-level: mid-step, the predicted positions are the state.
+        p = bodiesOnly ? Vec3(px_[k], py_[k], pz_[k]) : Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
+        v = Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
+        if (pinned_[k]) v = Vec3::Zero();
+      } else if (bodiesOnly) {
         const Vec3 r0 = R * Vec3(rx_[k], ry_[k], rz_[k]);
         p = r0 + mo.c;
         v = mo.v + mo.w.cross(r0);
@@ -655,7 +801,7 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
              "A non-finite value usually comes from a degenerate constraint; lower 'dt' or raise 'substeps'.");
         return r;
       }
-      if (m != BodyMode::kDynamic) continue;  // the input moves it: only NaN is the solver's
+      if (m != BodyMode::kDynamic || pinned_[k]) continue;  // the input moves it: only NaN is the solver's
       if (bodiesOnly && v.squaredNorm() > maxSpeed2) {
         fill(GuardKind::kExplosion, v.norm(), params_.maxSpeed,
              "Speed above the bound: raise 'substeps' or 'iterations', or lower 'dt'.");
@@ -673,7 +819,7 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
 
 void PbdWorld::integrate(double h) {
   const Vec3 g = params_.gravity;
-  forBodies(active_.size(), [&](std::size_t k) {
+  forEach(active_.size(), [&](std::size_t k) {
     const auto b = std::size_t(active_[k]);
     Motion& mo = motion_[b];
     mo.cPrev = mo.c;
@@ -698,6 +844,10 @@ void PbdWorld::kinematic(int substep) {
     mo.cPrev = mo.c;
     mo.qPrev = mo.q;
     mo.c = mo.kinStart + a * (mo.kinTarget - mo.kinStart);
+    if (!isRigid(b)) {
+      kinematicParticles(b, mo.c - mo.cPrev);
+      continue;
+    }
     // The ground stops a carried body as it stops any other: a brush that dips below the
     // floor slides the body along it instead of pushing it through.
     const Mat3 R = mo.q.toRotationMatrix();
@@ -728,7 +878,7 @@ void PbdWorld::findContacts() {
   const double reuse = 4.0 * r;
   const Plane& ground = contacts_.planes[0];
   const double floorY = ground.offset + r;
-  forBodies(active_.size(), [&](std::size_t k) {
+  forEach(active_.size(), [&](std::size_t k) {
     const auto b = std::size_t(active_[k]);
     const Motion& mo = motion_[b];
     GroundCache& cache = groundCache_[b];
@@ -780,6 +930,7 @@ void PbdWorld::findContacts() {
 bool PbdWorld::mayTouch(std::size_t a, std::size_t b, double horizon) const {
   if (mode_[a] == BodyMode::kEmpty || mode_[b] == BodyMode::kEmpty) return false;
   if (mode_[a] != BodyMode::kDynamic && mode_[b] != BodyMode::kDynamic) return false;
+  if (!isRigid(a) || !isRigid(b)) return false;  // particle-level bodies touch through particle_contact
   const double g = params_.gravity.norm();
   const auto travel = [&](std::size_t k) {
     const Motion& m = motion_[k];
@@ -907,7 +1058,7 @@ void PbdWorld::bodyContact() {
 
 void PbdWorld::rigidContact() {
   BodyPlaneContacts& bp = contacts_.bodyPlane;  // each task writes only its own contact's entries
-  forBodies(bp.size(), [&](std::size_t c) {
+  forEach(bp.size(), [&](std::size_t c) {
     const auto b = std::size_t(bp.body[c]);
     const Plane& plane = contacts_.planes[std::size_t(bp.plane[c])];
     const double floorY = plane.offset + params_.particleRadius;
@@ -982,7 +1133,7 @@ void PbdWorld::rigidContact() {
 void PbdWorld::restitution(double h) {
   const BodyPlaneContacts& bp = contacts_.bodyPlane;
   const double slow = 2.0 * params_.gravity.norm() * h;
-  forBodies(bp.size(), [&](std::size_t c) {
+  forEach(bp.size(), [&](std::size_t c) {
     const auto b = std::size_t(bp.body[c]);
     if (!bp.touched[c] || restitution_[b] <= 0.0 || mode_[b] != BodyMode::kDynamic) return;
     const double u = bp.approachSpeed[c];
@@ -1004,6 +1155,7 @@ void PbdWorld::restitution(double h) {
 void PbdWorld::update(double h) {
   for (std::size_t b = 0; b < members_.size(); ++b) {
     Motion& mo = motion_[b];
+    if (!isRigid(b)) continue;
     if (mode_[b] == BodyMode::kDynamic) {
       mo.v = (mo.c - mo.cPrev) / h;
       mo.w = rotationVector(mo.q * mo.qPrev.conjugate()) / h;
@@ -1029,6 +1181,11 @@ void PbdWorld::writeParticles() {
   for (std::size_t b = 0; b < members_.size(); ++b) {
     // Fixed bodies never move: written once, when the world starts.
     if (mode_[b] == BodyMode::kEmpty || (mode_[b] == BodyMode::kFixed && steps_ > 0)) continue;
+    if (!isRigid(b)) {
+      // Particle-level bodies live in the particle arrays: only their summary is made here.
+      suspect = summarizeLoose(b) || suspect;
+      continue;
+    }
     const Motion& mo = motion_[b];
     // The particles are the body's float32 image: R r in float loses nothing the float
     // output keeps (|r| <= reach, relative error 1e-7), and runs as plain SoA loops.

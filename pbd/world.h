@@ -18,6 +18,18 @@
 //   write_particles  x_i = R r_i + c, v_i = v + w x R r_i, once per step
 //   guard            first NaN / explosion / penetration, once per step
 //
+// Soft bodies, ropes and cloth (and fluids) are simulated particle by particle, in the
+// same substeps (Macklin et al. 2014, Alg. 1, with XPBD compliance, Macklin et al. 2016):
+//     predict          v += g h, p = x + v h for their dynamic particles
+//     find_neighbors   particle pairs within reach (one NeighborGrid per substep): theirs
+//                      against each other and against rigid bodies' particles
+//     per iteration:   particle_contact (pairs and ground, Coulomb friction; a rigid body
+//                      takes its share through its generalized inverse mass),
+//                      cluster_match (soft: clustered shape matching), distance (rope and
+//                      cloth stretch and bending, attachments to bodies, tethers)
+//     particle_update  v = (p - x) / h, x = p; ground restitution
+//     plasticity       soft materials with plastic_creep > 0: cluster rest shapes creep
+//
 // Rigid bodies are integrated as bodies, in double precision: a particle-level
 // v = (p - x)/h in float32 loses gravity once the per-substep displacement drops
 // below the float spacing of the position (1000 substeps: g h^2 = 2.7e-9 m, while
@@ -34,6 +46,7 @@
 #include "core/math.h"
 #include "core/scene.h"
 #include "core/solver.h"
+#include "pbd/constraints.h"
 #include "pbd/contacts.h"
 
 namespace physketch::pbd {
@@ -54,11 +67,18 @@ PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius);
 // The passes of one step, in the order they run (the pass table: kPbdPasses[k] describes pass k).
 enum class PbdPass : int {
   kIntegrate,
+  kPredict,
   kKinematic,
   kFindContacts,
+  kFindNeighbors,
+  kParticleContact,
+  kClusterMatch,
+  kDistance,
   kRigidContact,
   kBodyContact,
   kUpdate,
+  kParticleUpdate,
+  kPlasticity,
   kRestitution,
   kWriteParticles,
   kGuard,
@@ -115,6 +135,16 @@ class PbdWorld final : public Solver {
     Quat qPrev = Quat::Identity();
     Vec3 kinStart = Vec3::Zero(), kinTarget = Vec3::Zero();  // kinematic centre at the start / end of the step
   };
+  // What the bodies are now, counted once for work(), reason() and touches().
+  struct Census {
+    long bodies = 0;        // not emptied
+    long rigidDynamic = 0, looseDynamic = 0, kinematic = 0, kinematicLoose = 0;
+    long soft = 0, strands = 0, fluid = 0;  // dynamic particle-level bodies by kind
+    long bouncy = 0;        // dynamic rigid bodies with restitution > 0
+    long plastic = 0;       // clusters of dynamic soft bodies with plastic_creep > 0
+    bool distances = false; // a distance constraint, attachment or tether with a dynamic end
+  };
+  Census census() const;
   // Which passes have work in the current state (the plan and the step both read it).
   std::vector<bool> work() const;
   bool mayTouch(std::size_t a, std::size_t b, double horizon) const;
@@ -136,9 +166,32 @@ class PbdWorld final : public Solver {
   void restitution(double h);
   void writeParticles();
 
+  // Particle-level kinds (pbd/world_particles.cpp).
+  bool isRigid(std::size_t body) const { return kind_[body] == MaterialKind::kRigid; }
+  void setupParticleBody(std::size_t body, const BodyRange& range);
+  void buildClusters(std::size_t body);
+  void buildStrand(std::size_t body, const BodyRange& range);
+  void attachStrandEnds(std::size_t body);
+  void refreshInverseMasses(std::size_t body);
+  void dropRemovedConstraints();
+  bool hasLoose() const;
+  void predict(double h);
+  void kinematicParticles(std::size_t body, const Vec3& delta);
+  void findNeighbors();
+  void particleContact();
+  void clusterMatch(double h);
+  void distanceConstraints(double h);
+  void particleUpdate(double h);
+  void plasticity(double h);
+  // Centre and mean velocity of a particle-level body (its pose and velocity()); true when
+  // some particle may fail the guard (non-finite, too fast, below the ground).
+  bool summarizeLoose(std::size_t body);
+  Vec3 rigidPoint(std::size_t i) const;  // world position of rigid particle i at its body's current pose
+
   std::size_t pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
-                           BodyMode mode);
-  void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode);
+                           BodyMode mode, MaterialKind kind = MaterialKind::kRigid);
+  MaterialKind kindOf(std::int16_t material) const;
+  void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode, MaterialKind kind);
   void refreshMassProperties(std::size_t body);
   void recentre(std::size_t body);
   std::vector<std::int32_t> restComponents(std::size_t body, int& count) const;
@@ -173,6 +226,43 @@ class PbdWorld final : public Solver {
     std::vector<std::int32_t> candidates;
   };
   std::vector<GroundCache> groundCache_;
+  // --- particle-level kinds -------------------------------------------------
+  std::vector<MaterialKind> kind_;  // per body: what it runs as (solverModel(kind, pbd).runsAs)
+  std::vector<float> px_, py_, pz_;  // per particle: predicted position this substep (particle-level kinds)
+  std::vector<float> invMassP_;      // per particle: 1/kg for a dynamic particle-level particle, else 0
+  std::vector<std::uint8_t> pinned_; // per particle: held where it was drawn (a rope end or cloth on a fixed body)
+  std::vector<std::int32_t> loose_;  // alive particles of particle-level bodies (ascending), rebuilt by refresh
+  // Soft bodies: clusters of radius R, centres at least dC apart (Phys-Sketch Fig. 3).
+  struct SoftClusters {
+    Clusters members;                 // particle ids per cluster
+    std::vector<float> qx, qy, qz;    // per membership: rest offset from the cluster's rest centre (m)
+    std::vector<float> lambda;        // per membership: XPBD multiplier of this substep
+    std::vector<float> compliance;    // per cluster (m/N)
+    std::vector<float> yield, creep;  // per cluster: plasticity (Müller 2005 §4.4)
+    std::vector<Quat> rotation;       // per cluster: warm start of the polar decomposition
+    std::vector<std::int32_t> body;   // per cluster
+  } clusters_;
+  DistanceConstraints distances_;     // rope and cloth stretch and bending
+  std::vector<std::int32_t> distanceVia_;  // per distance constraint: the node a bending link spans, else -1
+  std::vector<Vec3> dp_;              // scratch: one cluster's corrections
+  // A strand particle held to a point of a dynamic rigid body (a rope end on a bucket).
+  struct Attachment {
+    std::int32_t particle = 0, body = 0;
+    Vec3 local = Vec3::Zero();  // the point in the body's rest frame, relative to its rest centre
+    std::int32_t anchor = -1;   // the pinned particle the strand hangs from, if any (a tether, below)
+    float length = 0.0f;        // rest length along the strand from the anchor (m)
+  };
+  std::vector<Attachment> attachments_;
+  // Long-range attachments (Kim et al. 2012, FleX): a strand particle is never farther from
+  // its pinned anchor than the rest length along the strand, so a heavy bob cannot stretch
+  // a rope that the Gauss-Seidel sweeps converge on slowly.
+  struct Tether {
+    std::int32_t particle = 0, anchor = 0;
+    float length = 0.0f;
+  };
+  std::vector<Tether> tethers_;
+  std::vector<float> groundApproach_;
+  bool looseDirty_ = true;             // loose_ must be rebuilt before the next step  // per particle: vy before the solve when it touched the ground, else 0
   std::int64_t steps_ = 0;
   bool validate_ = false;
   std::vector<bool> work_;      // the passes this step runs (work() at its start)

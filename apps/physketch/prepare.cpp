@@ -12,7 +12,9 @@ SolverSupport supportOf(SolverKind solver) {
   s.solver = solver;
   switch (solver) {
     case SolverKind::kPbd:
-      s.kinds = {MaterialKind::kRigid};
+      // soft and elastic run as soft bodies (clustered shape matching); rope, cloth and
+      // fluid follow as the sketch lays them out and the density pass lands (issue 8).
+      s.kinds = {MaterialKind::kRigid, MaterialKind::kSoft};
       s.initialMotion = true;
       s.fixedBodies = true;
       break;

@@ -1,0 +1,749 @@
+// The particle-level kinds of the PBD world: soft bodies (clustered shape matching),
+// ropes and cloth (XPBD distance and bending constraints), fluids' particles, their
+// contacts with each other, with rigid bodies and with the ground (Macklin et al. 2014,
+// "Unified particle physics for real-time applications", Alg. 1; XPBD: Macklin et al.
+// 2016). Rigid bodies stay bodies (pbd/world.cpp); a particle touching one moves it
+// through its generalized inverse mass at the contact point, so coupling is two-way.
+//
+// Every constraint loop here is a Gauss-Seidel sweep in a fixed order (pairs by id,
+// clusters by index): deterministic, the same state for any thread count.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+#include "core/error.h"
+#include "core/neighbor_grid.h"
+#include "pbd/parallel.h"
+#include "pbd/shape_matching.h"
+#include "pbd/world.h"
+
+namespace physketch::pbd {
+
+namespace {
+
+// Coulomb friction on a position-level contact (Macklin et al. 2014, Eq. 24): the
+// tangential relative displacement `t` of this substep is removed while it is within
+// mu_s times the penetration depth d (static), else reduced by mu_k d (dynamic).
+// Returns the displacement to remove.
+Vec3 frictionCorrection(const Vec3& t, double d, double mus, double muk) {
+  const double len = t.norm();
+  if (len == 0.0) return Vec3::Zero();
+  if (len < mus * d) return t;
+  return t * std::min(muk * d / len, 1.0);
+}
+
+Vec3 at(const std::vector<float>& x, const std::vector<float>& y, const std::vector<float>& z, std::size_t i) {
+  return Vec3(x[i], y[i], z[i]);
+}
+
+void put(std::vector<float>& x, std::vector<float>& y, std::vector<float>& z, std::size_t i, const Vec3& p) {
+  x[i] = float(p.x()), y[i] = float(p.y()), z[i] = float(p.z());
+}
+
+}  // namespace
+
+// --- setup ------------------------------------------------------------------------
+
+void PbdWorld::setupParticleBody(std::size_t b, const BodyRange& range) {
+  switch (kind_[b]) {
+    case MaterialKind::kSoft: buildClusters(b); break;
+    case MaterialKind::kRope:
+    case MaterialKind::kCloth: buildStrand(b, range); break;
+    default: break;  // fluid: free particles; the density pass finds their neighbours
+  }
+  looseDirty_ = true;
+}
+
+void PbdWorld::refreshInverseMasses(std::size_t b) {
+  const bool dyn = mode_[b] == BodyMode::kDynamic && !isRigid(b);
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    invMassP_[k] = dyn && !pinned_[k] && alive(i) && parts_.mass[k] > 0.0f ? 1.0f / parts_.mass[k] : 0.0f;
+  }
+  looseDirty_ = true;
+}
+
+bool PbdWorld::hasLoose() const {
+  for (std::size_t b = 0; b < kind_.size(); ++b)
+    if (!isRigid(b) && mode_[b] != BodyMode::kEmpty) return true;
+  return false;
+}
+
+// Clusters (Phys-Sketch Fig. 3): centres chosen greedily in particle order, each at least
+// dC from every earlier centre; a cluster holds the body's particles within R of its
+// centre. With R < dC a particle can lie in no cluster: it joins its nearest centre's.
+void PbdWorld::buildClusters(std::size_t b) {
+  const auto& mem = members_[b];
+  if (mem.empty()) return;
+  const double spacing = 2.0 * params_.particleRadius;
+  const Material& mat = materials_[std::size_t(parts_.material[std::size_t(mem.front())])];
+  const double R = mat.soft.clusterRadius * spacing, dC = mat.soft.clusterSpacing * spacing;
+  const std::size_t n = mem.size();
+  std::vector<float> x(n), y(n), z(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto i = std::size_t(mem[k]);
+    x[k] = parts_.x[i], y[k] = parts_.y[i], z[k] = parts_.z[i];
+  }
+  // Centres: a hash of cells of edge dC; a candidate checks the 27 cells around it.
+  const auto key = [&](double v) { return static_cast<std::int64_t>(std::floor(v / dC)); };
+  const auto pack = [](std::int64_t a, std::int64_t c, std::int64_t d) {
+    return (a & 0x1FFFFF) | ((c & 0x1FFFFF) << 21) | ((d & 0x1FFFFF) << 42);
+  };
+  std::unordered_map<std::int64_t, std::vector<std::int32_t>> cells;
+  std::vector<std::int32_t> centres;
+  const double dC2 = dC * dC * (1.0 - 1e-9);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::int64_t cx = key(x[k]), cy = key(y[k]), cz = key(z[k]);
+    bool free = true;
+    for (int dz = -1; dz <= 1 && free; ++dz)
+      for (int dy = -1; dy <= 1 && free; ++dy)
+        for (int dx = -1; dx <= 1 && free; ++dx) {
+          const auto it = cells.find(pack(cx + dx, cy + dy, cz + dz));
+          if (it == cells.end()) continue;
+          for (std::int32_t c : it->second) {
+            const double ex = x[k] - x[std::size_t(c)], ey = y[k] - y[std::size_t(c)], ez = z[k] - z[std::size_t(c)];
+            if (ex * ex + ey * ey + ez * ez < dC2) {
+              free = false;
+              break;
+            }
+          }
+        }
+    if (!free) continue;
+    centres.push_back(static_cast<std::int32_t>(k));
+    cells[pack(cx, cy, cz)].push_back(static_cast<std::int32_t>(k));
+  }
+  // Members: the body's particles within R of each centre (a NeighborGrid of cell R).
+  NeighborGrid grid;
+  grid.build(x.data(), y.data(), z.data(), n, static_cast<float>(R));
+  std::vector<std::vector<std::int32_t>> lists(centres.size());
+  std::vector<std::uint8_t> covered(n, 0);
+  for (std::size_t c = 0; c < centres.size(); ++c) {
+    const std::int32_t k = centres[c];
+    lists[c].push_back(k);
+    covered[std::size_t(k)] = 1;
+    grid.forEachNeighbor(k, static_cast<float>(R), [&](std::int32_t j) {
+      lists[c].push_back(j);
+      covered[std::size_t(j)] = 1;
+    });
+  }
+  for (std::size_t k = 0; k < n; ++k) {
+    if (covered[k]) continue;
+    std::size_t best = 0;
+    double bestD = std::numeric_limits<double>::infinity();
+    for (std::size_t c = 0; c < centres.size(); ++c) {
+      const auto j = std::size_t(centres[c]);
+      const double d = (Vec3(x[k], y[k], z[k]) - Vec3(x[j], y[j], z[j])).squaredNorm();
+      if (d < bestD) bestD = d, best = c;
+    }
+    lists[best].push_back(static_cast<std::int32_t>(k));
+  }
+  // Each particle is held to its goal by one constraint per cluster it belongs to, in
+  // parallel: their compliance is that many times the per-particle one, so the particle's
+  // total stiffness is 1/softCompliance = E h whatever R and dC are.
+  std::size_t memberships = 0;
+  for (const auto& list : lists) memberships += list.size();
+  const double perParticle = double(memberships) / double(n);
+  const float alpha = static_cast<float>(softCompliance(mat, spacing) * perParticle);
+  for (auto& list : lists) {
+    std::sort(list.begin(), list.end());
+    std::vector<std::int32_t> ids(list.size());
+    double m = 0.0;
+    Vec3 c0 = Vec3::Zero();
+    for (std::size_t k = 0; k < list.size(); ++k) {
+      ids[k] = mem[std::size_t(list[k])];
+      const double mi = parts_.mass[std::size_t(ids[k])];
+      m += mi;
+      c0 += mi * at(parts_.x, parts_.y, parts_.z, std::size_t(ids[k]));
+    }
+    c0 /= m;
+    for (std::int32_t i : ids) {
+      const Vec3 q = at(parts_.x, parts_.y, parts_.z, std::size_t(i)) - c0;
+      clusters_.qx.push_back(float(q.x())), clusters_.qy.push_back(float(q.y())), clusters_.qz.push_back(float(q.z()));
+      clusters_.lambda.push_back(0.0f);
+    }
+    clusters_.members.add(ids, 1.0f);
+    clusters_.compliance.push_back(alpha);
+    clusters_.yield.push_back(static_cast<float>(mat.soft.plasticYield));
+    clusters_.creep.push_back(static_cast<float>(mat.soft.plasticCreep));
+    clusters_.rotation.push_back(Quat::Identity());
+    clusters_.body.push_back(static_cast<std::int32_t>(b));
+  }
+}
+
+// Rope: links k-(k+1) (stretch) and k-(k+2) (bending as a distance across two links, as
+// FleX does). Cloth: structural and shear links of the lattice (stretch), and links two
+// nodes apart along rows and columns (bending). Rest lengths are the drawn distances.
+void PbdWorld::buildStrand(std::size_t b, const BodyRange& range) {
+  const auto& mem = members_[b];
+  const Material& mat = materials_[std::size_t(parts_.material[std::size_t(mem.front())])];
+  const float stretch = static_cast<float>(mat.strand.stretchCompliance);
+  const float bend = static_cast<float>(mat.strand.bendCompliance);
+  const auto link = [&](std::int32_t a, std::int32_t c, float alpha, std::int32_t via = -1) {
+    const float len = static_cast<float>(
+        (at(parts_.x, parts_.y, parts_.z, std::size_t(a)) - at(parts_.x, parts_.y, parts_.z, std::size_t(c))).norm());
+    distances_.add(a, c, len, alpha);
+    distanceVia_.push_back(via);
+  };
+  const std::int32_t f = range.first, n = range.count;
+  if (kind_[b] == MaterialKind::kRope) {
+    if (range.layout != BodyLayout::kChain)
+      throw RuntimeError("PbdWorld: rope body " + std::to_string(b) + " is not laid out as a chain");
+    for (std::int32_t k = 0; k + 1 < n; ++k) link(f + k, f + k + 1, stretch);
+    for (std::int32_t k = 0; k + 2 < n; ++k) link(f + k, f + k + 2, bend, f + k + 1);
+    return;
+  }
+  if (range.layout != BodyLayout::kLattice || range.rows * range.cols != n)
+    throw RuntimeError("PbdWorld: cloth body " + std::to_string(b) + " is not laid out as a rows x cols lattice");
+  const std::int32_t rows = range.rows, cols = range.cols;
+  const auto id = [&](std::int32_t r, std::int32_t c) { return f + r * cols + c; };
+  for (std::int32_t r = 0; r < rows; ++r)
+    for (std::int32_t c = 0; c < cols; ++c) {
+      if (c + 1 < cols) link(id(r, c), id(r, c + 1), stretch);
+      if (r + 1 < rows) link(id(r, c), id(r + 1, c), stretch);
+      if (r + 1 < rows && c + 1 < cols) {
+        link(id(r, c), id(r + 1, c + 1), stretch);
+        link(id(r, c + 1), id(r + 1, c), stretch);
+      }
+      if (c + 2 < cols) link(id(r, c), id(r, c + 2), bend, id(r, c + 1));
+      if (r + 2 < rows) link(id(r, c), id(r + 2, c), bend, id(r + 1, c));
+    }
+}
+
+// A strand attaches where it touches another body at play (within 1.5 particle spacings
+// of one of its particles): a rope by its two ends, a cloth by every node. On a fixed body
+// the node is pinned; a rope end on a dynamic rigid body is held to that point of the body
+// (the pail, rope and bucket of Phys-Sketch Fig. 5); on a soft body, to the nearest particle.
+// Then every particle of a strand with pinned nodes gets a tether to its nearest anchor.
+void PbdWorld::attachStrandEnds(std::size_t b) {
+  const auto& mem = members_[b];
+  if (mem.empty()) return;
+  const double reachDist = 1.5 * 2.0 * params_.particleRadius;
+  std::vector<std::int32_t> nodes;
+  if (kind_[b] == MaterialKind::kRope) {
+    nodes.push_back(mem.front());
+    if (mem.size() > 1) nodes.push_back(mem.back());
+  } else {
+    nodes = mem;
+  }
+  // Candidates: particles of other, non-fluid bodies within reach of the strand's box.
+  Eigen::AlignedBox3d box;
+  for (std::int32_t i : nodes) box.extend(at(parts_.x, parts_.y, parts_.z, std::size_t(i)));
+  box.min().array() -= reachDist;
+  box.max().array() += reachDist;
+  std::vector<float> x, y, z;
+  std::vector<std::int32_t> id;
+  for (std::int32_t i : nodes) {
+    const auto k = std::size_t(i);
+    x.push_back(parts_.x[k]), y.push_back(parts_.y[k]), z.push_back(parts_.z[k]);
+    id.push_back(i);
+  }
+  const std::size_t nn = id.size();
+  for (std::size_t o = 0; o < members_.size(); ++o) {
+    if (o == b || mode_[o] == BodyMode::kEmpty || kind_[o] == MaterialKind::kFluid) continue;
+    for (std::int32_t i : members_[o]) {
+      const auto k = std::size_t(i);
+      if (!box.contains(at(parts_.x, parts_.y, parts_.z, k))) continue;
+      x.push_back(parts_.x[k]), y.push_back(parts_.y[k]), z.push_back(parts_.z[k]);
+      id.push_back(i);
+    }
+  }
+  if (id.size() == nn) return;
+  NeighborGrid grid;
+  grid.build(x.data(), y.data(), z.data(), x.size(), static_cast<float>(reachDist));
+  for (std::size_t k = 0; k < nn; ++k) {
+    std::int32_t best = -1;
+    double bestD = std::numeric_limits<double>::infinity();
+    grid.forEachNeighbor(static_cast<std::int32_t>(k), static_cast<float>(reachDist), [&](std::int32_t j) {
+      if (std::size_t(j) < nn) return;
+      const double d = (Vec3(x[k], y[k], z[k]) - Vec3(x[std::size_t(j)], y[std::size_t(j)], z[std::size_t(j)])).squaredNorm();
+      if (d < bestD) bestD = d, best = j;  // ascending rank: ties keep the first
+    });
+    if (best < 0) continue;
+    const std::int32_t i = id[k], j = id[std::size_t(best)];
+    const auto o = std::size_t(parts_.group(std::size_t(j)));
+    if (mode_[o] == BodyMode::kFixed) {
+      pinned_[std::size_t(i)] = 1;
+    } else if (kind_[b] == MaterialKind::kRope && isRigid(o)) {
+      Attachment a;
+      a.particle = i;
+      a.body = static_cast<std::int32_t>(o);
+      const Motion& mo = motion_[o];
+      a.local = mo.q.toRotationMatrix().transpose() * (at(parts_.x, parts_.y, parts_.z, std::size_t(i)) - mo.c);
+      attachments_.push_back(a);
+    } else if (kind_[b] == MaterialKind::kRope && !isRigid(o)) {
+      distances_.add(i, j, static_cast<float>(std::sqrt(bestD)), 0.0f);
+      distanceVia_.push_back(-1);
+    }
+  }
+  // Phase flags follow the pins.
+  setMode(static_cast<int>(b), mode_[b]);
+  // Tethers: each particle to its nearest pinned node (rope: along the chain; cloth: the
+  // straight rest distance, Kim et al. 2012), which it may never leave farther than that.
+  std::vector<std::int32_t> anchors;
+  for (std::int32_t i : mem)
+    if (pinned_[std::size_t(i)]) anchors.push_back(i);
+  // Only for inextensible strands: a compliant one must be free to stretch.
+  const Material& mat = materials_[std::size_t(parts_.material[std::size_t(mem.front())])];
+  if (anchors.empty() || anchors.size() > 256 || mat.strand.stretchCompliance > 0.0) return;
+  const auto rest = [&](std::int32_t a) { return at(parts_.x, parts_.y, parts_.z, std::size_t(a)); };
+  if (kind_[b] == MaterialKind::kRope) {
+    // Path length along the chain from its first particle.
+    std::vector<double> s(mem.size(), 0.0);
+    for (std::size_t k = 1; k < mem.size(); ++k) s[k] = s[k - 1] + (rest(mem[k]) - rest(mem[k - 1])).norm();
+    std::vector<std::size_t> anchorAt;
+    for (std::size_t k = 0; k < mem.size(); ++k)
+      if (pinned_[std::size_t(mem[k])]) anchorAt.push_back(k);
+    for (std::size_t k = 0; k < mem.size(); ++k) {
+      if (pinned_[std::size_t(mem[k])]) continue;
+      std::size_t best = anchorAt.front();
+      for (std::size_t a : anchorAt)
+        if (std::abs(s[a] - s[k]) < std::abs(s[best] - s[k])) best = a;
+      tethers_.push_back({mem[k], mem[best], static_cast<float>(std::abs(s[best] - s[k]))});
+    }
+    for (Attachment& a : attachments_) {
+      if (parts_.group(std::size_t(a.particle)) != static_cast<std::int32_t>(b)) continue;
+      const auto k = std::size_t(std::find(mem.begin(), mem.end(), a.particle) - mem.begin());
+      std::size_t best = anchorAt.front();
+      for (std::size_t an : anchorAt)
+        if (std::abs(s[an] - s[k]) < std::abs(s[best] - s[k])) best = an;
+      a.anchor = mem[best];
+      a.length = static_cast<float>(std::abs(s[best] - s[k]));
+    }
+    return;
+  }
+  for (std::int32_t i : mem) {
+    if (pinned_[std::size_t(i)]) continue;
+    std::int32_t best = anchors.front();
+    for (std::int32_t a : anchors)
+      if ((rest(a) - rest(i)).squaredNorm() < (rest(best) - rest(i)).squaredNorm()) best = a;
+    tethers_.push_back({i, best, static_cast<float>((rest(best) - rest(i)).norm())});
+  }
+}
+
+// After a removal: constraints, tethers and attachments that reach a removed particle go,
+// and clusters lose their removed members (a cluster left with none goes too).
+void PbdWorld::dropRemovedConstraints() {
+  // A bending link goes with the node it bends over (a rope cut at k loses k-1..k+1).
+  DistanceConstraints kept;
+  std::vector<std::int32_t> via;
+  for (std::size_t k = 0; k < distances_.size(); ++k)
+    if (alive(distances_.i[k]) && alive(distances_.j[k]) && (distanceVia_[k] < 0 || alive(distanceVia_[k]))) {
+      kept.add(distances_.i[k], distances_.j[k], distances_.rest[k], distances_.compliance[k]);
+      via.push_back(distanceVia_[k]);
+    }
+  distances_ = std::move(kept);
+  distanceVia_ = std::move(via);
+  tethers_.erase(std::remove_if(tethers_.begin(), tethers_.end(),
+                                [&](const Tether& t) { return !alive(t.particle) || !alive(t.anchor); }),
+                 tethers_.end());
+  attachments_.erase(std::remove_if(attachments_.begin(), attachments_.end(),
+                                    [&](const Attachment& a) {
+                                      return !alive(a.particle) || mode_[std::size_t(a.body)] == BodyMode::kEmpty;
+                                    }),
+                     attachments_.end());
+  for (Attachment& a : attachments_)
+    if (a.anchor >= 0 && !alive(a.anchor)) a.anchor = -1;
+  // A cut strand no longer hangs from anchors on the other side of the cut: tethers are
+  // kept only while the chain between particle and anchor is whole (checked on ropes, whose
+  // chain is their id order; a torn cloth keeps its straight-line tethers).
+  tethers_.erase(std::remove_if(tethers_.begin(), tethers_.end(),
+                                [&](const Tether& t) {
+                                  const auto b = std::size_t(parts_.group(std::size_t(t.particle)));
+                                  if (kind_[b] != MaterialKind::kRope) return false;
+                                  const std::int32_t lo = std::min(t.particle, t.anchor), hi = std::max(t.particle, t.anchor);
+                                  for (std::int32_t i = lo; i <= hi; ++i)
+                                    if (!alive(i)) return true;
+                                  return false;
+                                }),
+                 tethers_.end());
+  SoftClusters kc;
+  for (std::size_t c = 0; c < clusters_.members.size(); ++c) {
+    std::vector<std::int32_t> ids;
+    for (std::int32_t m = clusters_.members.offset[c]; m < clusters_.members.offset[c + 1]; ++m) {
+      const std::int32_t i = clusters_.members.index[std::size_t(m)];
+      if (!alive(i)) continue;
+      ids.push_back(i);
+      kc.qx.push_back(clusters_.qx[std::size_t(m)]), kc.qy.push_back(clusters_.qy[std::size_t(m)]),
+          kc.qz.push_back(clusters_.qz[std::size_t(m)]);
+      kc.lambda.push_back(0.0f);
+    }
+    if (ids.empty()) continue;
+    kc.members.add(ids, 1.0f);
+    kc.compliance.push_back(clusters_.compliance[c]);
+    kc.yield.push_back(clusters_.yield[c]);
+    kc.creep.push_back(clusters_.creep[c]);
+    kc.rotation.push_back(clusters_.rotation[c]);
+    kc.body.push_back(clusters_.body[c]);
+  }
+  clusters_ = std::move(kc);
+}
+
+// --- the passes -----------------------------------------------------------------
+
+void PbdWorld::predict(double h) {
+  const float gx = float(params_.gravity.x() * h), gy = float(params_.gravity.y() * h), gz = float(params_.gravity.z() * h);
+  const float hf = float(h);
+  forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(loose_[k]);
+      groundApproach_[i] = 0.0f;
+      if (invMassP_[i] > 0.0f) {
+        parts_.vx[i] += gx, parts_.vy[i] += gy, parts_.vz[i] += gz;
+        px_[i] = parts_.x[i] + hf * parts_.vx[i];
+        py_[i] = parts_.y[i] + hf * parts_.vy[i];
+        pz_[i] = parts_.z[i] + hf * parts_.vz[i];
+      } else {
+        px_[i] = parts_.x[i], py_[i] = parts_.y[i], pz_[i] = parts_.z[i];
+      }
+    }
+  });
+  distances_.resetMultipliers();
+  std::fill(clusters_.lambda.begin(), clusters_.lambda.end(), 0.0f);
+}
+
+void PbdWorld::kinematicParticles(std::size_t b, const Vec3& delta) {
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    put(px_, py_, pz_, k, at(parts_.x, parts_.y, parts_.z, k) + delta);
+  }
+}
+
+Vec3 PbdWorld::rigidPoint(std::size_t i) const {
+  const Motion& mo = motion_[std::size_t(parts_.group(i))];
+  return mo.q * Vec3(rx_[i], ry_[i], rz_[i]) + mo.c;
+}
+
+// Pairs (i, j) with i a particle-level particle and j any particle of another body (or,
+// for fluids, of the same one) closer than one spacing plus a margin at the predicted
+// positions. Rigid bodies contribute the particles within reach of the particle-level
+// material's bounding box. Pairs are listed by i, then by j's rank: a fixed order.
+void PbdWorld::findNeighbors() {
+  ParticlePairContacts& pairs = contacts_.particlePair;
+  pairs.clear();
+  const double r = params_.particleRadius;
+  const float radius = static_cast<float>(3.0 * r);  // touching (2 r) plus half a spacing of travel
+  std::vector<float> x, y, z;
+  std::vector<std::int32_t> id;
+  Eigen::AlignedBox3d box;
+  for (std::int32_t i : loose_) {
+    const auto k = std::size_t(i);
+    x.push_back(px_[k]), y.push_back(py_[k]), z.push_back(pz_[k]);
+    id.push_back(i);
+    box.extend(Vec3(px_[k], py_[k], pz_[k]));
+  }
+  const std::size_t nl = id.size();
+  if (nl == 0) return;
+  box.min().array() -= radius;
+  box.max().array() += radius;
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    if (!isRigid(b) || mode_[b] == BodyMode::kEmpty) continue;
+    const Motion& mo = motion_[b];
+    if (box.exteriorDistance(mo.c) > reach_[b]) continue;
+    const Mat3 R = mo.q.toRotationMatrix();
+    for (std::int32_t i : members_[b]) {
+      const auto k = std::size_t(i);
+      const Vec3 p = R * Vec3(rx_[k], ry_[k], rz_[k]) + mo.c;
+      if (!box.contains(p)) continue;
+      x.push_back(float(p.x())), y.push_back(float(p.y())), z.push_back(float(p.z()));
+      id.push_back(i);
+    }
+  }
+  NeighborGrid grid;
+  grid.build(x.data(), y.data(), z.data(), x.size(), radius);
+  std::vector<ParticlePairContacts> chunks((nl + kChunk - 1) / kChunk);
+  forRange(nl, [&](std::size_t lo, std::size_t hi) {
+    ParticlePairContacts& out = chunks[lo / kChunk];
+    for (std::size_t k = lo; k < hi; ++k) {
+      const std::int32_t i = id[k];
+      const std::uint32_t phi = parts_.phase[std::size_t(i)];
+      grid.forEachNeighbor(static_cast<std::int32_t>(k), radius, [&](std::int32_t j) {
+        const std::int32_t other = id[std::size_t(j)];
+        const bool looseJ = std::size_t(j) < nl;
+        if (looseJ && other < i) return;  // each particle-level pair once
+        const std::uint32_t phj = parts_.phase[std::size_t(other)];
+        const bool sameBody = phase::group(phi) == phase::group(phj);
+        if (sameBody && !phase::has(phi, phase::kFluid)) return;
+        if (invMassP_[std::size_t(i)] == 0.0f && (!looseJ || invMassP_[std::size_t(other)] == 0.0f)) return;
+        out.i.push_back(i);
+        out.j.push_back(other);
+      });
+    }
+  });
+  for (const ParticlePairContacts& c : chunks) {
+    pairs.i.insert(pairs.i.end(), c.i.begin(), c.i.end());
+    pairs.j.insert(pairs.j.end(), c.j.begin(), c.j.end());
+  }
+}
+
+// One sweep over the particle pairs, then the ground. A pair closer than one spacing is
+// pushed apart along the line of centres, each side by its share of the inverse mass (a
+// rigid body's share is its generalized inverse mass at the contact point), then friction
+// removes (static) or reduces (dynamic) their relative tangential motion of this substep.
+void PbdWorld::particleContact() {
+  const ParticlePairContacts& pairs = contacts_.particlePair;
+  const double touch = 2.0 * params_.particleRadius;
+  for (std::size_t c = 0; c < pairs.size(); ++c) {
+    const auto i = std::size_t(pairs.i[c]), j = std::size_t(pairs.j[c]);
+    const auto bj = std::size_t(parts_.group(j));
+    const bool rigidJ = isRigid(bj);
+    const Vec3 pi = at(px_, py_, pz_, i);
+    const Vec3 pj = rigidJ ? rigidPoint(j) : at(px_, py_, pz_, j);
+    const Vec3 d = pi - pj;
+    const double dist = d.norm();
+    const double pen = touch - dist;
+    if (pen <= 0.0 || dist == 0.0) continue;
+    const Vec3 n = d / dist;
+    Motion* mj = rigidJ ? &motion_[bj] : nullptr;
+    RigidPose pose;
+    if (rigidJ) pose = RigidPose{mj->c, mj->q, invMass_[bj], invInertiaRest_[bj]};
+    const double wi = invMassP_[i];
+    const double wj = rigidJ ? (mode_[bj] == BodyMode::kDynamic ? generalizedInverseMass(pose, pj, n) : 0.0)
+                             : double(invMassP_[j]);
+    if (wi + wj <= 0.0) continue;
+    const double lambda = pen / (wi + wj);
+    Vec3 newI = pi + (wi * lambda) * n;
+    Vec3 newJ = pj - (wj * lambda) * n;
+    // Friction: relative tangential displacement over the substep.
+    const Vec3 startI = at(parts_.x, parts_.y, parts_.z, i);
+    const Vec3 startJ = rigidJ ? Vec3(mj->qPrev * Vec3(rx_[j], ry_[j], rz_[j]) + mj->cPrev) : at(parts_.x, parts_.y, parts_.z, j);
+    Vec3 rel = (newI - startI) - (newJ - startJ);
+    rel -= n.dot(rel) * n;
+    const Material& mi = materials_[std::size_t(parts_.material[i])];
+    const Material& mjm = materials_[std::size_t(parts_.material[j])];
+    const Vec3 f = frictionCorrection(rel, pen, 0.5 * (mi.staticFriction + mjm.staticFriction),
+                                      0.5 * (mi.dynamicFriction + mjm.dynamicFriction));
+    newI -= (wi / (wi + wj)) * f;
+    put(px_, py_, pz_, i, newI);
+    if (rigidJ) {
+      if (wj > 0.0) {
+        applyPointCorrection(pose, pj, -n, wj * lambda);
+        const double ft = f.norm();
+        if (ft > 0.0) {
+          const Vec3 t = f / ft;
+          const double wt = generalizedInverseMass(pose, pj, t);
+          applyPointCorrection(pose, pj, t, ft * wt / (wi + wt));
+        }
+        mj->c = pose.c, mj->q = pose.q;
+      }
+    } else {
+      newJ += (wj / (wi + wj)) * f;
+      put(px_, py_, pz_, j, newJ);
+    }
+  }
+  // The ground (and its friction) for every dynamic particle-level particle.
+  const double floorY = params_.groundY + params_.particleRadius;
+  forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(loose_[k]);
+      if (invMassP_[i] == 0.0f || !(py_[i] < floorY)) continue;
+      const double pen = floorY - py_[i];
+      if (groundApproach_[i] == 0.0f) groundApproach_[i] = std::min(parts_.vy[i], -1e-30f);
+      py_[i] = static_cast<float>(floorY);
+      const Material& m = materials_[std::size_t(parts_.material[i])];
+      const Vec3 t(px_[i] - parts_.x[i], 0.0, pz_[i] - parts_.z[i]);
+      const Vec3 f = frictionCorrection(t, pen, m.staticFriction, m.dynamicFriction);
+      px_[i] = static_cast<float>(px_[i] - f.x());
+      pz_[i] = static_cast<float>(pz_[i] - f.z());
+    }
+  });
+}
+
+// Clustered shape matching with XPBD compliance: per cluster, the best rigid transform of
+// its rest shape onto the current positions (Müller 2005, Eq. 5-7; polar decomposition by
+// Müller 2016), then per member the constraint C = |p - g| towards its goal g with
+// compliance alpha: dlambda = (-C - alpha~ lambda) / (w + alpha~), alpha~ = alpha / h^2.
+void PbdWorld::clusterMatch(double h) {
+  const double invH2 = 1.0 / (h * h);
+  const Clusters& cl = clusters_.members;
+  for (std::size_t c = 0; c < cl.size(); ++c) {
+    if (mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) continue;
+    const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
+    if (hi - lo < 2) continue;
+    double m = 0.0;
+    Vec3 cm = Vec3::Zero();
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      m += parts_.mass[i];
+      cm += double(parts_.mass[i]) * at(px_, py_, pz_, i);
+    }
+    cm /= m;
+    Mat3 A = Mat3::Zero();
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
+      A += double(parts_.mass[i]) * (at(px_, py_, pz_, i) - cm) * q.transpose();
+    }
+    Quat& rot = clusters_.rotation[c];
+    rot = extractRotation(A, rot);
+    const Mat3 R = rot.toRotationMatrix();
+    const double alpha = clusters_.compliance[c] * invH2;
+    // The members' corrections are computed from the same positions (Jacobi within the
+    // cluster), then their net momentum is removed: a member's goal moves with the others
+    // (XPBD's per-member gradient ignores that), and without this the compliance term
+    // would push the cluster as a whole.
+    dp_.resize(std::size_t(hi - lo));
+    Vec3 net = Vec3::Zero();
+    double mDyn = 0.0;
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      Vec3& out = dp_[std::size_t(k - lo)];
+      out = Vec3::Zero();
+      const double w = invMassP_[i];
+      if (w == 0.0) continue;
+      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
+      const Vec3 d = at(px_, py_, pz_, i) - (R * q + cm);
+      const double C = d.norm();
+      mDyn += parts_.mass[i];
+      if (C == 0.0) continue;
+      float& lambda = clusters_.lambda[std::size_t(k)];
+      const double dl = (-C - alpha * lambda) / (w + alpha);
+      lambda = static_cast<float>(lambda + dl);
+      out = (w * dl / C) * d;
+      net += double(parts_.mass[i]) * out;
+    }
+    if (mDyn == 0.0) continue;
+    const Vec3 shift = net / mDyn;
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      if (invMassP_[i] == 0.0f) continue;
+      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + dp_[std::size_t(k - lo)] - shift);
+    }
+  }
+}
+
+// Stretch and bending (XPBD distances), then attachments to rigid bodies (zero rest
+// length, the body's share through its generalized inverse mass), then tethers.
+void PbdWorld::distanceConstraints(double h) {
+  solveDistances(distances_, px_.data(), py_.data(), pz_.data(), invMassP_.data(), h);
+  for (const Attachment& a : attachments_) {
+    const auto i = std::size_t(a.particle), b = std::size_t(a.body);
+    Motion& mo = motion_[b];
+    const bool dyn = mode_[b] == BodyMode::kDynamic;
+    RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
+    const Vec3 target = mo.q * a.local + mo.c;
+    const Vec3 p = at(px_, py_, pz_, i);
+    Vec3 d = p - target;
+    double C = d.norm();
+    if (C > 0.0) {
+      const Vec3 n = d / C;
+      const double wi = invMassP_[i], wb = dyn ? generalizedInverseMass(pose, target, n) : 0.0;
+      if (wi + wb > 0.0) {
+        const double lambda = C / (wi + wb);
+        put(px_, py_, pz_, i, p - (wi * lambda) * n);
+        if (wb > 0.0) applyPointCorrection(pose, target, n, wb * lambda);
+      }
+    }
+    // The body's point hangs no farther from the strand's anchor than the strand is long.
+    if (a.anchor >= 0 && dyn) {
+      const Vec3 anchor = at(px_, py_, pz_, std::size_t(a.anchor));
+      const Vec3 pt = pose.q * a.local + pose.c;
+      d = pt - anchor;
+      C = d.norm() - a.length;
+      if (C > 0.0) applyPointCorrection(pose, pt, -d.normalized(), C);
+    }
+    mo.c = pose.c, mo.q = pose.q;
+  }
+  for (const Tether& t : tethers_) {
+    const auto i = std::size_t(t.particle);
+    if (invMassP_[i] == 0.0f) continue;
+    const Vec3 anchor = at(px_, py_, pz_, std::size_t(t.anchor));
+    const Vec3 d = at(px_, py_, pz_, i) - anchor;
+    const double len = d.norm();
+    if (len > t.length) put(px_, py_, pz_, i, anchor + d * (t.length / len));
+  }
+}
+
+// v = (p - x) / h, x = p for dynamic and carried particles. A particle that hit the
+// ground faster than 2 |g| h leaves it at e times its approach speed.
+void PbdWorld::particleUpdate(double h) {
+  const float invH = static_cast<float>(1.0 / h);
+  const float slow = static_cast<float>(2.0 * params_.gravity.norm() * h);
+  forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(loose_[k]);
+      const bool moves = invMassP_[i] > 0.0f || mode_[std::size_t(parts_.group(i))] == BodyMode::kKinematic;
+      if (!moves || pinned_[i]) continue;
+      parts_.vx[i] = (px_[i] - parts_.x[i]) * invH;
+      parts_.vy[i] = (py_[i] - parts_.y[i]) * invH;
+      parts_.vz[i] = (pz_[i] - parts_.z[i]) * invH;
+      parts_.x[i] = px_[i], parts_.y[i] = py_[i], parts_.z[i] = pz_[i];
+      const float u = groundApproach_[i];
+      if (u < -slow) {
+        const float e = static_cast<float>(materials_[std::size_t(parts_.material[i])].restitution);
+        parts_.vy[i] = std::max(parts_.vy[i], -e * u);
+      }
+    }
+  });
+}
+
+// Plastic creep (Müller et al. 2005 §4.4, in the rest offsets of each cluster): where the
+// cluster's deformation S = R^T A (A the best linear fit of the rest shape) is strained
+// more than plastic_yield (Frobenius norm of S - I), the rest offsets move towards the
+// current shape seen in the cluster's frame at rate plastic_creep (1/s).
+void PbdWorld::plasticity(double h) {
+  const Clusters& cl = clusters_.members;
+  for (std::size_t c = 0; c < cl.size(); ++c) {
+    if (clusters_.creep[c] <= 0.0f || mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) continue;
+    const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
+    if (hi - lo < 4) continue;
+    double m = 0.0;
+    Vec3 cm = Vec3::Zero();
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      m += parts_.mass[i];
+      cm += double(parts_.mass[i]) * at(parts_.x, parts_.y, parts_.z, i);
+    }
+    cm /= m;
+    Mat3 Apq = Mat3::Zero(), Aqq = Mat3::Zero();
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
+      Apq += double(parts_.mass[i]) * (at(parts_.x, parts_.y, parts_.z, i) - cm) * q.transpose();
+      Aqq += double(parts_.mass[i]) * q * q.transpose();
+    }
+    if (std::abs(Aqq.determinant()) < 1e-30) continue;  // flat or linear cluster: no 3D strain
+    const Mat3 R = clusters_.rotation[c].toRotationMatrix();
+    const Mat3 S = R.transpose() * Apq * Aqq.inverse();
+    if ((S - Mat3::Identity()).norm() <= clusters_.yield[c]) continue;
+    const double a = std::min(1.0, double(clusters_.creep[c]) * h);
+    for (std::int32_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
+      const Vec3 now = R.transpose() * (at(parts_.x, parts_.y, parts_.z, i) - cm);
+      const Vec3 nq = q + a * (now - q);
+      clusters_.qx[std::size_t(k)] = float(nq.x()), clusters_.qy[std::size_t(k)] = float(nq.y()),
+      clusters_.qz[std::size_t(k)] = float(nq.z());
+    }
+  }
+}
+
+bool PbdWorld::summarizeLoose(std::size_t b) {
+  const auto& mem = members_[b];
+  double m = 0.0;
+  Vec3 c = Vec3::Zero(), v = Vec3::Zero();
+  float maxV2 = 0.0f, minY = 3.4e38f;
+  bool bad = false;
+  for (std::int32_t i : mem) {
+    const auto k = std::size_t(i);
+    const double mi = parts_.mass[k];
+    const Vec3 p = at(parts_.x, parts_.y, parts_.z, k), u = at(parts_.vx, parts_.vy, parts_.vz, k);
+    bad = bad || !p.allFinite() || !u.allFinite();
+    m += mi;
+    c += mi * p;
+    v += mi * u;
+    if (pinned_[k]) continue;
+    maxV2 = std::max(maxV2, float(u.squaredNorm()));
+    minY = std::min(minY, parts_.y[k]);
+  }
+  if (m > 0.0 && !bad) {
+    motion_[b].c = c / m;
+    motion_[b].v = v / m;
+  }
+  if (mode_[b] != BodyMode::kDynamic) return bad;
+  const double floorY = params_.groundY + params_.particleRadius;
+  return bad || !(double(maxV2) <= 0.999 * params_.maxSpeed * params_.maxSpeed) ||
+         !(double(minY) >= floorY - params_.particleRadius);
+}
+
+}  // namespace physketch::pbd

@@ -1,0 +1,74 @@
+// Builders of test bodies for the PBD tests: lattice boxes, bars and balls of particles at
+// the test spacing, as the sketch would make them.
+#pragma once
+
+#include <cmath>
+#include <vector>
+
+#include "core/material.h"
+#include "core/particles.h"
+
+namespace physketch::pbd::test {
+
+inline constexpr double kSpacing = 0.01;  // m: particle diameter 2r
+inline constexpr double kRadius = 0.5 * kSpacing;
+inline constexpr double kDensity = 1000.0;
+inline const double kParticleMass = kDensity * kSpacing * kSpacing * kSpacing;
+
+inline std::vector<Material> rigidMaterial(double friction = 0.5) {
+  Material m;
+  m.name = "rigid";
+  m.density = kDensity;
+  m.staticFriction = m.dynamicFriction = friction;
+  return {m};
+}
+
+// Appends an nx*ny*nz lattice box with its lowest corner particle at `corner` (m).
+inline BodyRange addBox(ParticleArrays& p, const Vec3& corner, int nx, int ny, int nz, int stroke = 0,
+                        std::int16_t material = 0) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const Vec3 x = corner + kSpacing * Vec3(i, j, k);
+        p.push(float(x.x()), float(x.y()), float(x.z()), stroke, material);
+      }
+  b.count = nx * ny * nz;
+  b.stroke = stroke;
+  return b;
+}
+
+// A bar tilted in the x-y plane, `len` particles long and 3x3 thick.
+inline BodyRange addTiltedBar(ParticleArrays& p, const Vec3& start, int len, double angleRad, int stroke = 0) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  const Vec3 axis(std::cos(angleRad), std::sin(angleRad), 0.0), side(-std::sin(angleRad), std::cos(angleRad), 0.0);
+  for (int i = 0; i < len; ++i)
+    for (int j = -1; j <= 1; ++j)
+      for (int k = -1; k <= 1; ++k) {
+        const Vec3 x = start + kSpacing * (i * axis + j * side + k * Vec3::UnitZ());
+        p.push(float(x.x()), float(x.y()), float(x.z()), stroke, 0);
+      }
+  b.count = len * 9;
+  b.stroke = stroke;
+  return b;
+}
+
+// A lattice ball of radius `cells` particle spacings around `centre`.
+inline BodyRange addBall(ParticleArrays& p, const Vec3& centre, int cells, int stroke = 0, std::int16_t material = 0) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int k = -cells; k <= cells; ++k)
+    for (int j = -cells; j <= cells; ++j)
+      for (int i = -cells; i <= cells; ++i)
+        if (i * i + j * j + k * k <= cells * cells) {
+          const Vec3 x = centre + kSpacing * Vec3(i, j, k);
+          p.push(float(x.x()), float(x.y()), float(x.z()), stroke, material);
+        }
+  b.count = static_cast<std::int32_t>(p.size()) - b.first;
+  b.stroke = stroke;
+  return b;
+}
+
+}  // namespace physketch::pbd::test

@@ -1,0 +1,322 @@
+// PBD particle-level kinds (soft, rope, cloth) and their coupling with rigid bodies.
+// Each test checks against an independent oracle (a closed-form period, conservation of
+// momentum, XPBD's iteration independence, the rest state) with its tolerance and why.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <tbb/global_control.h>
+
+#include "core/material_table.h"
+#include "pbd/world.h"
+#include "tests/pbd/builders.h"
+
+using namespace physketch;
+using namespace physketch::pbd;
+using namespace physketch::pbd::test;
+
+namespace {
+
+Material makeKind(const char* name, MaterialKind kind, double density = kDensity) {
+  Material m = makeMaterial(kind);
+  m.name = name;
+  m.density = density;
+  return m;
+}
+
+PbdParams params(int substeps, int iterations, Vec3 gravity = Vec3(0, -9.81, 0)) {
+  PbdParams p;
+  p.substeps = substeps;
+  p.iterations = iterations;
+  p.particleRadius = kRadius;
+  p.gravity = gravity;
+  return p;
+}
+
+// A straight chain of n particles from `start` along unit `dir`, one spacing apart.
+BodyRange addChain(ParticleArrays& p, const Vec3& start, const Vec3& dir, int n, std::int16_t material) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int k = 0; k < n; ++k) {
+    const Vec3 x = start + (k * kSpacing) * dir;
+    p.push(float(x.x()), float(x.y()), float(x.z()), 1, material);
+  }
+  b.count = n;
+  b.stroke = 1;
+  b.layout = BodyLayout::kChain;
+  return b;
+}
+
+// A rows x cols lattice, rows going down (-y) from `topLeft`, cols along +x.
+BodyRange addSheet(ParticleArrays& p, const Vec3& topLeft, int rows, int cols, std::int16_t material) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const Vec3 x = topLeft + kSpacing * Vec3(c, -r, 0);
+      p.push(float(x.x()), float(x.y()), float(x.z()), 2, material);
+    }
+  b.count = rows * cols;
+  b.rows = rows;
+  b.cols = cols;
+  b.stroke = 2;
+  b.layout = BodyLayout::kLattice;
+  return b;
+}
+
+std::vector<std::string> planNames(const PbdWorld& w) {
+  std::vector<std::string> out;
+  for (const PlanEntry& e : w.plan()) out.push_back(e.name);
+  return out;
+}
+
+bool has(const std::vector<std::string>& v, const char* s) { return std::find(v.begin(), v.end(), s) != v.end(); }
+
+Vec3 momentum(const PbdWorld& w) {
+  Vec3 m = Vec3::Zero();
+  const ParticleArrays& p = w.particles();
+  for (int b = 0; b < w.bodyCount(); ++b)
+    for (std::int32_t i : w.bodyParticles(b)) {
+      const auto k = std::size_t(i);
+      m += double(p.mass[k]) * Vec3(p.vx[k], p.vy[k], p.vz[k]);
+    }
+  return m;
+}
+
+}  // namespace
+
+// A rope hanging from a fixed beam carries a bob 22.6x its mass; released at 0.1 rad it
+// swings with the period of a simple pendulum of length L (pivot to the bob's centre),
+// T0 = 2 pi sqrt(L/g). Tolerance 3 % (the issue's): the rope's own mass shortens the
+// period by about 0.4 % (a rigid rod of 1/22.6 of the mass) and the bob's size lengthens it
+// by 0.1 %, the amplitude by 0.06 %; a stretching rope (weak tethers, slow Gauss-Seidel
+// convergence under a 1:1000 mass ratio per particle) would lengthen it by far more.
+TEST(Rope, PendulumPeriodMatchesTheSimplePendulum) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("beam", MaterialKind::kRigid), makeKind("rope", MaterialKind::kRope, 100.0),
+                                makeKind("bob", MaterialKind::kRigid)};
+  mats[1].strand.bendCompliance = 1.0;
+  const double theta0 = 0.1;
+  const Vec3 dir(std::sin(theta0), -std::cos(theta0), 0.0);
+  BodyRange beam = addBox(p, Vec3(-0.01, 1.0, -0.01), 3, 1, 3, 0, 0);
+  beam.init.fixed = true;
+  const Vec3 pivot = Vec3(0.0, 1.0, 0.0) + kSpacing * dir;  // the rope's first particle, one spacing below the beam
+  const int n = 50;
+  BodyRange rope = addChain(p, pivot, dir, n, 1);
+  const int bobCells = 3;  // radius 0.03 m
+  const Vec3 bobCentre = pivot + ((n - 1) * kSpacing + kSpacing + bobCells * kSpacing) * dir;
+  BodyRange bob = addBall(p, bobCentre, bobCells, 3, 2);
+  const double ropeMass = n * 100.0 * std::pow(kSpacing, 3), bobMass = bob.count * kDensity * std::pow(kSpacing, 3);
+  ASSERT_GE(bobMass, 20.0 * ropeMass);
+  PbdParams prm = params(20, 2);
+  PbdWorld w(p, {beam, rope, bob}, mats, prm);
+  const double L = (bobCentre - pivot).norm();
+  const double T0 = 2.0 * M_PI * std::sqrt(L / 9.81);
+  // Upward crossings of the bob's x through the pivot's, interpolated linearly in time.
+  std::vector<double> ups;
+  double prev = w.pose(2).centre.x() - pivot.x();
+  const int steps = int(4.0 * T0 / prm.dt);
+  for (int s = 0; s < steps; ++s) {
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    const double x = w.pose(2).centre.x() - pivot.x();
+    if (prev < 0.0 && x >= 0.0) ups.push_back(w.time() - prm.dt * x / (x - prev));
+    prev = x;
+  }
+  ASSERT_GE(ups.size(), 3u) << "the bob did not swing";
+  const double T = (ups.back() - ups.front()) / double(ups.size() - 1);
+  EXPECT_NEAR(T / T0, 1.0, 0.03) << "T = " << T << " s, T0 = " << T0 << " s";
+  // The rope held: the bob's centre stays within 1 % of L from the pivot.
+  EXPECT_NEAR((w.pose(2).centre - pivot).norm() / L, 1.0, 0.01);
+}
+
+// XPBD (Macklin et al. 2016): with a compliant stretch constraint, the converged stretch
+// is set by the compliance, not by the iteration count. A cloth hanging from a fixed bar
+// stretches by the same amount at 4 and 32 iterations: within 5 % (the issue's bound).
+// Plain PBD's stiffness k(1-(1-k)^n) depends on n and would differ by far more.
+TEST(Cloth, HangingStretchDoesNotDependOnIterations) {
+  const auto stretchAt = [](int iterations) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("bar", MaterialKind::kRigid), makeKind("cloth", MaterialKind::kCloth)};
+    // m/N: compliant enough (alpha / h^2 = 3600 > 1/m = 1000) that 4 Gauss-Seidel sweeps
+    // converge; a stiffer cloth at 4 iterations is limited by iterations, not compliance.
+    mats[1].strand.stretchCompliance = 1e-2;
+    BodyRange bar = addBox(p, Vec3(0.0, 0.51, 0.0), 12, 1, 1, 0, 0);
+    bar.init.fixed = true;
+    BodyRange sheet = addSheet(p, Vec3(0.0, 0.50, 0.0), 16, 12, 1);
+    PbdParams prm = params(10, iterations);
+    PbdWorld w(p, {bar, sheet}, mats, prm);
+    const auto length = [&] {
+      const ParticleArrays& q = w.particles();
+      double top = 0.0, bottom = 0.0;
+      for (int c = 0; c < 12; ++c) {
+        top += q.y[std::size_t(sheet.first + c)];
+        bottom += q.y[std::size_t(sheet.first + 15 * 12 + c)];
+      }
+      return (top - bottom) / 12.0;
+    };
+    // Average over the last second: the undamped cloth still bounces a little.
+    double sum = 0.0;
+    int count = 0;
+    for (int s = 0; s < 180; ++s) {
+      EXPECT_TRUE(w.step());
+      if (s >= 120) sum += length(), ++count;
+    }
+    return sum / count / (15 * kSpacing) - 1.0;
+  };
+  const double s4 = stretchAt(4), s32 = stretchAt(32);
+  EXPECT_GT(s32, 0.01) << "the cloth should visibly stretch under its weight";
+  EXPECT_NEAR(s4 / s32, 1.0, 0.05) << "stretch at 4 iterations " << s4 << ", at 32 " << s32;
+}
+
+// Two soft cubes fly at each other in zero gravity: particle contacts push both sides by
+// equal and opposite impulses, and each cluster's corrections carry no net momentum, so
+// the total momentum is conserved. Tolerance: 2e-3 of the initial momentum: the state is
+// float32, and every position write rounds by up to 3e-8 m at 0.5 m (7e-6 m/s over a 4 ms
+// substep); about 1e5 writes per step (pairs and 14 clusters per particle, 4 iterations)
+// add up, as a random walk over 240 substeps, to about 5e-4 of it (measured 6e-4). A
+// one-sided contact or cluster correction would be of the order of the exchanged momentum.
+TEST(Soft, ZeroGravityCollisionConservesMomentum) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft)};
+  BodyRange a = addBox(p, Vec3(0.0, 0.5, 0.0), 6, 6, 6, 0, 0);
+  BodyRange b = addBox(p, Vec3(0.09, 0.52, 0.01), 6, 6, 6, 1, 0);
+  a.init.velocity = Vec3(0.5, 0.0, 0.0);
+  b.init.velocity = Vec3(-0.3, 0.05, 0.0);
+  PbdWorld w(p, {a, b}, mats, params(4, 4, Vec3::Zero()));
+  const Vec3 m0 = momentum(w);
+  bool touched = false;
+  for (int s = 0; s < 60; ++s) {
+    ASSERT_TRUE(w.step());
+    touched = touched || has(planNames(w), "find_neighbors");
+  }
+  EXPECT_TRUE(touched);
+  // They did collide: the first body no longer moves at 0.5 m/s.
+  EXPECT_LT(w.velocity(0).x(), 0.45);
+  EXPECT_LT((momentum(w) - m0).norm(), 2e-3 * m0.norm());
+}
+
+// The same with a rigid body: a soft cube hits a rigid box; the rigid body takes its share
+// through its generalized inverse mass, so the momentum of both together is conserved
+// (tolerance as above: float32 rounding of the soft side's positions).
+TEST(Soft, CollisionWithARigidBodyConservesMomentum) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("box", MaterialKind::kRigid)};
+  BodyRange a = addBox(p, Vec3(0.0, 0.5, 0.0), 5, 5, 5, 0, 0);
+  BodyRange b = addBox(p, Vec3(0.08, 0.51, 0.0), 5, 5, 5, 1, 1);
+  a.init.velocity = Vec3(0.6, 0.0, 0.0);
+  PbdWorld w(p, {a, b}, mats, params(4, 4, Vec3::Zero()));
+  const auto total = [&] { return momentum(w); };
+  const Vec3 m0 = total();
+  for (int s = 0; s < 60; ++s) ASSERT_TRUE(w.step());
+  EXPECT_GT(w.velocity(1).x(), 0.05) << "the rigid box was pushed";
+  EXPECT_LT((total() - m0).norm(), 2e-3 * m0.norm());
+}
+
+// A soft cube resting on the ground stays on it (no sinking, no NaN, no drift) and keeps
+// its height: within 2 % for E = 5e5 Pa (a static sag of rho g H / 2E = 8e-6 m, far below
+// a particle spacing); a cube of E = 500 Pa sags by at least a spacing (rho g H / 2E =
+// 0.8 cm). Heights are averaged over the last second: the cluster springs are undamped.
+TEST(Soft, CubeOnTheGroundKeepsItsShapeAndSoftOneSags) {
+  const auto restingHeight = [](double E) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft)};
+    mats[0].elastic.youngs = E;
+    BodyRange a = addBox(p, Vec3(0.0, kRadius, 0.0), 8, 8, 8, 0, 0);
+    PbdWorld w(p, {a}, mats, params(4, 4));
+    const Vec3 c0 = w.pose(0).centre;
+    double sum = 0.0;
+    int count = 0;
+    for (int s = 0; s < 180; ++s) {
+      EXPECT_TRUE(w.step()) << w.guard().message();
+      const auto [lo, hi] = std::minmax_element(w.particles().y.begin(), w.particles().y.end());
+      EXPECT_GT(*lo, kRadius - 0.2 * kRadius) << "sank into the ground";
+      if (s >= 120) sum += double(*hi - *lo) + kSpacing, ++count;
+    }
+    // The stiff cube must not slide (2 mm over 3 s: it is at rest). The soft one still
+    // walks a few cm while its undamped clusters ring (friction ratchets the wobble; soft
+    // damping is open work in issue 8), so it is held only to staying near its place.
+    const Vec3 drift = w.pose(0).centre - c0;
+    EXPECT_LT(std::hypot(drift.x(), drift.z()), E > 1e5 ? 2e-3 : 0.1) << "slid on the ground";
+    return sum / count;
+  };
+  const double stiff = restingHeight(5e5), soft = restingHeight(5e2);
+  EXPECT_NEAR(stiff, 8 * kSpacing, 0.02 * 8 * kSpacing);
+  EXPECT_LT(soft, stiff - kSpacing) << "E = 500 Pa should sag by a spacing or more";
+}
+
+// Only what the scene calls for: a soft body runs the particle passes and cluster
+// matching but no rigid or strand pass; a rope adds the distance pass.
+TEST(Soft, PlanListsOnlyTheParticlePassesItNeeds) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft)};
+  BodyRange a = addBox(p, Vec3(0.0, 0.1, 0.0), 4, 4, 4, 0, 0);
+  PbdWorld w(p, {a}, mats, params(2, 2));
+  const auto names = planNames(w);
+  for (const char* on : {"predict", "particle_contact", "cluster_match", "particle_update", "write_particles", "guard"})
+    EXPECT_TRUE(has(names, on)) << on;
+  for (const char* off : {"integrate", "rigid_contact", "body_contact", "distance", "find_neighbors", "plasticity"})
+    EXPECT_FALSE(has(names, off)) << off;
+  // The plan is the step: every planned pass ran perStep times.
+  ASSERT_TRUE(w.step());
+  for (const PlanEntry& e : w.plan()) EXPECT_EQ(w.profile().entries()[std::size_t(e.pass)].calls, e.perStep) << e.name;
+}
+
+// Cutting a rope (a remove after play) drops the constraints across the cut: the part
+// below falls freely while the part above still hangs.
+TEST(Rope, RemovingAParticleCutsTheRope) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("beam", MaterialKind::kRigid), makeKind("rope", MaterialKind::kRope)};
+  BodyRange beam = addBox(p, Vec3(-0.01, 1.0, -0.01), 3, 1, 3, 0, 0);
+  beam.init.fixed = true;
+  BodyRange rope = addChain(p, Vec3(0.0, 0.99, 0.0), Vec3(0, -1, 0), 30, 1);
+  PbdWorld w(p, {beam, rope}, mats, params(8, 2));
+  for (int s = 0; s < 30; ++s) ASSERT_TRUE(w.step());
+  const double lastY = w.particles().y[std::size_t(rope.first + 29)];
+  w.removeParticles({rope.first + 15});
+  for (int s = 0; s < 12; ++s) ASSERT_TRUE(w.step());
+  // 0.2 s of free fall: 0.196 m (allow 20 % for the cut's first substeps and the bending links).
+  EXPECT_LT(w.particles().y[std::size_t(rope.first + 29)], lastY - 0.8 * 0.5 * 9.81 * 0.04);
+  // The top half still hangs where it was (within a spacing).
+  EXPECT_NEAR(w.particles().y[std::size_t(rope.first + 10)], 0.99 - 10 * kSpacing, kSpacing);
+}
+
+// Plastic creep: a soft cube with plastic_creep keeps part of the squash of a hard landing;
+// the same cube without it recovers its height.
+TEST(Soft, PlasticCubeKeepsPartOfItsDeformation) {
+  const auto restHeight = [](double creep) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("clay", MaterialKind::kSoft)};
+    mats[0].elastic.youngs = 2e3;
+    mats[0].soft.plasticYield = 0.02;
+    mats[0].soft.plasticCreep = creep;
+    BodyRange a = addBox(p, Vec3(0.0, 0.4, 0.0), 8, 8, 8, 0, 0);
+    PbdWorld w(p, {a}, mats, params(4, 4));
+    for (int s = 0; s < 150; ++s) EXPECT_TRUE(w.step());
+    const auto [lo, hi] = std::minmax_element(w.particles().y.begin(), w.particles().y.end());
+    return double(*hi - *lo);
+  };
+  const double elastic = restHeight(0.0), plastic = restHeight(50.0);
+  EXPECT_LT(plastic, elastic - 0.5 * kSpacing) << "elastic " << elastic << " m, plastic " << plastic << " m";
+}
+
+// Deterministic for any thread count: soft, rope and cloth together (more than one chunk
+// of particles, so the parallel loops split) give bit-identical states on 1 and 2 threads.
+TEST(Particles, SameStateForOneAndTwoThreads) {
+  const auto run = [](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("rope", MaterialKind::kRope),
+                                  makeKind("cloth", MaterialKind::kCloth), makeKind("beam", MaterialKind::kRigid)};
+    BodyRange jelly = addBox(p, Vec3(0.0, 0.05, 0.0), 17, 17, 17, 0, 0);
+    BodyRange beam = addBox(p, Vec3(0.3, 0.6, 0.0), 20, 1, 3, 3, 3);
+    beam.init.fixed = true;
+    BodyRange rope = addChain(p, Vec3(0.31, 0.59, 0.01), Vec3(0, -1, 0), 40, 1);
+    BodyRange cloth = addSheet(p, Vec3(0.05, 0.4, 0.05), 20, 20, 2);
+    PbdWorld w(p, {jelly, beam, rope, cloth}, mats, params(4, 4));
+    for (int s = 0; s < 20; ++s) EXPECT_TRUE(w.step());
+    return w.stateHash();
+  };
+  EXPECT_EQ(run(1), run(2));
+}
