@@ -88,7 +88,7 @@ struct Material {
   // rope, cloth: XPBD distance and bending constraints.
   struct Strand {
     double stretchCompliance = 0.0;  // m/N
-    double bendCompliance = 1.0;     // 1/(N*m)
+    double bendCompliance = 1.0;     // m/N, of the links across two particles
   } strand;
 
   // sand: Drucker-Prager plasticity (Klár et al. 2016).

@@ -59,7 +59,7 @@ std::vector<ParamSpec> buildTable() {
   // rope, cloth (pbd only).
   for (const char* k : {"rope", "cloth"}) {
     t.push_back(number(k, "stretch_compliance", "m/N", 0, closed(0, 1), P, PHYSKETCH_FIELD(strand.stretchCompliance)));
-    t.push_back(number(k, "bend_compliance", "1/(N*m)", 1, closed(0, 1e6), P, PHYSKETCH_FIELD(strand.bendCompliance)));
+    t.push_back(number(k, "bend_compliance", "m/N", 1, closed(0, 1e6), P, PHYSKETCH_FIELD(strand.bendCompliance)));
   }
   // elastic (mpm; pbd runs it as soft).
   t.push_back(number("elastic", "E", "Pa", 5e5, openLo(0, 1e12), B, PHYSKETCH_FIELD(elastic.youngs)));
