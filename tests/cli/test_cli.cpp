@@ -391,3 +391,23 @@ TEST(Cli, TheCollideExampleKeepsBodiesOnEachOther) {
   EXPECT_GT(last[4][1].get<double>(), 0.08);          // the dropped block, on the other
   fs::remove_all(dir);
 }
+
+TEST(Cli, TheJellyExampleRestsSoftBodiesOnTheTable) {
+  // scenes/jelly.scene (soft bodies with rigid ones): after 2 s the jelly block lies on the
+  // fixed table top (its centre above the top at 0.215 m, over the table), the wooden block
+  // dropped onto it lies on the jelly (above the jelly's centre), and the clay lump thrown
+  // at the ground kept a dent: its centre lies lower than its 5 cm radius.
+  const fs::path dir = freshDir("jelly");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/jelly.scene";
+  const Result r = runCli("run '" + scene + "' -q --out '" + (dir / "o").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto rep = readJson(dir / "o" / "report.json");
+  EXPECT_EQ(rep["status"], "ok");
+  const auto& last = rep["poses"].back()["bodies"];
+  ASSERT_EQ(last.size(), 5u);
+  EXPECT_GT(last[1][1].get<double>(), 0.215);                  // jelly on the table
+  EXPECT_LT(std::abs(last[1][0].get<double>() + 0.2), 0.15);   // still over it
+  EXPECT_GT(last[2][1].get<double>(), last[1][1].get<double>());  // the block on the jelly
+  EXPECT_LT(last[4][1].get<double>(), 0.04);                   // the clay flattened
+  fs::remove_all(dir);
+}
