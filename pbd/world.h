@@ -241,10 +241,18 @@ class PbdWorld final : public Solver {
     std::vector<float> yield, creep;  // per cluster: plasticity (Müller 2005 §4.4)
     std::vector<Quat> rotation;       // per cluster: warm start of the polar decomposition
     std::vector<std::int32_t> body;   // per cluster
+    std::vector<Vec3> restCentre;     // per cluster: centre of its members where they were made (m)
+    std::vector<float> extent;        // per cluster: farthest member from restCentre then (m)
   } clusters_;
   DistanceConstraints distances_;     // rope and cloth stretch and bending
   std::vector<std::int32_t> distanceVia_;  // per distance constraint: the node a bending link spans, else -1
-  std::vector<Vec3> dp_;              // scratch: one cluster's corrections
+  std::vector<Vec3> dp_;              // per membership: the correction of this iteration
+  // Clusters in 8 colours for parallel matching: colour = parity of the cell (edge twice the
+  // largest cluster extent) of the cluster's rest centre. Clusters of one colour in different
+  // cells share no particle; those of one cell are matched in order by one task.
+  std::vector<std::vector<std::vector<std::int32_t>>> clusterCells_;  // [colour][cell] -> clusters
+  bool clusterColoursDirty_ = true;
+  void colourClusters();
   // A strand particle held to a point of a dynamic rigid body (a rope end on a bucket).
   struct Attachment {
     std::int32_t particle = 0, body = 0;

@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <tuple>
 #include <unordered_map>
 
 #include "core/error.h"
@@ -47,7 +49,10 @@ void put(std::vector<float>& x, std::vector<float>& y, std::vector<float>& z, st
 
 void PbdWorld::setupParticleBody(std::size_t b, const BodyRange& range) {
   switch (kind_[b]) {
-    case MaterialKind::kSoft: buildClusters(b); break;
+    case MaterialKind::kSoft:
+      buildClusters(b);
+      clusterColoursDirty_ = true;
+      break;
     case MaterialKind::kRope:
     case MaterialKind::kCloth: buildStrand(b, range); break;
     default: break;  // fluid: free particles; the density pass finds their neighbours
@@ -157,6 +162,10 @@ void PbdWorld::buildClusters(std::size_t b) {
       c0 += mi * at(parts_.x, parts_.y, parts_.z, std::size_t(ids[k]));
     }
     c0 /= m;
+    double extent = 0.0;
+    for (std::int32_t i : ids) extent = std::max(extent, (at(parts_.x, parts_.y, parts_.z, std::size_t(i)) - c0).norm());
+    clusters_.restCentre.push_back(c0);
+    clusters_.extent.push_back(static_cast<float>(extent));
     for (std::int32_t i : ids) {
       const Vec3 q = at(parts_.x, parts_.y, parts_.z, std::size_t(i)) - c0;
       clusters_.qx.push_back(float(q.x())), clusters_.qy.push_back(float(q.y())), clusters_.qz.push_back(float(q.z()));
@@ -375,8 +384,35 @@ void PbdWorld::dropRemovedConstraints() {
     kc.creep.push_back(clusters_.creep[c]);
     kc.rotation.push_back(clusters_.rotation[c]);
     kc.body.push_back(clusters_.body[c]);
+    kc.restCentre.push_back(clusters_.restCentre[c]);
+    kc.extent.push_back(clusters_.extent[c]);
   }
   clusters_ = std::move(kc);
+  clusterColoursDirty_ = true;
+}
+
+// Two clusters share a particle only if their centres where they were made lie within the
+// sum of their extents then (membership never grows), so with cells of edge twice the
+// largest extent, clusters of one colour in different cells never share one: exact, whatever
+// the bodies have done since.
+void PbdWorld::colourClusters() {
+  const Clusters& cl = clusters_.members;
+  double extent = 0.0;
+  for (float e : clusters_.extent) extent = std::max(extent, double(e));
+  const double cell = 2.0 * extent * (1.0 + 1e-6) + 1e-9;
+  std::vector<std::map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::int32_t>>> byCell(8);
+  for (std::size_t c = 0; c < cl.size(); ++c) {
+    const Vec3& x = clusters_.restCentre[c];
+    const auto ix = std::int64_t(std::floor(x.x() / cell)), iy = std::int64_t(std::floor(x.y() / cell)),
+               iz = std::int64_t(std::floor(x.z() / cell));
+    const int colour = int(ix & 1) | int(iy & 1) << 1 | int(iz & 1) << 2;
+    byCell[std::size_t(colour)][{ix, iy, iz}].push_back(static_cast<std::int32_t>(c));
+  }
+  clusterCells_.assign(8, {});
+  for (int colour = 0; colour < 8; ++colour)
+    for (auto& [key, list] : byCell[std::size_t(colour)]) clusterCells_[std::size_t(colour)].push_back(std::move(list));
+  dp_.assign(cl.index.size(), Vec3::Zero());
+  clusterColoursDirty_ = false;
 }
 
 // --- the passes -----------------------------------------------------------------
@@ -554,12 +590,13 @@ void PbdWorld::particleContact() {
 // Müller 2016), then per member the constraint C = |p - g| towards its goal g with
 // compliance alpha: dlambda = (-C - alpha~ lambda) / (w + alpha~), alpha~ = alpha / h^2.
 void PbdWorld::clusterMatch(double h) {
+  if (clusterColoursDirty_) colourClusters();
   const double invH2 = 1.0 / (h * h);
   const Clusters& cl = clusters_.members;
-  for (std::size_t c = 0; c < cl.size(); ++c) {
-    if (mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) continue;
+  const auto match = [&](std::size_t c) {
+    if (mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
     const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
-    if (hi - lo < 2) continue;
+    if (hi - lo < 2) return;
     double m = 0.0;
     Vec3 cm = Vec3::Zero();
     for (std::int32_t k = lo; k < hi; ++k) {
@@ -582,12 +619,11 @@ void PbdWorld::clusterMatch(double h) {
     // cluster), then their net momentum is removed: a member's goal moves with the others
     // (XPBD's per-member gradient ignores that), and without this the compliance term
     // would push the cluster as a whole.
-    dp_.resize(std::size_t(hi - lo));
     Vec3 net = Vec3::Zero();
     double mDyn = 0.0;
     for (std::int32_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(cl.index[std::size_t(k)]);
-      Vec3& out = dp_[std::size_t(k - lo)];
+      Vec3& out = dp_[std::size_t(k)];
       out = Vec3::Zero();
       const double w = invMassP_[i];
       if (w == 0.0) continue;
@@ -602,14 +638,19 @@ void PbdWorld::clusterMatch(double h) {
       out = (w * dl / C) * d;
       net += double(parts_.mass[i]) * out;
     }
-    if (mDyn == 0.0) continue;
+    if (mDyn == 0.0) return;
     const Vec3 shift = net / mDyn;
     for (std::int32_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(cl.index[std::size_t(k)]);
       if (invMassP_[i] == 0.0f) continue;
-      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + dp_[std::size_t(k - lo)] - shift);
+      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + dp_[std::size_t(k)] - shift);
     }
-  }
+  };
+  // Colour by colour; the cells of a colour in parallel, each cell's clusters in order.
+  for (const auto& cells : clusterCells_)
+    forEach(cells.size(), [&](std::size_t j) {
+      for (std::int32_t c : cells[j]) match(std::size_t(c));
+    });
 }
 
 // Stretch and bending (XPBD distances), then attachments to rigid bodies (zero rest
