@@ -79,11 +79,15 @@ void text(cairo_t* cr, double x, double y, const std::string& s, double alignX, 
 // Ticks of a log axis: decades labelled, 2..9 unlabelled; `vertical` for the y axis.
 void ticks(cairo_t* cr, const LogAxis& ax, bool vertical, double cross) {
   // Under two decades, 2 and 5 are labelled too, so every axis has a few numbers.
-  const bool few = std::log10(ax.hi) - std::log10(ax.lo) < 2.0;
+  // Over many decades only every `every`-th decade is labelled, and minor ticks are left out.
+  const double decades = std::log10(ax.hi) - std::log10(ax.lo);
+  const bool few = decades < 2.0;
+  const int every = std::max(1, int(std::ceil(decades / 8.0)));
   for (int d = int(std::floor(std::log10(ax.lo))); d <= int(std::ceil(std::log10(ax.hi))); ++d)
     for (int m = 1; m <= 9; ++m) {
       const double v = m * std::pow(10.0, d);
       if (v < ax.lo || v > ax.hi) continue;
+      if ((m > 1 && decades > 6.0) || (m == 1 && d % every != 0)) continue;
       const double p = ax.px(v), len = m == 1 ? 8 : 4;
       if (vertical) {
         cairo_move_to(cr, cross, p);
@@ -124,7 +128,7 @@ cairo_status_t appendBytes(void* closure, const unsigned char* data, unsigned in
 }  // namespace
 
 std::string studyPlotPng(const std::vector<PlotPoint>& points, const std::string& title, const std::string& errorLabel) {
-  const double left = 110, right = kPlotWidth - 40, top = 60, bottom = kPlotHeight - 80;
+  const double left = 110, right = kPlotWidth - 40, top = 70, bottom = kPlotHeight - 80;
   double msLo = INFINITY, msHi = -INFINITY, eLo = INFINITY, eHi = -INFINITY;
   for (const auto& p : points) {
     if (std::isnan(p.ms) || std::isnan(p.error) || !(p.ms > 0)) continue;
@@ -198,25 +202,31 @@ std::string studyPlotPng(const std::vector<PlotPoint>& points, const std::string
     if (p.front && p.error > 0) cairo_fill(cr);
     else cairo_stroke(cr);
     if (p.front) {
+      // Beside the marker, on its left where the right would leave the frame.
+      cairo_text_extents_t ext;
+      cairo_text_extents(cr, p.label.c_str(), &ext);
       cairo_set_source_rgb(cr, 0.25, 0.25, 0.25);
-      text(cr, x + 8, y - 4, p.label, 0.0, 1.0);
+      if (x + 8 + ext.x_advance > kPlotWidth - 4) text(cr, x - 8, y - 4, p.label, 1.0, 1.0);
+      else text(cr, x + 8, y - 4, p.label, 0.0, 1.0);
     }
   }
 
-  // Legend.
+  // Legend, in one row between the title and the frame (it never hides a point).
   cairo_set_font_size(cr, 12);
-  const double lx = right - 250, ly = top + 16;
+  const double lx = left + 10, ly = top - 14;
+  cairo_new_path(cr);
   cairo_set_source_rgb(cr, 0.15, 0.30, 0.70);
   cairo_arc(cr, lx, ly, 5, 0, 2 * M_PI);
   cairo_stroke(cr);
   cairo_set_source_rgb(cr, 0, 0, 0);
   text(cr, lx + 12, ly, "one setting", 0.0, 0.5);
+  cairo_new_path(cr);
   cairo_set_source_rgb(cr, 0.80, 0.15, 0.10);
-  cairo_arc(cr, lx, ly + 20, 5, 0, 2 * M_PI);
+  cairo_arc(cr, lx + 130, ly, 5, 0, 2 * M_PI);
   cairo_fill(cr);
   cairo_set_source_rgb(cr, 0, 0, 0);
-  text(cr, lx + 12, ly + 20, "Pareto front (joined)", 0.0, 0.5);
-  if (anyZero) text(cr, lx + 12, ly + 40, "triangle: error 0 (the reference)", 0.0, 0.5);
+  text(cr, lx + 142, ly, "on the Pareto front (joined)", 0.0, 0.5);
+  if (anyZero) text(cr, lx + 350, ly, "triangle on the bottom edge: error 0 (the reference itself)", 0.0, 0.5);
 
   std::string bytes;
   cairo_destroy(cr);
