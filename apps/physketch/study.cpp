@@ -155,7 +155,13 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
   tbb::task_arena arena(threads);
   json part;
   arena.execute([&] {
-    const Prepared p = prepare(scenePath, threads, [&](SceneDesc& sc) { applySetting(setting, sc, option); });
+    Prepared p;
+    try {
+      p = prepare(scenePath, threads, [&](SceneDesc& sc) { applySetting(setting, sc, option); });
+    } catch (const InputError& e) {
+      // A voxel knob can push a stroke out of the workspace or past the particle cap: say which setting.
+      throw InputError(e.file(), e.line(), e.field(), e.reason() + " (with " + settingText(setting) + ")");
+    }
     if (analytic) checkExpectations(p);
     const SceneDesc& sc = p.scene;
     const int frames = sc.frameCount();

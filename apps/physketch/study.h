@@ -66,7 +66,7 @@ struct Trajectory {
 // body's bounding sphere (radius `reach`), moving on its analytic parabola, first comes within
 // one particle spacing of the ground plane or of another body's sphere (moving on its own
 // parabola, or still when not dynamic). Returns, per body, the number of frames in the window
-// (frames 1..n); 0 for bodies that are not dynamic. Sampled 1000 times per frame interval.
+// (frames 1..n); 0 for bodies that are not dynamic. Sampled 100 times per frame interval.
 std::vector<int> freefallWindow(const Trajectory& tr, const Vec3& gravity, double groundY);
 // RMS over dynamic bodies and the frames of their windows of |c(t) - (c0 + v0 t + g t^2/2)| (m).
 // Throws InputError naming `expectLine` of `scenePath` when no body has a frame of free fall.

@@ -167,6 +167,7 @@ TEST(StudyCli, BadVaryValuesAreClearErrors) {
       {"--vary smoothing=1", "not available yet"},
       {"--vary substeps", "expected KNOB=V1,V2"},
       {"--vary dt=0.02", "1/fps must be a whole multiple of dt"},
+      {"--vary voxel=0.001", "(with voxel=0.001)"},  // a 15 cm workspace: the box lies outside it
       {"", "nothing to vary"},
       {"--vary substeps=1 --reference exact", "unknown reference (known: analytic, fine)"},
   };
