@@ -297,3 +297,96 @@ TEST(StudyCli, JobsAndEmitPlusCollectGiveTheDirectRunsNumbers) {
   }
   fs::remove_all(dir);
 }
+
+namespace {
+
+// One body (a sphere of `reach` m) at rest at height y0 on frames 0..frames-1 at 30 fps; no other body.
+Trajectory fallingSphere(double y0, double reach, int frames) {
+  Trajectory tr;
+  for (int f = 0; f < frames; ++f) {
+    const double t = f / 30.0;
+    tr.t.push_back(t);
+    tr.centres.push_back({Vec3(0.0, y0 - 0.5 * 9.81 * t * t, 0.0)});
+  }
+  tr.velocity0 = {Vec3::Zero()};
+  tr.reach = {reach};
+  tr.dynamic0 = {true};
+  tr.names = {"ball"};
+  tr.spacing = 0.01;
+  return tr;
+}
+
+}  // namespace
+
+TEST(StudyNorms, FreefallWindowEndsWhereTheSphereNearsTheGround) {
+  // Closed form: the sphere's lowest point comes within one spacing of y = 0 when
+  // y0 - g t^2 / 2 - reach = spacing, t = sqrt(2 (y0 - reach - spacing) / g); the window holds the
+  // frames whose whole interval up to them stays clear: frames 1..floor(t * 30).
+  const Trajectory tr = fallingSphere(0.6, 0.05, 20);
+  const double tContact = std::sqrt(2.0 * (0.6 - 0.05 - 0.01) / 9.81);
+  const std::vector<int> w = freefallWindow(tr, Vec3(0, -9.81, 0), 0.0);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0], int(std::floor(tContact * 30.0)));
+  // The trajectory is the parabola itself: error 0 to rounding.
+  EXPECT_LT(freefallError(tr, Vec3(0, -9.81, 0), 0.0, "x.scene", 3), 1e-12);
+  // A second, fixed body under it ends the window sooner: the spheres' gap closes at
+  // y0 - g t^2/2 - 0.3 = reach + reach + spacing.
+  Trajectory two = fallingSphere(0.6, 0.05, 20);
+  for (auto& f : two.centres) f.push_back(Vec3(0.0, 0.3, 0.0));
+  two.velocity0.push_back(Vec3::Zero());
+  two.reach.push_back(0.05);
+  two.dynamic0.push_back(false);
+  two.names.push_back("table");
+  const double tHit = std::sqrt(2.0 * (0.6 - 0.3 - 0.05 - 0.05 - 0.01) / 9.81);
+  const std::vector<int> w2 = freefallWindow(two, Vec3(0, -9.81, 0), 0.0);
+  EXPECT_EQ(w2[0], int(std::floor(tHit * 30.0)));
+  EXPECT_EQ(w2[1], 0);  // not dynamic: no window of its own
+  // Nothing falls freely for a frame: an error naming the expect record.
+  try {
+    freefallError(fallingSphere(0.061, 0.05, 20), Vec3(0, -9.81, 0), 0.0, "x.scene", 3);
+    ADD_FAILURE() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 3);
+  }
+}
+
+TEST(StudyNorms, FineErrorIsTheRmsCentreDistanceOverDynamicBodiesAndFrames) {
+  Trajectory ref = fallingSphere(0.6, 0.05, 3), run = ref;
+  // Offsets 0.003 m and 0.004 m on frames 1 and 2 (frame 0 does not count): RMS = sqrt((9 + 16) / 2) mm.
+  run.centres[1][0].x() += 0.003;
+  run.centres[2][0].z() += 0.004;
+  EXPECT_NEAR(fineError(run, ref), std::sqrt(12.5) * 1e-3, 1e-15);
+  // A body that is not dynamic in the reference is left out.
+  for (auto* t : {&ref, &run})
+    for (auto& f : t->centres) f.push_back(Vec3(1, 1, 1));
+  ref.dynamic0.push_back(false);
+  run.centres[2][1].x() += 5.0;
+  EXPECT_NEAR(fineError(run, ref), std::sqrt(12.5) * 1e-3, 1e-15);
+  // Runs of different lengths (an unstable one) have no error.
+  run.centres.pop_back();
+  EXPECT_TRUE(std::isnan(fineError(run, ref)));
+}
+
+TEST(StudyCli, RestAndHeightErrorsMatchClosedForms) {
+  const fs::path dir = freshDir("rest");
+  // A block lying on the ground stays: only float rounding of its positions (~0.1 m: 1e-8) moves it.
+  Result r = runCli("study '" + scene("rest.scene") + "' --vary iterations=1,4 -q --out '" + (dir / "rest").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const auto& row : readCsv(dir / "rest" / "study.csv")) EXPECT_LT(std::stod(row.at("error_m")), 1e-6);
+  // A box drawn 10 cm above the ground under 'expect rest' falls: its particles move by at least
+  // the 10 cm gap.
+  std::ofstream(dir / "s.strokes") << "physketch-strokes 1\nprimitive box stone 0  0 0.15 0  0.1 0.1 0.1 body=box\nplay 0\n";
+  std::ofstream(dir / "air.scene") << "physketch-scene 1\nstrokes s.strokes\nduration 0.5\nmaterial stone rigid "
+                                      "density=2400\noutput report\nexpect rest\n";
+  r = runCli("study '" + (dir / "air.scene").string() + "' --vary substeps=4 -q --out '" + (dir / "air").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(std::stod(readCsv(dir / "air" / "study.csv").at(0).at("error_m")), 0.099);
+  // A 10 cm box voxelized at h = 1/151 m is 15 layers high (0.0993 m): lying on the ground, its
+  // centre is at 7.5 h, so 'expect height box 0.05' measures 0.05 - 7.5/151 at any setting that
+  // settles it.
+  r = runCli("study '" + scene("land.scene") + "' --vary substeps=2,8 -q --out '" + (dir / "land").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const auto& row : readCsv(dir / "land" / "study.csv"))
+    EXPECT_NEAR(std::stod(row.at("error_m")), 0.05 - 7.5 / 151.0, 1e-6);
+  fs::remove_all(dir);
+}
