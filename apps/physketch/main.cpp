@@ -75,7 +75,7 @@ int main(int argc, char** argv) {
   studyCmd->add_option("--out,-o", study.outDir, "Output folder (created if missing)")->capture_default_str();
   studyCmd->add_option("--jobs", study.jobs, "Settings run side by side (each gives the numbers it gives alone)")
       ->check(CLI::Range(1, 1024));
-  studyCmd->add_option("--threads,-j", study.threads, "Worker threads per run (default: all cores / jobs)")
+  studyCmd->add_option("--threads", study.threads, "Worker threads per run (default: all cores / jobs)")
       ->check(CLI::Range(1, 1024));
   studyCmd->add_option("--repeat", study.repeat, "Runs per setting; the time is their median")->check(CLI::Range(1, 1000));
   studyCmd->add_flag("--emit-commands", study.emitCommands,

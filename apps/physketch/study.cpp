@@ -443,8 +443,12 @@ std::vector<json> runAll(const StudyOptions& opt, const std::vector<Setting>& se
 }
 
 int emitCommands(const StudyOptions& opt, const Plan& plan, int threads) {
+  // Absolute paths, so the list runs from any folder (a Slurm job starts in its own). A program
+  // found on PATH (no '/') stays a bare name.
   const fs::path out = fs::absolute(opt.outDir);
   const std::string scene = fs::absolute(opt.scene).string();
+  const std::string program =
+      opt.program.find('/') == std::string::npos ? opt.program : fs::absolute(opt.program).lexically_normal().string();
   const int width = int(std::to_string(plan.settings.size()).size());
   std::string common = " --reference " + std::string(plan.analytic ? "analytic" : "fine");
   if (!plan.analytic) common += " --reference-at " + quote(settingText(plan.reference));
@@ -455,7 +459,7 @@ int emitCommands(const StudyOptions& opt, const Plan& plan, int threads) {
   planJson["reference"] = plan.analytic ? "analytic" : "fine";
   planJson["settings"] = json::array();
   auto command = [&](const Setting& s, const std::string& dir) {
-    return quote(opt.program) + " study " + quote(scene) + " --only " + quote(settingText(s)) + common + " --out " +
+    return quote(program) + " study " + quote(scene) + " --only " + quote(settingText(s)) + common + " --out " +
            quote((out / "parts" / dir).string());
   };
   std::error_code ec;
