@@ -96,6 +96,40 @@ void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshColl
   it->keyframes.push_back(k);
 }
 
+// expect freefall | expect rest | expect height BODY Y (docs/formats.md, "Expected answers").
+Expectation parseExpect(const RecordFile& file, const Record& r, const std::vector<Expectation>& existing) {
+  FieldReader f(file, r, {"kind", "body", "y"}, 1);
+  Expectation e;
+  e.line = r.line;
+  const std::string& kind = f.word(0);
+  const std::size_t want = kind == "height" ? 3 : 1;
+  if (kind == "freefall") e.kind = Expectation::Kind::kFreefall;
+  else if (kind == "rest") e.kind = Expectation::Kind::kRest;
+  else if (kind == "height") e.kind = Expectation::Kind::kHeight;
+  else f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height)");
+  if (f.count() < want) f.fail(f.count(), "expect height needs BODY and Y (m): expect height NAME Y");
+  if (f.count() > want)
+    throw InputError(file.path, r.line, "#" + std::to_string(want + 1),
+                     "extra field '" + f.word(want) + "' (expect " + kind + " takes " +
+                         (want == 1 ? "no further field)" : "BODY and Y only)"));
+  if (e.kind == Expectation::Kind::kHeight) {
+    e.body = SceneDesc::expectedBodyName(f.word(1));
+    e.value = f.inRange(2, -1e6, 1e6);
+  }
+  for (const auto& o : existing) {
+    const bool same = o.kind == e.kind && (e.kind != Expectation::Kind::kHeight || o.body == e.body);
+    if (same) f.fail(e.kind == Expectation::Kind::kHeight ? 1 : 0,
+                     "expect " + kind + (e.body.empty() ? "" : " " + f.word(1)) + " given twice (first on line " +
+                         std::to_string(o.line) + ")");
+    // Free fall and rest of every dynamic body cannot both hold (unless nothing moves): one or the other.
+    const bool clash = (o.kind == Expectation::Kind::kFreefall && e.kind == Expectation::Kind::kRest) ||
+                       (o.kind == Expectation::Kind::kRest && e.kind == Expectation::Kind::kFreefall);
+    if (clash) f.fail(0, "expect freefall and expect rest both speak of every dynamic body: give one (line " +
+                             std::to_string(o.line) + " gives the other)");
+  }
+  return e;
+}
+
 SceneDesc build(const RecordFile& file) {
   SceneDesc s;
   s.path = file.path;
@@ -106,7 +140,7 @@ SceneDesc build(const RecordFile& file) {
   int dtLine = 0, fpsLine = 0;
   for (const Record& r : file.records) {
     const std::string& kw = r.keyword();
-    if (kw != "material" && kw != "collider" && kw != "keyframe") {
+    if (kw != "material" && kw != "collider" && kw != "keyframe" && kw != "expect") {
       auto [it, fresh] = seen.emplace(kw, r.line);
       if (!fresh)
         throw InputError(file.path, r.line, "record", "'" + kw + "' given twice (first given on line " +
@@ -166,6 +200,8 @@ SceneDesc build(const RecordFile& file) {
       colliderAtLine.push_back(atGiven ? r.line : 0);
     } else if (kw == "keyframe") {
       parseKeyframe(file, r, s.colliders, keyframeCount);
+    } else if (kw == "expect") {
+      s.expectations.push_back(parseExpect(file, r, s.expectations));
     } else if (kw == "camera") {
       FieldReader f(file, r, {"ex", "ey", "ez", "tx", "ty", "tz", "fov"});
       s.camera.eye = Vec3(f.number(0), f.number(1), f.number(2));
@@ -189,7 +225,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "ground duration fps material collider keyframe camera image output)");
+                                                  "ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");
@@ -228,6 +264,21 @@ void MeshCollider::poseAt(double t, Mat3& rotationOut, Vec3& positionOut) const 
   const double u = (t - a.t) / (b.t - a.t);
   positionOut = (1.0 - u) * a.position + u * b.position;
   rotationOut = Quat(a.rotation).slerp(u, Quat(b.rotation)).toRotationMatrix();
+}
+
+const char* toString(Expectation::Kind kind) {
+  switch (kind) {
+    case Expectation::Kind::kFreefall: return "freefall";
+    case Expectation::Kind::kRest: return "rest";
+    case Expectation::Kind::kHeight: return "height";
+  }
+  return "?";
+}
+
+std::string SceneDesc::expectedBodyName(const std::string& field) {
+  // Unnamed bodies are called "stroke N" (a space); a record field cannot hold one.
+  if (field.rfind("stroke_", 0) == 0) return "stroke " + field.substr(7);
+  return field;
 }
 
 int SceneDesc::stepsPerFrame() const { return static_cast<int>(std::lround(1.0 / (fps * dt))); }

@@ -44,6 +44,18 @@ struct MeshCollider {
   void poseAt(double t, Mat3& rotationOut, Vec3& positionOut) const;
 };
 
+// The answer a scene declares (`expect` record), which `physketch study` measures a
+// run's error against (docs/formats.md, "Expected answers"; docs/accuracy.md, the norms).
+// `physketch run` ignores it.
+struct Expectation {
+  enum class Kind { kFreefall, kRest, kHeight };
+  Kind kind = Kind::kFreefall;
+  std::string body;   // kHeight: the body's name (body=NAME, or "stroke N" written stroke_N)
+  double value = 0.0; // kHeight: the final height of its centre of mass (m)
+  int line = 0;
+};
+const char* toString(Expectation::Kind kind);
+
 struct SceneDesc {
   std::string path;          // the scene file, as given
   std::string strokesPath;   // resolved relative to the scene file's folder
@@ -67,6 +79,10 @@ struct SceneDesc {
   int width = 640, height = 480;  // image size (pixels)
   bool writeFrames = true;
   bool writeReport = true;
+  std::vector<Expectation> expectations;  // `expect` records, in file order
+
+  // The (sketch) body an `expect height` names: "stroke_3" in the file means "stroke 3".
+  static std::string expectedBodyName(const std::string& field);
 
   int stepsPerFrame() const;  // (1/fps)/dt, validated to be whole when parsed
   int frameCount() const;     // frames including frame 0 at t = 0

@@ -1,4 +1,4 @@
-// The physketch command line: subcommands run and plan (see --help).
+// The physketch command line: subcommands run, plan, lint and study (see --help; study: study.h).
 #pragma once
 
 #include <string>

@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "apps/physketch/app.h"
+#include "apps/physketch/study.h"
 
 int main(int argc, char** argv) {
   using namespace physketch::app;
@@ -24,7 +25,8 @@ int main(int argc, char** argv) {
       "  physketch run scenes/hello.scene --frames 10 --threads 1\n"
       "  physketch plan scenes/hello.scene                     # the passes a step runs, and why\n"
       "  physketch run scenes/play.scene --validate            # check the state after every pass\n"
-      "  physketch lint scenes/hello.scene                     # check a sketch without simulating it\n\n"
+      "  physketch lint scenes/hello.scene                     # check a sketch without simulating it\n"
+      "  physketch study scenes/study/drop.scene --vary substeps=1,2,4,8 --out out/study  # error vs time\n\n"
       "Exit codes: 0 success, 1 bad input (the message names file:line:field), 2 runtime failure\n"
       "(e.g. the stability guard tripped: the message and report.json name the pass, particle, stroke,\n"
       "material, value, bound and the setting to change)."};
@@ -53,11 +55,41 @@ int main(int argc, char** argv) {
   auto* lintCmd = cli.add_subcommand("lint", "Parse and voxelize only: particles per stroke and material, memory estimate, warnings; exit 1 on any error");
   lintCmd->add_option("scene", lintPath, "Scene file")->required();
 
+  StudyOptions study;
+  study.program = argv[0];
+  auto* studyCmd = cli.add_subcommand(
+      "study",
+      "What accuracy costs in time: run the scene once per setting of the knobs varied (every combination),\n"
+      "measure each run's error and wall time per frame; write DIR/study.csv, study.md and study.png\n"
+      "(error against time per frame, log-log, the Pareto front marked). Knobs: iterations, substeps,\n"
+      "dt (s), voxel (m: the voxel size; the workspace edge becomes 151 voxels). Error: against the\n"
+      "scene's 'expect' records (--reference analytic, the default when it has one) or against a fine\n"
+      "run (--reference fine: the finest value of each knob, or --reference-at). docs/accuracy.md.");
+  studyCmd->add_option("scene", study.scene, "Scene file (not with --collect)");
+  studyCmd->add_option("--vary", study.vary, "KNOB=V1,V2,... (repeat for more knobs; every combination runs)")
+      ->expected(1)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  studyCmd->add_option("--reference", study.reference, "analytic (the scene's expect records) or fine (a converged run)");
+  studyCmd->add_option("--reference-at", study.referenceAt,
+                       "KNOB=V,...: the fine reference's setting (default: the finest value of each varied knob)");
+  studyCmd->add_option("--out,-o", study.outDir, "Output folder (created if missing)")->capture_default_str();
+  studyCmd->add_option("--jobs", study.jobs, "Settings run side by side (each gives the numbers it gives alone)")
+      ->check(CLI::Range(1, 1024));
+  studyCmd->add_option("--threads", study.threads, "Worker threads per run (default: all cores / jobs)")
+      ->check(CLI::Range(1, 1024));
+  studyCmd->add_option("--repeat", study.repeat, "Runs per setting; the time is their median")->check(CLI::Range(1, 1000));
+  studyCmd->add_flag("--emit-commands", study.emitCommands,
+                     "Print one command per setting (a job list for GNU parallel or a Slurm array) that writes "
+                     "DIR/parts/K/part.json; write DIR/plan.json; run nothing");
+  studyCmd->add_option("--only", study.only, "KNOB=V,...: run this one setting and write DIR/part.json");
+  studyCmd->add_option("--collect", study.collect, "DIR of --emit-commands: merge DIR/parts into DIR/study.{csv,md,png}");
+  studyCmd->add_flag("--quiet,-q", study.quiet, "No progress lines on stderr");
+
   // CLI11 reports a word that is not a subcommand as "A subcommand is required": name it instead.
   if (argc > 1 && argv[1][0] != '-') {
     std::string known;
     bool found = false;
-    for (const CLI::App* c : {runCmd, planCmd, lintCmd}) {
+    for (const CLI::App* c : {runCmd, planCmd, lintCmd, studyCmd}) {
       found = found || c->check_name(argv[1]);
       known += (known.empty() ? "" : ", ") + c->get_name();
     }
@@ -75,5 +107,6 @@ int main(int argc, char** argv) {
   if (*runCmd) return runScene(run);
   if (*planCmd) return printPlan(plan);
   if (*lintCmd) return lintScene(lintPath);
+  if (*studyCmd) return runStudy(study);
   return kExitBadInput;
 }

@@ -24,9 +24,10 @@ SolverSupport supportOf(SolverKind solver) {
   return s;
 }
 
-Prepared prepare(const std::string& scenePath, int threads) {
+Prepared prepare(const std::string& scenePath, int threads, const std::function<void(SceneDesc&)>& adjust) {
   Prepared p;
   p.scene = loadScene(scenePath);
+  if (adjust) adjust(p.scene);
   // A stroke file that cannot be opened is the scene's error (its 'strokes' line).
   if (!std::ifstream(p.scene.strokesPath))
     throw InputError(p.scene.path, p.scene.strokesLine, "path", "cannot open stroke file '" + p.scene.strokesPath + "'");

@@ -1,6 +1,7 @@
 // Everything that comes from input files, fully validated before any output is written.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -25,7 +26,9 @@ SolverSupport supportOf(SolverKind solver);
 // ask for, and voxelizes the sketch. Throws InputError
 // (file:line:field) for anything wrong in either file.
 // `threads`: for voxelizing (0 = every core); the sketch does not depend on it.
-Prepared prepare(const std::string& scenePath, int threads = 0);
+// `adjust`: changes the scene before the stroke file is read and voxelized (physketch study's
+// knobs); it may throw InputError.
+Prepared prepare(const std::string& scenePath, int threads = 0, const std::function<void(SceneDesc&)>& adjust = {});
 
 // The solver the scene asks for (`solver` record), started on the sketch's particles
 // and bodies. Throws InputError naming the scene's line when that solver cannot run it.

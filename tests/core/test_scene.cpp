@@ -637,3 +637,51 @@ TEST(Support, AParameterTheSolverDoesNotSimulateYetIsAnErrorNamingIt) {
   EXPECT_TRUE(mentions(e, "solver pbd does not simulate restitution yet")) << e.what();
   EXPECT_NO_THROW(checkSupport(scene, usesOfMaterials({{"ball", 3}}), pbdToday()));
 }
+
+TEST(Scene, ExpectRecordsParse) {
+  const SceneDesc s = parseScene(std::string(kGood) +
+                                     "expect freefall\n"
+                                     "expect height top 0.25\n"
+                                     "expect height stroke_3 -0.5\n",
+                                 "dir/x.scene");
+  ASSERT_EQ(s.expectations.size(), 3u);
+  EXPECT_EQ(s.expectations[0].kind, Expectation::Kind::kFreefall);
+  EXPECT_EQ(s.expectations[0].line, 10);
+  EXPECT_EQ(s.expectations[1].kind, Expectation::Kind::kHeight);
+  EXPECT_EQ(s.expectations[1].body, "top");
+  EXPECT_DOUBLE_EQ(s.expectations[1].value, 0.25);
+  EXPECT_EQ(s.expectations[2].body, "stroke 3");  // unnamed bodies are "stroke N"
+  EXPECT_DOUBLE_EQ(s.expectations[2].value, -0.5);
+  EXPECT_TRUE(parseScene(kGood, "dir/x.scene").expectations.empty());
+  EXPECT_EQ(parseScene(std::string(kGood) + "expect rest\n", "x.scene").expectations[0].kind, Expectation::Kind::kRest);
+}
+
+TEST(Scene, EveryBadExpectNamesLineAndField) {
+  auto e = sceneError("expect orbit\n");
+  EXPECT_EQ(e.line(), 10);
+  EXPECT_EQ(e.field(), "kind");
+  EXPECT_NE(std::string(e.what()).find("known: freefall, rest, height"), std::string::npos);
+  e = sceneError("expect\n");
+  EXPECT_EQ(e.field(), "kind");
+  e = sceneError("expect height top\n");
+  EXPECT_EQ(e.field(), "y");
+  e = sceneError("expect height\n");
+  EXPECT_EQ(e.field(), "body");
+  e = sceneError("expect height top nan\n");
+  EXPECT_EQ(e.field(), "y");
+  e = sceneError("expect height top 0.2m\n");
+  EXPECT_EQ(e.field(), "y");
+  e = sceneError("expect freefall 3\n");
+  EXPECT_EQ(e.field(), "#2");
+  e = sceneError("expect height top 0.2 1\n");
+  EXPECT_EQ(e.field(), "#4");
+  e = sceneError("expect rest\nexpect rest\n");
+  EXPECT_EQ(e.line(), 11);
+  EXPECT_NE(std::string(e.what()).find("first on line 10"), std::string::npos);
+  e = sceneError("expect height a 1\nexpect height a 2\n");
+  EXPECT_EQ(e.line(), 11);
+  EXPECT_EQ(e.field(), "body");
+  e = sceneError("expect freefall\nexpect rest\n");
+  EXPECT_EQ(e.line(), 11);
+  EXPECT_NE(std::string(e.what()).find("give one"), std::string::npos);
+}

@@ -1,0 +1,597 @@
+// physketch study: runs a scene once per setting, measures error and wall time per frame,
+// and writes study.csv, study.md and study.png (docs/accuracy.md says what each number is).
+//
+// Every setting's run becomes one "part" (a JSON object, written as OUT/part.json by
+// --only): the direct run, --jobs and --emit-commands + --collect all assemble the outputs
+// from the same parts, so they give the same numbers.
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
+#include "apps/physketch/app.h"
+#include "apps/physketch/prepare.h"
+#include "apps/physketch/runtime.h"
+#include "apps/physketch/study.h"
+#include "core/atomic_file.h"
+#include "core/error.h"
+#include "core/profile.h"
+
+namespace physketch::app {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr int kPartVersion = 1;
+
+// --- one run ------------------------------------------------------------------------
+
+std::string machine() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line, cpu = "unknown CPU";
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0 && line.find(':') != std::string::npos) {
+      cpu = line.substr(line.find(':') + 2);
+      break;
+    }
+  return cpu + ", " + std::to_string(std::thread::hardware_concurrency()) + " logical cores";
+}
+
+// The state a study needs from the run at one frame: centres of every body, and the
+// largest particle displacement from t = 0 and speed (for expect rest).
+void observe(const Solver& solver, const std::vector<Vec3>& x0, Trajectory& tr) {
+  std::vector<Vec3> centres;
+  for (int b = 0; b < solver.bodyCount(); ++b) centres.push_back(solver.pose(b).centre);
+  tr.centres.push_back(std::move(centres));
+  tr.t.push_back(solver.time());
+  const ParticleArrays& p = solver.particles();
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!solver.alive(static_cast<std::int32_t>(i))) continue;
+    const Vec3 x(p.x[i], p.y[i], p.z[i]);
+    if (i < x0.size()) tr.maxDisplacement = std::max(tr.maxDisplacement, (x - x0[i]).norm());
+    tr.maxSpeed = std::max(tr.maxSpeed, Vec3(p.vx[i], p.vy[i], p.vz[i]).norm());
+  }
+}
+
+// What the norms need at t = 0: velocity, bounding-sphere reach, mode and name per body.
+void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr) {
+  const ParticleArrays& p = solver.particles();
+  tr.spacing = sk.mapping.voxelSize();
+  for (int b = 0; b < solver.bodyCount(); ++b) {
+    const Vec3 c = solver.pose(b).centre;
+    double reach = 0.0;
+    for (std::int32_t i : solver.bodyParticles(b)) {
+      const auto k = static_cast<std::size_t>(i);
+      reach = std::max(reach, (Vec3(p.x[k], p.y[k], p.z[k]) - c).norm());
+    }
+    tr.reach.push_back(reach + 0.5 * tr.spacing);
+    tr.velocity0.push_back(solver.velocity(b));
+    tr.dynamic0.push_back(solver.mode(b) == BodyMode::kDynamic);
+    tr.names.push_back(b < int(sk.bodyNames.size()) ? sk.bodyNames[std::size_t(b)] : "after play " + std::to_string(b));
+  }
+}
+
+json vec(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
+Vec3 vec(const json& j) { return Vec3(j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()); }
+
+json trajectoryJson(const Trajectory& tr) {
+  json centres = json::array();
+  for (const auto& frame : tr.centres) {
+    json f = json::array();
+    for (const auto& c : frame) f.push_back(vec(c));
+    centres.push_back(f);
+  }
+  json v0 = json::array();
+  for (const auto& v : tr.velocity0) v0.push_back(vec(v));
+  return {{"t", tr.t},           {"centres", centres},   {"velocity0", v0},
+          {"reach", tr.reach},   {"dynamic0", tr.dynamic0}, {"names", tr.names},
+          {"max_displacement_m", tr.maxDisplacement}, {"max_speed_mps", tr.maxSpeed}, {"spacing_m", tr.spacing}};
+}
+
+Trajectory trajectoryFrom(const json& j) {
+  Trajectory tr;
+  tr.t = j.at("t").get<std::vector<double>>();
+  for (const auto& f : j.at("centres")) {
+    std::vector<Vec3> frame;
+    for (const auto& c : f) frame.push_back(vec(c));
+    tr.centres.push_back(std::move(frame));
+  }
+  for (const auto& v : j.at("velocity0")) tr.velocity0.push_back(vec(v));
+  tr.reach = j.at("reach").get<std::vector<double>>();
+  tr.dynamic0 = j.at("dynamic0").get<std::vector<bool>>();
+  tr.names = j.at("names").get<std::vector<std::string>>();
+  tr.maxDisplacement = j.at("max_displacement_m").get<double>();
+  tr.maxSpeed = j.at("max_speed_mps").get<double>();
+  tr.spacing = j.at("spacing_m").get<double>();
+  return tr;
+}
+
+json settingJson(const Setting& s) {
+  json a = json::array();
+  for (const auto& [k, v] : s) a.push_back({k, v});
+  return a;
+}
+
+Setting settingFrom(const json& j) {
+  Setting s;
+  for (const auto& kv : j) s.emplace_back(kv.at(0).get<std::string>(), kv.at(1).get<double>());
+  return s;
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// expect freefall and rest speak of the bodies made before play: refuse what they cannot judge.
+void checkExpectations(const Prepared& p) {
+  for (const Expectation& e : p.scene.expectations)
+    if (e.kind != Expectation::Kind::kHeight && !p.sketch->runtime.empty())
+      throw InputError(p.scene.path, e.line, "kind",
+                       std::string("expect ") + toString(e.kind) + " needs a sketch with nothing drawn after play (" +
+                           p.strokes.path + " draws " + std::to_string(p.sketch->runtime.size()) + " operation(s) after play)");
+}
+
+// Runs the scene with one setting `repeats` times (each from a fresh solver; the state after
+// every repeat must be the same) and returns its part. `analytic`: measure the error against
+// the scene's expect records here.
+json runSetting(const std::string& scenePath, const Setting& setting, int repeats, int threads, bool analytic,
+                const std::string& option) {
+  tbb::task_arena arena(threads);
+  json part;
+  arena.execute([&] {
+    Prepared p;
+    try {
+      p = prepare(scenePath, threads, [&](SceneDesc& sc) { applySetting(setting, sc, option); });
+    } catch (const InputError& e) {
+      // A voxel knob can push a stroke out of the workspace or past the particle cap: say which setting.
+      throw InputError(e.file(), e.line(), e.field(), e.reason() + " (with " + settingText(setting) + ")");
+    }
+    if (analytic) checkExpectations(p);
+    const SceneDesc& sc = p.scene;
+    const int frames = sc.frameCount();
+    Trajectory tr;
+    std::vector<double> msPerFrame;
+    std::uint64_t hash = 0;
+    std::string status = "ok";
+    for (int r = 0; r < repeats; ++r) {
+      const std::unique_ptr<Solver> solver = makeSolver(p);
+      RuntimeDriver runtime(*p.sketch, *solver);
+      const bool record = r == 0;
+      std::vector<Vec3> x0;
+      if (record) {
+        const ParticleArrays& ps = solver->particles();
+        for (std::size_t i = 0; i < ps.size(); ++i) x0.emplace_back(ps.x[i], ps.y[i], ps.z[i]);
+        observeStart(*solver, *p.sketch, tr);
+        observe(*solver, x0, tr);
+      }
+      double simulated = 0.0;  // s of wall time in steps only: observing is not the solver's cost
+      for (int f = 1; f < frames && !solver->guard().tripped(); ++f) {
+        const double t0 = nowSeconds();
+        for (int s = 0; s < sc.stepsPerFrame(); ++s) {
+          runtime.beforeStep();
+          if (!solver->step()) break;
+        }
+        simulated += nowSeconds() - t0;
+        if (record && !solver->guard().tripped()) observe(*solver, x0, tr);
+      }
+      if (solver->guard().tripped()) status = "unstable: " + solver->guard().message();
+      msPerFrame.push_back(frames > 1 ? 1000.0 * simulated / (frames - 1) : 0.0);
+      if (r == 0) hash = solver->stateHash();
+      else if (solver->stateHash() != hash)
+        throw RuntimeError("setting " + settingText(setting) + ": repeat " + std::to_string(r + 1) +
+                           " ended in another state than the first (the run is not deterministic)");
+    }
+    part["physketch_study_part"] = kPartVersion;
+    part["scene"] = scenePath;
+    part["setting"] = settingJson(setting);
+    part["particles"] = p.sketch->particles.size();
+    part["threads"] = threads;
+    part["frames"] = frames;
+    part["repeats"] = repeats;
+    part["ms_per_frame_repeats"] = msPerFrame;
+    part["ms_per_frame"] = median(msPerFrame);
+    part["status"] = status;
+    part["machine"] = machine();
+    part["trajectory"] = trajectoryJson(tr);
+    if (analytic) part["error_m"] = status == "ok" ? json(analyticError(tr, sc)) : json(nullptr);
+  });
+  return part;
+}
+
+// --- reference and options ----------------------------------------------------------
+
+struct Plan {
+  std::vector<KnobValues> knobs;
+  std::vector<Setting> settings;
+  bool analytic = true;
+  Setting reference;              // fine: the reference run's setting
+  std::ptrdiff_t referenceIndex = -1;  // fine: its index among the settings, or -1 (an extra run)
+};
+
+bool finestIsLargest(const std::string& knob) { return knob == "iterations" || knob == "substeps"; }
+
+Plan makePlan(const StudyOptions& opt, const SceneDesc& scene) {
+  Plan plan;
+  for (const auto& v : opt.vary) plan.knobs.push_back(parseVary(v));
+  checkDistinctKnobs(plan.knobs);
+  plan.settings = cartesianProduct(plan.knobs);
+  std::string mode = opt.reference;
+  if (mode.empty()) mode = scene.expectations.empty() ? "fine" : "analytic";
+  if (mode != "analytic" && mode != "fine")
+    throw InputError("--reference '" + mode + "'", 0, "reference", "unknown reference (known: analytic, fine)");
+  plan.analytic = mode == "analytic";
+  if (plan.analytic && scene.expectations.empty())
+    throw InputError(scene.path, 0, "expect",
+                     "the scene declares no answer ('expect freefall', 'expect rest', 'expect height BODY Y'): "
+                     "add one or use --reference fine");
+  if (plan.analytic && !opt.referenceAt.empty())
+    throw InputError("--reference-at", 0, "reference", "--reference-at names the fine reference: use it with --reference fine");
+  if (!plan.analytic) {
+    for (const auto& k : plan.knobs) {
+      const auto [lo, hi] = std::minmax_element(k.values.begin(), k.values.end());
+      plan.reference.emplace_back(k.knob, finestIsLargest(k.knob) ? *hi : *lo);
+    }
+    if (!opt.referenceAt.empty())
+      for (const auto& [knob, v] : parseSetting(opt.referenceAt, "--reference-at")) {
+        auto it = std::find_if(plan.reference.begin(), plan.reference.end(), [&](const auto& kv) { return kv.first == knob; });
+        if (it != plan.reference.end()) it->second = v;
+        else plan.reference.emplace_back(knob, v);
+      }
+    for (std::size_t i = 0; i < plan.settings.size(); ++i)
+      if (settingText(plan.settings[i]) == settingText(plan.reference)) plan.referenceIndex = std::ptrdiff_t(i);
+  }
+  return plan;
+}
+
+// --- assembling the outputs -----------------------------------------------------------
+
+struct Row {
+  Setting setting;
+  double error = NAN, ms = NAN;
+  long long particles = 0;
+  int threads = 0, repeats = 0;
+  std::string status;
+  bool front = false;
+};
+
+std::string fmt(const char* f, double v) {
+  if (std::isnan(v)) return "nan";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+// Rows in order of their knob values (the order --vary gave the knobs), so a direct run and a
+// collected one list them alike whatever order the parts came in.
+std::vector<Row> makeRows(const std::vector<json>& parts, const json* reference, bool analytic) {
+  std::vector<Row> rows;
+  Trajectory ref;
+  if (!analytic) ref = trajectoryFrom(reference->at("trajectory"));
+  for (const json& p : parts) {
+    Row r;
+    r.setting = settingFrom(p.at("setting"));
+    r.status = p.at("status").get<std::string>();
+    const bool ok = r.status == "ok" && (analytic || reference->at("status") == "ok");
+    if (ok) r.error = analytic ? p.at("error_m").get<double>() : fineError(trajectoryFrom(p.at("trajectory")), ref);
+    r.ms = p.at("ms_per_frame").get<double>();
+    r.particles = p.at("particles").get<long long>();
+    r.threads = p.at("threads").get<int>();
+    r.repeats = p.at("repeats").get<int>();
+    rows.push_back(std::move(r));
+  }
+  std::sort(rows.begin(), rows.end(), [](const Row& a, const Row& b) {
+    for (std::size_t k = 0; k < a.setting.size() && k < b.setting.size(); ++k)
+      if (a.setting[k].second != b.setting[k].second) return a.setting[k].second < b.setting[k].second;
+    return false;
+  });
+  std::vector<CostPoint> pts;
+  for (const Row& r : rows) pts.push_back({r.ms, r.error});
+  const std::vector<bool> front = paretoFront(pts);
+  for (std::size_t i = 0; i < rows.size(); ++i) rows[i].front = front[i];
+  return rows;
+}
+
+std::string csvText(const std::vector<Row>& rows) {
+  std::string s;
+  for (const auto& kv : rows.front().setting) s += kv.first + ",";
+  s += "error_m,ms_per_frame,particles,threads,repeats,status,pareto\n";
+  for (const Row& r : rows) {
+    for (const auto& kv : r.setting) s += fmt("%.10g", kv.second) + ",";
+    std::string status = r.status;
+    std::replace(status.begin(), status.end(), ',', ';');
+    std::replace(status.begin(), status.end(), '\n', ' ');
+    s += fmt("%.6e", r.error) + "," + fmt("%.4f", r.ms) + "," + std::to_string(r.particles) + "," +
+         std::to_string(r.threads) + "," + std::to_string(r.repeats) + "," + status + "," + (r.front ? "1" : "0") + "\n";
+  }
+  return s;
+}
+
+std::string normText(bool analytic, const SceneDesc* scene, const std::string& referenceText) {
+  if (!analytic)
+    return "RMS over frames 1.. and the bodies dynamic at t = 0 of the distance between each body's centre of "
+           "mass and the reference run's (m); reference: " + referenceText;
+  std::string s;
+  if (scene)
+    for (const Expectation& e : scene->expectations) {
+      s += s.empty() ? "" : "; ";
+      switch (e.kind) {
+        case Expectation::Kind::kFreefall:
+          s += "expect freefall: RMS over dynamic bodies and the frames before each comes within one particle "
+               "spacing of the ground or another body of |c(t) - (c0 + v0 t + g t^2/2)| (m)";
+          break;
+        case Expectation::Kind::kRest: s += "expect rest: largest particle displacement from t = 0 (m)"; break;
+        case Expectation::Kind::kHeight:
+          s += "expect height " + e.body + " " + fmt("%g", e.value) + ": |final centre height - " + fmt("%g", e.value) + "| (m)";
+          break;
+      }
+    }
+  return s + (s.find(';') != std::string::npos ? "; the error is the largest of these" : "");
+}
+
+std::string markdown(const std::vector<Row>& rows, const std::vector<json>& parts, const std::string& scene,
+                     const std::string& norm, int jobs) {
+  std::ostringstream md;
+  md << "# physketch study: " << scene << "\n\n";
+  md << "- error: " << norm << "\n";
+  md << "- wall time: the solver's steps only, per simulated frame, median of the repeats\n";
+  std::vector<std::string> machines;
+  for (const json& p : parts) {
+    const std::string m = p.at("machine").get<std::string>();
+    if (std::find(machines.begin(), machines.end(), m) == machines.end()) machines.push_back(m);
+  }
+  for (const auto& m : machines) md << "- machine: " << m << "\n";
+  if (jobs > 1) md << "- " << jobs << " settings ran side by side (--jobs): their times include that contention\n";
+  md << "- Pareto front: no other setting is both as fast and as accurate, and better in one (marked `*`)\n\n";
+  md << "|";
+  for (const auto& kv : rows.front().setting) md << " " << kv.first << " |";
+  md << " error (m) | ms/frame | particles | threads | front | status |\n|";
+  for (std::size_t k = 0; k < rows.front().setting.size() + 6; ++k) md << " --- |";
+  md << "\n";
+  for (const Row& r : rows) {
+    md << "|";
+    for (const auto& kv : r.setting) md << " " << fmt("%.10g", kv.second) << " |";
+    md << " " << fmt("%.3e", r.error) << " | " << fmt("%.3f", r.ms) << " | " << r.particles << " | " << r.threads
+       << " | " << (r.front ? "*" : "") << " | " << r.status << " |\n";
+  }
+  return md.str();
+}
+
+void writeOutputs(const fs::path& out, const std::vector<json>& parts, const json* reference, bool analytic,
+                  const SceneDesc* scene, const std::string& referenceText, int jobs) {
+  const std::vector<Row> rows = makeRows(parts, reference, analytic);
+  const std::string scenePath = parts.front().at("scene").get<std::string>();
+  const std::string norm = normText(analytic, scene, referenceText);
+  std::vector<PlotPoint> pts;
+  for (const Row& r : rows) pts.push_back({r.ms, r.error, r.front, settingText(r.setting)});
+  const std::string title = "physketch study: " + fs::path(scenePath).filename().string() + " (error against " +
+                            (analytic ? std::string("the scene's expect") : "a fine run: " + referenceText) + ")";
+  const std::string yLabel = analytic ? "error against the expected answer (m)" : "RMS centre distance to the fine run (m)";
+  const std::string png = studyPlotPng(pts, title, yLabel);
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) throw RuntimeError("cannot create output folder " + out.string() + ": " + ec.message());
+  writeFileAtomic((out / "study.csv").string(), csvText(rows));
+  writeFileAtomic((out / "study.md").string(), markdown(rows, parts, scenePath, norm, jobs));
+  writeFileAtomic((out / "study.png").string(), png);
+}
+
+// --- the modes ------------------------------------------------------------------------
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+int defaultThreads(int jobs) { return std::max(1, tbb::info::default_concurrency() / std::max(1, jobs)); }
+
+// Runs every setting (and an extra reference run), `jobs` at a time, each in a TBB arena of
+// its own threads; progress on stderr, one line per finished setting.
+std::vector<json> runAll(const StudyOptions& opt, const std::vector<Setting>& settings, bool analytic, int threads) {
+  std::vector<json> parts(settings.size());
+  std::atomic<std::size_t> next{0}, done{0};
+  std::mutex mutex;
+  std::exception_ptr failure;
+  std::atomic<bool> stop{false};
+  const double start = nowSeconds();
+  auto worker = [&] {
+    for (;;) {
+      const std::size_t i = next++;
+      if (i >= settings.size() || stop) return;
+      try {
+        parts[i] = runSetting(opt.scene, settings[i], opt.repeat, threads, analytic, "setting");
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!failure) failure = std::current_exception();
+        stop = true;
+        return;
+      }
+      const std::size_t d = ++done;
+      if (opt.quiet) continue;
+      const double elapsed = nowSeconds() - start;
+      std::lock_guard<std::mutex> lock(mutex);
+      std::string err;
+      if (analytic && parts[i].contains("error_m") && parts[i]["error_m"].is_number())
+        err = "  error " + fmt("%.3e", parts[i]["error_m"].get<double>()) + " m";
+      std::fprintf(stderr, "study: setting %zu/%zu %s%s  %.3f ms/frame  %.1f s elapsed, ETA %.0f s\n", d,
+                   settings.size(), settingText(settings[i]).c_str(), err.c_str(),
+                   parts[i]["ms_per_frame"].get<double>(), elapsed, elapsed / double(d) * double(settings.size() - d));
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int j = 1; j < opt.jobs; ++j) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  if (failure) std::rethrow_exception(failure);
+  return parts;
+}
+
+int emitCommands(const StudyOptions& opt, const Plan& plan, int threads) {
+  // Absolute paths, so the list runs from any folder (a Slurm job starts in its own). A program
+  // found on PATH (no '/') stays a bare name.
+  const fs::path out = fs::absolute(opt.outDir);
+  const std::string scene = fs::absolute(opt.scene).string();
+  const std::string program =
+      opt.program.find('/') == std::string::npos ? opt.program : fs::absolute(opt.program).lexically_normal().string();
+  const int width = int(std::to_string(plan.settings.size()).size());
+  std::string common = " --reference " + std::string(plan.analytic ? "analytic" : "fine");
+  if (!plan.analytic) common += " --reference-at " + quote(settingText(plan.reference));
+  common += " --repeat " + std::to_string(opt.repeat) + " --threads " + std::to_string(threads) + " --quiet";
+  json planJson;
+  planJson["physketch_study_plan"] = kPartVersion;
+  planJson["scene"] = scene;
+  planJson["reference"] = plan.analytic ? "analytic" : "fine";
+  planJson["settings"] = json::array();
+  auto command = [&](const Setting& s, const std::string& dir) {
+    return quote(program) + " study " + quote(scene) + " --only " + quote(settingText(s)) + common + " --out " +
+           quote((out / "parts" / dir).string());
+  };
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) throw RuntimeError("cannot create output folder " + out.string() + ": " + ec.message());
+  for (std::size_t i = 0; i < plan.settings.size(); ++i) {
+    char dir[32];
+    std::snprintf(dir, sizeof dir, "%0*zu", width, i + 1);
+    planJson["settings"].push_back({{"dir", dir}, {"setting", settingText(plan.settings[i])}});
+    std::cout << command(plan.settings[i], dir) << "\n";
+  }
+  if (!plan.analytic && plan.referenceIndex < 0) {
+    planJson["settings"].push_back({{"dir", "ref"}, {"setting", settingText(plan.reference)}});
+    std::cout << command(plan.reference, "ref") << "\n";
+  }
+  writeFileAtomic((out / "plan.json").string(), planJson.dump(1) + "\n");
+  std::cout.flush();
+  return kExitOk;
+}
+
+json readJsonFile(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path.string(), 0, "", "cannot open");
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw InputError(path.string(), 0, "", std::string("not JSON: ") + e.what());
+  }
+}
+
+int collect(const StudyOptions& opt) {
+  const fs::path dir(opt.collect);
+  const fs::path planPath = dir / "plan.json";
+  if (!fs::is_regular_file(planPath))
+    throw InputError(planPath.string(), 0, "", "no plan: run 'physketch study SCENE --vary ... --emit-commands --out " +
+                                                   dir.string() + "' first, then its commands");
+  const json plan = readJsonFile(planPath);
+  const bool analytic = plan.at("reference") == "analytic";
+  std::vector<json> parts;
+  json reference;
+  std::string referenceText;
+  std::vector<std::string> missing;
+  for (const auto& entry : plan.at("settings")) {
+    const std::string sub = entry.at("dir").get<std::string>();
+    const fs::path partPath = dir / "parts" / sub / "part.json";
+    if (!fs::is_regular_file(partPath)) {
+      missing.push_back(sub + " (" + entry.at("setting").get<std::string>() + ")");
+      continue;
+    }
+    json part = readJsonFile(partPath);
+    if (!part.contains("physketch_study_part") || part["physketch_study_part"] != kPartVersion)
+      throw InputError(partPath.string(), 0, "", "not a physketch study part (version 1)");
+    if (settingText(settingFrom(part.at("setting"))) != entry.at("setting").get<std::string>())
+      throw InputError(partPath.string(), 0, "setting", "holds setting " + settingText(settingFrom(part.at("setting"))) +
+                                                            ", the plan says " + entry.at("setting").get<std::string>());
+    if (!analytic && part.value("is_reference", false)) {
+      reference = part;
+      referenceText = settingText(settingFrom(part.at("setting")));
+    }
+    if (sub != "ref") parts.push_back(std::move(part));
+  }
+  if (!missing.empty()) {
+    std::string list;
+    for (const auto& m : missing) list += (list.empty() ? "" : ", ") + m;
+    throw InputError((dir / "parts").string(), 0, "", std::to_string(missing.size()) + " part(s) missing: " + list +
+                                                          " (run their commands from --emit-commands)");
+  }
+  if (!analytic && reference.is_null())
+    throw InputError((dir / "parts").string(), 0, "", "no part holds the fine reference run");
+  std::unique_ptr<SceneDesc> scene;
+  const std::string scenePath = plan.at("scene").get<std::string>();
+  if (fs::is_regular_file(scenePath)) scene = std::make_unique<SceneDesc>(loadScene(scenePath));
+  writeOutputs(dir, parts, analytic ? nullptr : &reference, analytic, scene.get(), referenceText, 1);
+  if (!opt.quiet) std::cerr << "physketch study: " << parts.size() << " parts -> " << (dir / "study.csv").string() << "\n";
+  return kExitOk;
+}
+
+}  // namespace
+
+int runStudy(const StudyOptions& opt) {
+  try {
+    if (!opt.collect.empty()) return collect(opt);
+    if (opt.scene.empty()) throw InputError("study", 0, "scene", "missing SCENE (or --collect DIR)");
+    const int threads = opt.threads > 0 ? opt.threads : defaultThreads(opt.jobs);
+    const SceneDesc scene = loadScene(opt.scene);
+    if (!opt.only.empty()) {
+      // One part of a study run elsewhere (--emit-commands): OUT/part.json.
+      StudyOptions one = opt;
+      const Setting s = parseSetting(opt.only, "--only");
+      one.vary.clear();
+      for (const auto& [k, v] : s) one.vary.push_back(settingText({{k, v}}));
+      const Plan plan = makePlan(one, scene);
+      json part = runSetting(opt.scene, s, opt.repeat, threads, plan.analytic, "--only");
+      if (!plan.analytic) {
+        part["reference_setting"] = settingJson(plan.reference);
+        part["is_reference"] = settingText(s) == settingText(plan.reference);
+      }
+      std::error_code ec;
+      fs::create_directories(opt.outDir, ec);
+      if (ec) throw RuntimeError("cannot create output folder " + opt.outDir + ": " + ec.message());
+      writeFileAtomic((fs::path(opt.outDir) / "part.json").string(), part.dump() + "\n");
+      return kExitOk;
+    }
+    const Plan plan = makePlan(opt, scene);
+    if (opt.emitCommands) return emitCommands(opt, plan, threads);
+    std::vector<Setting> runs = plan.settings;
+    if (!plan.analytic && plan.referenceIndex < 0) runs.push_back(plan.reference);
+    // Bad input in any setting (a dt that does not divide a frame, a voxel that leaves strokes
+    // outside the workspace) is found before hours of runs: prepare each once, cheaply.
+    for (const Setting& s : runs) {
+      SceneDesc sc = scene;
+      applySetting(s, sc, "setting");
+    }
+    std::vector<json> parts = runAll(opt, runs, plan.analytic, threads);
+    json reference;
+    if (!plan.analytic) {
+      reference = plan.referenceIndex >= 0 ? parts[std::size_t(plan.referenceIndex)] : parts.back();
+      if (plan.referenceIndex < 0) parts.pop_back();
+    }
+    writeOutputs(opt.outDir, parts, plan.analytic ? nullptr : &reference, plan.analytic, &scene,
+                 settingText(plan.reference), opt.jobs);
+    if (!opt.quiet)
+      std::cerr << "physketch study: " << parts.size() << " settings -> " << (fs::path(opt.outDir) / "study.csv").string()
+                << ", study.md, study.png\n";
+    return kExitOk;
+  } catch (const InputError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitRuntime;
+  }
+}
+
+}  // namespace physketch::app

@@ -1,0 +1,128 @@
+// physketch study: what accuracy costs in time. Runs a scene once per setting of the knobs
+// it is asked to vary (the cartesian product), measures each run's error against the answer
+// the scene declares (`expect` records) or against a converged fine run, and its wall time per
+// frame; writes study.csv, study.md and study.png (docs/accuracy.md).
+//
+// The pieces are here so tests can check them without the binary: knob parsing, the
+// product, the error norms (study_error.cpp) and the Pareto front (study_plot.cpp).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/math.h"
+#include "core/scene.h"
+
+namespace physketch::app {
+
+// --- knobs and settings ------------------------------------------------------
+
+// One knob and the values it takes, from `--vary KNOB=V1,V2,...`.
+struct KnobValues {
+  std::string knob;
+  std::vector<double> values;
+};
+
+// One run's override of the scene: (knob, value) in the order the knobs were given.
+using Setting = std::vector<std::pair<std::string, double>>;
+
+// Parses `KNOB=V1,V2,...`. Throws InputError naming the argument and the knob for an unknown
+// or reserved knob (grid, cfl, mesh_resolution, smoothing: not available yet), a value that is
+// not a number, an empty list or value, a value out of the knob's range (iterations 0), or a
+// value given twice.
+KnobValues parseVary(const std::string& arg);
+// Checks that no knob is varied twice. Throws InputError.
+void checkDistinctKnobs(const std::vector<KnobValues>& knobs);
+// Parses one setting `KNOB=V,KNOB=V` (--only, --reference-at), with the same checks.
+Setting parseSetting(const std::string& arg, const std::string& option);
+// Every combination: the last knob varies fastest. Throws InputError past kMaxSettings.
+std::vector<Setting> cartesianProduct(const std::vector<KnobValues>& knobs);
+constexpr std::size_t kMaxSettings = 10000;
+// "iterations=4,substeps=8" (values as %.10g): the --only argument that names the setting.
+std::string settingText(const Setting& s);
+// Applies a setting to a scene: iterations, substeps, dt (s), voxel (m; the workspace edge
+// becomes 151 voxels, centre kept). Throws InputError naming `option` when the result is not a
+// valid scene (1/fps not a whole number of dt steps, a workspace over 1000 m).
+void applySetting(const Setting& s, SceneDesc& scene, const std::string& option);
+
+// --- error norms (study_error.cpp) -------------------------------------------
+
+// What a run recorded at every frame (frame 0 = t = 0), enough for every norm.
+struct Trajectory {
+  std::vector<double> t;                  // s, per frame
+  std::vector<std::vector<Vec3>> centres;  // per frame, per body: centre of mass (m)
+  std::vector<Vec3> velocity0;            // per body at t = 0 (m/s)
+  std::vector<double> reach;              // per body: centre to farthest particle + a radius (m)
+  std::vector<bool> dynamic0;             // per body: dynamic at t = 0 (not fixed, kinematic)
+  std::vector<std::string> names;         // per body (sketch names; "after play N" for later bodies)
+  double maxDisplacement = 0.0;           // m: largest particle displacement from t = 0 over the run
+  double maxSpeed = 0.0;                  // m/s: largest particle speed over the run (frames)
+  double spacing = 0.0;                   // m: the particle spacing (voxel size)
+};
+
+// The frame window of free fall of each body (docs/accuracy.md): frames f >= 1 before the
+// body's bounding sphere (radius `reach`), moving on its analytic parabola, first comes within
+// one particle spacing of the ground plane or of another body's sphere (moving on its own
+// parabola, or still when not dynamic). Returns, per body, the number of frames in the window
+// (frames 1..n); 0 for bodies that are not dynamic. Sampled 100 times per frame interval.
+std::vector<int> freefallWindow(const Trajectory& tr, const Vec3& gravity, double groundY);
+// RMS over dynamic bodies and the frames of their windows of |c(t) - (c0 + v0 t + g t^2/2)| (m).
+// Throws InputError naming `expectLine` of `scenePath` when no body has a frame of free fall.
+double freefallError(const Trajectory& tr, const Vec3& gravity, double groundY, const std::string& scenePath,
+                     int expectLine);
+// |c_y(T) - y| (m) of the named body at the last frame. Throws InputError for an unknown body.
+double heightError(const Trajectory& tr, const Expectation& e, const std::string& scenePath);
+// The scene's error: the largest of its expect records' errors (all in m).
+double analyticError(const Trajectory& tr, const SceneDesc& scene);
+// RMS over frames 1.. and the bodies dynamic at t = 0 in the reference (present in both) of
+// the distance between centres of mass (m). NaN when the runs have different frame counts.
+double fineError(const Trajectory& run, const Trajectory& reference);
+
+// --- Pareto front (study_plot.cpp) -------------------------------------------
+
+struct CostPoint {
+  double ms = 0.0;     // wall time per frame (ms)
+  double error = 0.0;  // m
+};
+// Whether each point is on the Pareto front of (time, error), both minimised: no other point
+// is as good in both and better in one. Points with a NaN coordinate are never on it and
+// dominate nothing. O(n log n).
+std::vector<bool> paretoFront(const std::vector<CostPoint>& points);
+
+// study.png: error against wall time per frame, log-log, one marker per setting, the front's
+// points filled and joined in order of time. Points with error 0 (the fine reference itself)
+// sit on the bottom edge as open triangles; NaN points (unstable runs) are left out. Returns
+// the PNG file's bytes (kPlotWidth x kPlotHeight, drawn with Cairo).
+struct PlotPoint {
+  double ms = 0.0, error = 0.0;
+  bool front = false;
+  std::string label;  // the setting, printed next to front points
+};
+std::string studyPlotPng(const std::vector<PlotPoint>& points, const std::string& title, const std::string& errorLabel);
+
+// --- the command --------------------------------------------------------------
+
+struct StudyOptions {
+  std::string program = "physketch";  // argv[0], for --emit-commands
+  std::string scene;
+  std::vector<std::string> vary;      // KNOB=V1,V2,...
+  std::string reference;              // analytic | fine | "" (analytic when the scene declares one)
+  std::string referenceAt;            // KNOB=V,...: the fine reference (default: finest of each knob)
+  std::string outDir = "study";
+  int jobs = 1;
+  int threads = 0;                    // per run; 0: cores / jobs
+  int repeat = 1;
+  bool emitCommands = false;
+  std::string only;                   // one setting: run it and write OUT/part.json
+  std::string collect;                // DIR: merge DIR/parts/*/part.json
+  bool quiet = false;
+};
+int runStudy(const StudyOptions& options);
+
+// Plot size of study.png (pixels).
+constexpr int kPlotWidth = 900;
+constexpr int kPlotHeight = 600;
+
+}  // namespace physketch::app

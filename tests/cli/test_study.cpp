@@ -1,0 +1,392 @@
+// physketch study: the command end to end (knobs, error, CSV, PNG, jobs, emit + collect) and
+// its pieces (Pareto front, knob parsing) against independent oracles.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <png.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <sstream>
+
+#include "apps/physketch/study.h"
+#include "core/error.h"
+
+namespace fs = std::filesystem;
+using namespace physketch;
+using namespace physketch::app;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+Result runCli(const std::string& args, const fs::path& dir) {
+  const std::string cmd = std::string(PHYSKETCH_CLI) + " " + args + " > '" + (dir / "stdout.txt").string() + "' 2> '" +
+                          (dir / "stderr.txt").string() + "'";
+  const int status = std::system(cmd.c_str());
+  Result r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = slurp(dir / "stdout.txt");
+  r.err = slurp(dir / "stderr.txt");
+  return r;
+}
+
+fs::path freshDir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / ("physketch_test_study_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+std::string scene(const std::string& name) { return std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/study/" + name; }
+
+using Table = std::vector<std::map<std::string, std::string>>;
+
+Table readCsv(const fs::path& p) {
+  std::ifstream in(p);
+  std::string line;
+  std::vector<std::string> header;
+  Table rows;
+  auto split = [](const std::string& s) {
+    std::vector<std::string> out;
+    std::stringstream ss(s);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) out.push_back(cell);
+    return out;
+  };
+  if (!std::getline(in, line)) return rows;
+  header = split(line);
+  while (std::getline(in, line)) {
+    const auto cells = split(line);
+    std::map<std::string, std::string> row;
+    for (std::size_t i = 0; i < header.size() && i < cells.size(); ++i) row[header[i]] = cells[i];
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+// The CSV without the columns that measure time (and the front, which follows from them).
+Table withoutTiming(Table t) {
+  for (auto& row : t) {
+    row.erase("ms_per_frame");
+    row.erase("pareto");
+  }
+  return t;
+}
+
+// Brute force: i is on the front when no j is as good in both and better in one.
+std::vector<bool> bruteFront(const std::vector<CostPoint>& p) {
+  std::vector<bool> front(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (std::isnan(p[i].ms) || std::isnan(p[i].error)) continue;
+    bool dominated = false;
+    for (std::size_t j = 0; j < p.size() && !dominated; ++j)
+      dominated = j != i && p[j].ms <= p[i].ms && p[j].error <= p[i].error &&
+                  (p[j].ms < p[i].ms || p[j].error < p[i].error);
+    front[i] = !dominated;
+  }
+  return front;
+}
+
+}  // namespace
+
+TEST(StudyPareto, MatchesABruteForceDominationCheck) {
+  std::mt19937 rng(11);
+  // Small integer coordinates make ties (same time, same error, both) common.
+  std::uniform_int_distribution<int> coord(0, 6), count(0, 40), nan(0, 15);
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::vector<CostPoint> pts(std::size_t(count(rng)));
+    for (auto& p : pts) {
+      p.ms = 1.0 + coord(rng);
+      p.error = 0.001 * coord(rng);
+      if (nan(rng) == 0) p.error = NAN;  // an unstable run
+    }
+    ASSERT_EQ(paretoFront(pts), bruteFront(pts)) << "trial " << trial;
+  }
+}
+
+TEST(StudyKnobs, ProductHasEveryCombinationOnce) {
+  const std::vector<KnobValues> knobs = {parseVary("substeps=1,2,4"), parseVary("iterations=3,1"), parseVary("dt=0.01")};
+  const auto settings = cartesianProduct(knobs);
+  ASSERT_EQ(settings.size(), 6u);
+  std::set<std::string> seen;
+  for (const auto& s : settings) seen.insert(settingText(s));
+  EXPECT_EQ(seen.size(), 6u);
+  for (int sub : {1, 2, 4})
+    for (int it : {3, 1})
+      EXPECT_TRUE(seen.count("substeps=" + std::to_string(sub) + ",iterations=" + std::to_string(it) + ",dt=0.01"));
+  // A setting's text reads back as the same setting, digits and all.
+  const Setting odd = {{"dt", 1.0 / 60.0}};
+  EXPECT_EQ(parseSetting(settingText(odd), "--only"), odd);
+}
+
+TEST(StudyKnobs, VoxelSetsTheWorkspaceEdgeAndDtMustDivideAFrame) {
+  SceneDesc sc;
+  sc.fps = 30;
+  applySetting({{"voxel", 0.01}, {"substeps", 7}, {"iterations", 2}}, sc, "--only");
+  EXPECT_DOUBLE_EQ(sc.workspaceSize, 1.51);  // 151 voxels of 1 cm
+  EXPECT_EQ(sc.substeps, 7);
+  EXPECT_EQ(sc.iterations, 2);
+  applySetting({{"dt", 1.0 / 90.0}}, sc, "--only");
+  EXPECT_DOUBLE_EQ(sc.dt, 1.0 / 90.0);
+  EXPECT_THROW(applySetting({{"dt", 0.02}}, sc, "--only"), InputError);  // 1/30 s is not whole steps of 20 ms
+}
+
+TEST(StudyCli, BadVaryValuesAreClearErrors) {
+  const fs::path dir = freshDir("bad");
+  const std::string s = "'" + scene("drop.scene") + "' --out '" + (dir / "o").string() + "' ";
+  const std::pair<std::string, std::string> cases[] = {
+      {"--vary warp=1,2", "unknown knob 'warp' (known: iterations, substeps, dt, voxel"},
+      {"--vary substeps=1,two", "field 'substeps': value 'two' is not a number"},
+      {"--vary substeps=", "field 'substeps': no values"},
+      {"--vary substeps=1,,4", "field 'substeps': empty value"},
+      {"--vary iterations=0", "field 'iterations': value '0' is out of range 1..1000"},
+      {"--vary iterations=2.5", "not a whole number"},
+      {"--vary substeps=nan", "not a finite number"},
+      {"--vary substeps=2,2", "value '2' given twice"},
+      {"--vary substeps=1 --vary substeps=2", "knob varied twice"},
+      {"--vary grid=64,128", "knob 'grid' (MPM grid resolution: not available yet"},
+      {"--vary cfl=0.5", "not available yet"},
+      {"--vary smoothing=1", "not available yet"},
+      {"--vary substeps", "expected KNOB=V1,V2"},
+      {"--vary dt=0.02", "1/fps must be a whole multiple of dt"},
+      {"--vary voxel=0.001", "(with voxel=0.001)"},  // a 15 cm workspace: the box lies outside it
+      {"", "nothing to vary"},
+      {"--vary substeps=1 --reference exact", "unknown reference (known: analytic, fine)"},
+  };
+  for (const auto& [args, message] : cases) {
+    const Result r = runCli("study " + s + args, dir);
+    EXPECT_EQ(r.code, 1) << args << "\n" << r.err;
+    EXPECT_NE(r.err.find(message), std::string::npos) << args << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(dir / "o" / "study.csv")) << args;
+  }
+  fs::remove_all(dir);
+}
+
+TEST(StudyCli, ExpectErrorsNameTheSceneLine) {
+  const fs::path dir = freshDir("expect");
+  std::ofstream(dir / "s.strokes") << "physketch-strokes 1\nprimitive box stone 0  0 0.5 0  0.1 0.1 0.1 body=box\nplay 0\n";
+  const std::string head =
+      "physketch-scene 1\nstrokes s.strokes\nduration 0.2\nmaterial stone rigid density=2400\noutput report\n";
+  std::ofstream(dir / "a.scene") << head << "expect height lid 0.5\n";
+  Result r = runCli("study '" + (dir / "a.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("a.scene:6: field 'body': no body named 'lid' (bodies: box)"), std::string::npos) << r.err;
+  std::ofstream(dir / "b.scene") << head;  // no expect: analytic has nothing to measure against
+  r = runCli("study '" + (dir / "b.scene").string() + "' --vary substeps=1 --reference analytic --out '" +
+                 (dir / "o").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("declares no answer"), std::string::npos) << r.err;
+  fs::remove_all(dir);
+}
+
+TEST(StudyCli, FreefallErrorFallsAsSubstepsGrowAndTheCsvHasTheProduct) {
+  const fs::path dir = freshDir("drop");
+  const fs::path out = dir / "out";
+  const Result r = runCli("study '" + scene("drop.scene") + "' --vary substeps=1,2,4,8,16 --vary iterations=2,4 --out '" +
+                              out.string() + "' --threads 1",
+                          dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Table rows = readCsv(out / "study.csv");
+  ASSERT_EQ(rows.size(), 10u);  // 5 x 2
+  std::set<std::pair<std::string, std::string>> product;
+  std::map<int, double> errorAt;  // substeps -> error (iterations do not touch free fall)
+  for (const auto& row : rows) {
+    product.insert({row.at("substeps"), row.at("iterations")});
+    EXPECT_EQ(row.at("status"), "ok");
+    EXPECT_EQ(row.at("threads"), "1");
+    EXPECT_GT(std::stoi(row.at("particles")), 1000);
+    EXPECT_GT(std::stod(row.at("ms_per_frame")), 0.0);
+    const int sub = std::stoi(row.at("substeps"));
+    const double e = std::stod(row.at("error_m"));
+    if (errorAt.count(sub)) {
+      EXPECT_EQ(errorAt[sub], e);
+    }
+    errorAt[sub] = e;
+  }
+  EXPECT_EQ(product.size(), 10u);
+  // Symplectic Euler in free fall ends each frame ½ g h t below the parabola (h = dt/substeps;
+  // the window is the same for every setting), so the RMS error halves exactly as the substeps
+  // double: first order. 1 % covers float rounding of the stored poses.
+  for (int sub : {1, 2, 4, 8}) {
+    EXPECT_GT(errorAt[sub], errorAt[sub * 2]);
+    EXPECT_NEAR(errorAt[sub] / errorAt[sub * 2], 2.0, 0.02) << sub;
+  }
+  // Bound at the finest: ½ |g| h T with T = 0.5 s the scene's duration, h = (1/60)/16 s.
+  EXPECT_LT(errorAt[16], 0.5 * 9.81 * (1.0 / 60.0 / 16.0) * 0.5);
+  EXPECT_GT(errorAt[16], 0.0);
+  // One progress line per setting, with the count and an ETA.
+  EXPECT_NE(r.err.find("setting 10/10"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("ETA"), std::string::npos);
+  // The plot decodes, at its stated size.
+  png_image img{};
+  img.version = PNG_IMAGE_VERSION;
+  ASSERT_TRUE(png_image_begin_read_from_file(&img, (out / "study.png").c_str())) << img.message;
+  img.format = PNG_FORMAT_RGBA;
+  std::vector<unsigned char> px(PNG_IMAGE_SIZE(img));
+  ASSERT_TRUE(png_image_finish_read(&img, nullptr, px.data(), 0, nullptr)) << img.message;
+  EXPECT_EQ(int(img.width), kPlotWidth);
+  EXPECT_EQ(int(img.height), kPlotHeight);
+  std::size_t red = 0;  // the front's markers and line are drawn in red (0.80, 0.15, 0.10)
+  for (std::size_t i = 0; i + 3 < px.size(); i += 4) red += px[i] > 150 && px[i + 1] < 90 && px[i + 2] < 90;
+  EXPECT_GT(red, 50u);
+  const std::string md = slurp(out / "study.md");
+  EXPECT_NE(md.find("| substeps | iterations | error (m) | ms/frame |"), std::string::npos) << md;
+  fs::remove_all(dir);
+}
+
+TEST(StudyCli, JobsAndEmitPlusCollectGiveTheDirectRunsNumbers) {
+  const fs::path dir = freshDir("collect");
+  const std::string vary = " --vary substeps=2,8 --vary iterations=1,4 --reference fine --threads 1 --quiet ";
+  const std::string sc = "'" + scene("stack.scene") + "'";
+  ASSERT_EQ(runCli("study " + sc + vary + "--out '" + (dir / "direct").string() + "'", dir).code, 0);
+  // Side by side: each run gives the numbers it gives alone.
+  ASSERT_EQ(runCli("study " + sc + vary + "--jobs 2 --out '" + (dir / "jobs").string() + "'", dir).code, 0);
+  // A job list: one command per setting, each writing its part; collect merges them.
+  const Result emit = runCli("study " + sc + vary + "--emit-commands --out '" + (dir / "batch").string() + "'", dir);
+  ASSERT_EQ(emit.code, 0) << emit.err;
+  std::stringstream lines(emit.out);
+  std::string command;
+  int commands = 0;
+  while (std::getline(lines, command)) {
+    ASSERT_NE(command.find(" --only "), std::string::npos) << command;
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    ++commands;
+  }
+  EXPECT_EQ(commands, 4);  // the reference (the finest setting) is one of the four
+  // Collect names a missing part before it is there.
+  fs::rename(dir / "batch" / "parts" / "2", dir / "parts2");
+  Result r = runCli("study --collect '" + (dir / "batch").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("1 part(s) missing: 2 (substeps=2,iterations=4)"), std::string::npos) << r.err;
+  fs::rename(dir / "parts2", dir / "batch" / "parts" / "2");
+  r = runCli("study --collect '" + (dir / "batch").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Table direct = readCsv(dir / "direct" / "study.csv");
+  ASSERT_EQ(direct.size(), 4u);
+  EXPECT_EQ(withoutTiming(readCsv(dir / "jobs" / "study.csv")), withoutTiming(direct));
+  EXPECT_EQ(withoutTiming(readCsv(dir / "batch" / "study.csv")), withoutTiming(direct));
+  EXPECT_TRUE(fs::exists(dir / "batch" / "study.png"));
+  EXPECT_TRUE(fs::exists(dir / "batch" / "study.md"));
+  // The fine reference is the finest of each knob (substeps 8, iterations 4): its own error is 0,
+  // and every other setting differs from it.
+  for (const auto& row : direct) {
+    const bool ref = row.at("substeps") == "8" && row.at("iterations") == "4";
+    if (ref) {
+      EXPECT_EQ(std::stod(row.at("error_m")), 0.0);
+    } else {
+      EXPECT_GT(std::stod(row.at("error_m")), 0.0) << row.at("substeps") << " " << row.at("iterations");
+    }
+  }
+  fs::remove_all(dir);
+}
+
+namespace {
+
+// One body (a sphere of `reach` m) at rest at height y0 on frames 0..frames-1 at 30 fps; no other body.
+Trajectory fallingSphere(double y0, double reach, int frames) {
+  Trajectory tr;
+  for (int f = 0; f < frames; ++f) {
+    const double t = f / 30.0;
+    tr.t.push_back(t);
+    tr.centres.push_back({Vec3(0.0, y0 - 0.5 * 9.81 * t * t, 0.0)});
+  }
+  tr.velocity0 = {Vec3::Zero()};
+  tr.reach = {reach};
+  tr.dynamic0 = {true};
+  tr.names = {"ball"};
+  tr.spacing = 0.01;
+  return tr;
+}
+
+}  // namespace
+
+TEST(StudyNorms, FreefallWindowEndsWhereTheSphereNearsTheGround) {
+  // Closed form: the sphere's lowest point comes within one spacing of y = 0 when
+  // y0 - g t^2 / 2 - reach = spacing, t = sqrt(2 (y0 - reach - spacing) / g); the window holds the
+  // frames whose whole interval up to them stays clear: frames 1..floor(t * 30).
+  const Trajectory tr = fallingSphere(0.6, 0.05, 20);
+  const double tContact = std::sqrt(2.0 * (0.6 - 0.05 - 0.01) / 9.81);
+  const std::vector<int> w = freefallWindow(tr, Vec3(0, -9.81, 0), 0.0);
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0], int(std::floor(tContact * 30.0)));
+  // The trajectory is the parabola itself: error 0 to rounding.
+  EXPECT_LT(freefallError(tr, Vec3(0, -9.81, 0), 0.0, "x.scene", 3), 1e-12);
+  // A second, fixed body under it ends the window sooner: the spheres' gap closes at
+  // y0 - g t^2/2 - 0.3 = reach + reach + spacing.
+  Trajectory two = fallingSphere(0.6, 0.05, 20);
+  for (auto& f : two.centres) f.push_back(Vec3(0.0, 0.3, 0.0));
+  two.velocity0.push_back(Vec3::Zero());
+  two.reach.push_back(0.05);
+  two.dynamic0.push_back(false);
+  two.names.push_back("table");
+  const double tHit = std::sqrt(2.0 * (0.6 - 0.3 - 0.05 - 0.05 - 0.01) / 9.81);
+  const std::vector<int> w2 = freefallWindow(two, Vec3(0, -9.81, 0), 0.0);
+  EXPECT_EQ(w2[0], int(std::floor(tHit * 30.0)));
+  EXPECT_EQ(w2[1], 0);  // not dynamic: no window of its own
+  // Nothing falls freely for a frame: an error naming the expect record.
+  try {
+    freefallError(fallingSphere(0.061, 0.05, 20), Vec3(0, -9.81, 0), 0.0, "x.scene", 3);
+    ADD_FAILURE() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 3);
+  }
+}
+
+TEST(StudyNorms, FineErrorIsTheRmsCentreDistanceOverDynamicBodiesAndFrames) {
+  Trajectory ref = fallingSphere(0.6, 0.05, 3), run = ref;
+  // Offsets 0.003 m and 0.004 m on frames 1 and 2 (frame 0 does not count): RMS = sqrt((9 + 16) / 2) mm.
+  run.centres[1][0].x() += 0.003;
+  run.centres[2][0].z() += 0.004;
+  EXPECT_NEAR(fineError(run, ref), std::sqrt(12.5) * 1e-3, 1e-15);
+  // A body that is not dynamic in the reference is left out.
+  for (auto* t : {&ref, &run})
+    for (auto& f : t->centres) f.push_back(Vec3(1, 1, 1));
+  ref.dynamic0.push_back(false);
+  run.centres[2][1].x() += 5.0;
+  EXPECT_NEAR(fineError(run, ref), std::sqrt(12.5) * 1e-3, 1e-15);
+  // Runs of different lengths (an unstable one) have no error.
+  run.centres.pop_back();
+  EXPECT_TRUE(std::isnan(fineError(run, ref)));
+}
+
+TEST(StudyCli, RestAndHeightErrorsMatchClosedForms) {
+  const fs::path dir = freshDir("rest");
+  // A block lying on the ground stays: only float rounding of its positions (~0.1 m: 1e-8) moves it.
+  Result r = runCli("study '" + scene("rest.scene") + "' --vary iterations=1,4 -q --out '" + (dir / "rest").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const auto& row : readCsv(dir / "rest" / "study.csv")) EXPECT_LT(std::stod(row.at("error_m")), 1e-6);
+  // A box drawn 10 cm above the ground under 'expect rest' falls: its particles move by at least
+  // the 10 cm gap.
+  std::ofstream(dir / "s.strokes") << "physketch-strokes 1\nprimitive box stone 0  0 0.15 0  0.1 0.1 0.1 body=box\nplay 0\n";
+  std::ofstream(dir / "air.scene") << "physketch-scene 1\nstrokes s.strokes\nduration 0.5\nmaterial stone rigid "
+                                      "density=2400\noutput report\nexpect rest\n";
+  r = runCli("study '" + (dir / "air.scene").string() + "' --vary substeps=4 -q --out '" + (dir / "air").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_GT(std::stod(readCsv(dir / "air" / "study.csv").at(0).at("error_m")), 0.099);
+  // A 10 cm box voxelized at h = 1/151 m is 15 layers high (0.0993 m): lying on the ground, its
+  // centre is at 7.5 h, so 'expect height box 0.05' measures 0.05 - 7.5/151 at any setting that
+  // settles it.
+  r = runCli("study '" + scene("land.scene") + "' --vary substeps=2,8 -q --out '" + (dir / "land").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const auto& row : readCsv(dir / "land" / "study.csv"))
+    EXPECT_NEAR(std::stod(row.at("error_m")), 0.05 - 7.5 / 151.0, 1e-6);
+  fs::remove_all(dir);
+}
