@@ -89,14 +89,15 @@ void CreatesAfterPlay::addStrand(const Operation& op, MaterialKind kind, double 
     r.bodyName = copy++ == 0 ? name : name + " #" + std::to_string(copy);
     r.init = bodyInit(op);
     r.layout = shape.layout;
-    r.rows = shape.rows;
-    r.cols = shape.cols;
+    r.rows = shape.layout == BodyLayout::kLattice ? shape.rows : 0;  // as BodyRange: kLattice only
+    r.cols = shape.layout == BodyLayout::kLattice ? shape.cols : 0;
     r.radius = shape.radius;
     r.particles.reserve(shape.nodes.size());
     for (const Vec3& q : shape.nodes) {
       r.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op.id,
                        sum.material);
-      r.cells.push_back(checks_.mapping().discretize(q));
+      r.cells.push_back(checks_.mapping().discretize(  // of the position as stored
+          Vec3(r.particles.x.back(), r.particles.y.back(), r.particles.z.back())));
     }
     out.push_back(std::move(r));
   }

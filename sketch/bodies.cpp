@@ -380,7 +380,8 @@ std::vector<CutBody> appendStrandBodies(const Strands& strands, const BodyPlan& 
             const Vec3& q = strands.positions()[static_cast<std::size_t>(node)];
             out.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op,
                      piece.material);
-            sk.cells.push_back(sk.mapping.discretize(q));
+            // The cell of the position as stored (float), which is what the solver and the runtime see.
+            sk.cells.push_back(sk.mapping.discretize(Vec3(out.x.back(), out.y.back(), out.z.back())));
             if (strands.alive(node)) ++sum.remaining;
             else out.phase.back() |= phase::kRemoved;  // a hole in a cut cloth
           }
