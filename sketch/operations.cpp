@@ -19,30 +19,31 @@ const char* kAxisNames[] = {"x", "y", "z"};
 // translated exactly; the mirror copy moves mirrored. Particles they land on are
 // replaced. Carrying one out of the workspace names the last sample's line and
 // the axis it leaves by.
-// Move (before play), ropes and cloth: the brush at the first sample grabs every piece
-// with a live node inside it (the mirror copy: inside its mirror image) and carries the
-// whole piece by the same whole-voxel shift as the voxels (mirrored for the mirror copy),
-// so a rope drawn on a body and moved with it stays where it was drawn on it.
+// Move (before play), ropes and cloth: the brush at the first sample grabs every rope
+// (every chain a remove left of one) and every cloth with a live node inside it (the mirror
+// copy: inside its mirror image) and carries the whole of it by the same whole-voxel shift as
+// the voxels (mirrored for the mirror copy), so a rope drawn on a body and moved with it
+// stays where it was drawn on it.
 void moveStrands(const Operation& op, const Solid& brush, const Vec3i& shift, const InputChecks& checks,
                  Strands& strands, SketchCells& cells) {
-  const GridMapping& m = checks.mapping();
-  std::vector<bool> taken(strands.pieces().size(), false);
+  std::vector<std::pair<Strands::Span, Vec3>> grabbed;  // both copies grab before either moves, like the voxels
   for (int pass = 0; pass < (op.mirror.axis >= 0 ? 2 : 1); ++pass) {
     Vec3i sh = shift;
     if (pass == 1) sh[op.mirror.axis] = -sh[op.mirror.axis];
-    const Vec3 offset = sh.cast<double>() * m.voxelSize();
-    for (int k : strands.piecesWhere(
-             [&](const Vec3& p) { return brush.contains(pass == 0 ? p : mirrorPoint(p, op.mirror)); })) {
-      if (taken[static_cast<std::size_t>(k)]) continue;
-      taken[static_cast<std::size_t>(k)] = true;
-      const Strands::Piece& piece = strands.pieces()[static_cast<std::size_t>(k)];
-      for (std::int32_t i = piece.first; i < piece.first + piece.count; ++i)
-        if (strands.alive(i))
-          checks.inside(strands.positions()[static_cast<std::size_t>(i)] + offset, op.stroke.samples.back().line,
-                        "move carries a rope or cloth node");
-      strands.translate(k, offset);
-      cells.carried(strands.aliveIn(piece));
-    }
+    const Vec3 offset = sh.cast<double>() * checks.mapping().voxelSize();
+    for (const Strands::Span& span :
+         strands.spansWhere([&](const Vec3& p) { return brush.contains(pass == 0 ? p : mirrorPoint(p, op.mirror)); }))
+      if (std::none_of(grabbed.begin(), grabbed.end(), [&](const auto& g) { return g.first == span; }))
+        grabbed.emplace_back(span, offset);
+  }
+  for (const auto& [span, offset] : grabbed)
+    for (std::int32_t i = span.first; i < span.end; ++i)
+      if (strands.alive(i))
+        checks.inside(strands.positions()[static_cast<std::size_t>(i)] + offset, op.stroke.samples.back().line,
+                      "move carries a rope or cloth node");
+  for (const auto& [span, offset] : grabbed) {
+    strands.translate(span, offset);
+    cells.carried(strands.aliveIn(span));
   }
 }
 

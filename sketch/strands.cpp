@@ -133,15 +133,14 @@ void Strands::add(int op, std::int16_t material, const StrandShape& shape) {
   alive_.insert(alive_.end(), shape.nodes.size(), 1);
 }
 
-std::int32_t Strands::aliveIn(const Piece& piece) const {
-  std::int32_t n = 0;
-  for (std::int32_t i = piece.first; i < piece.first + piece.count; ++i) n += alive(i);
-  return n;
+void Strands::translate(const Span& span, const Vec3& offset) {
+  for (std::int32_t i = span.first; i < span.end; ++i) pos_[static_cast<std::size_t>(i)] += offset;
 }
 
-void Strands::translate(int piece, const Vec3& offset) {
-  const Piece& p = pieces_[static_cast<std::size_t>(piece)];
-  for (std::int32_t i = p.first; i < p.first + p.count; ++i) pos_[static_cast<std::size_t>(i)] += offset;
+std::int32_t Strands::aliveIn(const Span& span) const {
+  std::int32_t n = 0;
+  for (std::int32_t i = span.first; i < span.end; ++i) n += alive(i);
+  return n;
 }
 
 std::vector<StrandBody> bodiesOf(const Strands& strands, const Strands::Piece& piece) {

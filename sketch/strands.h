@@ -62,7 +62,8 @@ StrandShape mirrored(const StrandShape& shape, const Mirror& mirror);
 
 // The ropes and cloths of the sketch while the operations before play are replayed: each
 // created shape (one per mirror copy) is a piece; removes kill nodes, moves translate
-// whole pieces. Nodes stay in place in their piece, so a piece keeps its layout.
+// what hangs together (a span). Nodes keep their index in their piece, so a piece keeps
+// its layout.
 class Strands {
  public:
   struct Piece {
@@ -79,7 +80,6 @@ class Strands {
   const std::vector<Piece>& pieces() const { return pieces_; }
   const std::vector<Vec3>& positions() const { return pos_; }
   bool alive(std::int32_t node) const { return alive_[static_cast<std::size_t>(node)] != 0; }
-  std::int32_t aliveIn(const Piece& piece) const;
 
   // Alg. 2 by position: kills every live node for which inside(position) holds. Returns how many.
   template <class Inside>
@@ -89,20 +89,36 @@ class Strands {
       if (alive_[i] && inside(pos_[i])) alive_[i] = 0, ++n;
     return n;
   }
-  // Indices of the pieces with a live node for which inside(position) holds, ascending.
+  // Nodes [first, end) that hang together: a whole lattice, or a run of live nodes of a chain
+  // (the chains a remove cut it into are bodies of their own).
+  struct Span {
+    std::int32_t first, end;
+    bool operator==(const Span& o) const { return first == o.first && end == o.end; }
+  };
+  // The spans with a live node for which inside(position) holds, in node order.
   template <class Inside>
-  std::vector<int> piecesWhere(Inside&& inside) const {
-    std::vector<int> out;
-    for (std::size_t k = 0; k < pieces_.size(); ++k)
-      for (std::int32_t i = pieces_[k].first; i < pieces_[k].first + pieces_[k].count; ++i)
-        if (alive_[static_cast<std::size_t>(i)] && inside(pos_[static_cast<std::size_t>(i)])) {
-          out.push_back(static_cast<int>(k));
+  std::vector<Span> spansWhere(Inside&& inside) const {
+    std::vector<Span> out;
+    for (const Piece& p : pieces_) {
+      const std::int32_t end = p.first + p.count;
+      for (std::int32_t i = p.first; i < end; ++i) {
+        if (!alive(i) || !inside(pos_[static_cast<std::size_t>(i)])) continue;
+        if (p.layout == BodyLayout::kLattice) {
+          out.push_back({p.first, end});
           break;
         }
+        std::int32_t a = i, b = i + 1;
+        while (a > p.first && alive(a - 1)) --a;
+        while (b < end && alive(b)) ++b;
+        out.push_back({a, b});
+        i = b;  // the run is taken; look on past it
+      }
+    }
     return out;
   }
-  // Moves every node of a piece by `offset` (m).
-  void translate(int piece, const Vec3& offset);
+  // Moves the nodes of a span by `offset` (m).
+  void translate(const Span& span, const Vec3& offset);
+  std::int32_t aliveIn(const Span& span) const;
 
  private:
   std::vector<Piece> pieces_;

@@ -351,6 +351,18 @@ TEST(Rope, AMoveCarriesTheWholeRopeItGrabs) {
   for (std::int32_t i = 0; i < still.bodies[0].count; ++i)
     EXPECT_NEAR((at(moved, i) - (at(still, i) + shift)).norm(), 0.0, kTol) << i;
   EXPECT_EQ(moved.operations[1].moved, still.bodies[0].count);
+  // After a remove cut it in two, a move grabbing one chain carries that chain only.
+  const std::string cut = rope + "stroke remove sphere 0.02\n" + sample(2, start + Vec3(0.05, 0, 0));
+  const Sketch cutStill = sketchOf(cut);
+  const Sketch cutMoved = sketchOf(cut + "stroke move sphere 0.02\n" + sample(3, start + Vec3(0.2, 0, 0)) +
+                                   sample(4, start + Vec3(0.2, 0, 0) + travel));
+  ASSERT_EQ(cutMoved.bodies.size(), 2u);
+  const BodyRange far = cutMoved.bodies[0], near = cutMoved.bodies[1];  // longer first: the far one
+  for (std::int32_t i = far.first; i < far.first + far.count; ++i)
+    EXPECT_NEAR((at(cutMoved, i) - (at(cutStill, i) + shift)).norm(), 0.0, kTol) << i;
+  for (std::int32_t i = near.first; i < near.first + near.count; ++i)
+    EXPECT_NEAR((at(cutMoved, i) - at(cutStill, i)).norm(), 0.0, kTol) << i;
+  EXPECT_EQ(cutMoved.operations[2].moved, far.count);
   // A move that misses it leaves it where it is.
   const Sketch missed = sketchOf(rope + "stroke move sphere 0.02\n" + sample(2, Vec3(0, 0.6, 0)) + sample(3, Vec3(0, 0.7, 0)));
   EXPECT_EQ(missed.particles.x, still.particles.x);
