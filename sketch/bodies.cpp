@@ -397,4 +397,53 @@ std::vector<CutBody> appendStrandBodies(const Strands& strands, const BodyPlan& 
   return cuts;
 }
 
+namespace {
+
+// out[j] = in[from[j]].
+template <class T>
+void gather(std::vector<T>& v, const std::vector<std::int32_t>& from) {
+  std::vector<T> out(from.size());
+  for (std::size_t j = 0; j < from.size(); ++j) out[j] = v[static_cast<std::size_t>(from[j])];
+  v = std::move(out);
+}
+
+}  // namespace
+
+void orderBodiesAsPlanned(const BodyPlan& plan, std::vector<CutBody>& cuts, Sketch& sk) {
+  const std::size_t n = sk.bodies.size();
+  // A body's planned body: that of the operation of its first particle (a cut piece's too).
+  auto planned = [&](std::size_t b) { return plan.bodyOfOp[static_cast<std::size_t>(sk.bodies[b].stroke)]; };
+  std::vector<std::size_t> order(n);
+  for (std::size_t b = 0; b < n; ++b) order[b] = b;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return planned(a) < planned(b); });
+  bool same = true;
+  for (std::size_t b = 0; b < n; ++b) same = same && order[b] == b;
+  if (same) return;
+  std::vector<std::int32_t> from;  // per new particle index: its old index
+  from.reserve(sk.particles.size());
+  std::vector<BodyRange> bodies;
+  std::vector<std::string> names;
+  std::vector<int> newIndex(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    BodyRange r = sk.bodies[order[k]];
+    newIndex[order[k]] = static_cast<int>(k);
+    const std::int32_t first = static_cast<std::int32_t>(from.size());
+    for (std::int32_t i = r.first; i < r.first + r.count; ++i) from.push_back(i);
+    r.first = first;
+    bodies.push_back(r);
+    names.push_back(sk.bodyNames[order[k]]);
+  }
+  ParticleArrays& p = sk.particles;
+  gather(p.x, from), gather(p.y, from), gather(p.z, from), gather(p.vx, from), gather(p.vy, from), gather(p.vz, from);
+  gather(p.mass, from), gather(p.phase, from), gather(p.stroke, from), gather(p.material, from), gather(sk.cells, from);
+  sk.bodies = std::move(bodies);
+  sk.bodyNames = std::move(names);
+  for (const BodyRange& r : sk.bodies)  // M with the new indices of the voxel particles
+    if (r.layout == BodyLayout::kVoxels)
+      for (std::int32_t i = r.first; i < r.first + r.count; ++i) sk.grid.set(sk.cells[static_cast<std::size_t>(i)], i);
+  for (auto& sum : sk.operations)
+    if (sum.body >= 0) sum.body = newIndex[static_cast<std::size_t>(sum.body)];
+  for (CutBody& cut : cuts) cut.firstBody = newIndex[static_cast<std::size_t>(cut.firstBody)];
+}
+
 }  // namespace physketch::sketch

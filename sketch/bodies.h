@@ -66,7 +66,7 @@ std::vector<CutBody> splitCutBodies(const SketchCells& cells, const BodyPlan& pl
                                     const StrokeFile& file, Sketch& sk);
 
 // Appends the bodies the ropes and cloths left (sketch/strands.h: bodiesOf) after the voxel
-// bodies, in file order: their particles to sk.particles (holes of a cut cloth with
+// bodies, in file order (orderBodiesAsPlanned then moves them to their places): their particles to sk.particles (holes of a cut cloth with
 // phase::kRemoved) and sk.cells (the cell each position falls in; not in M), a BodyRange
 // each with its layout and radius, and a name: an operation's first body has the planned
 // name, its further ones (the mirror copy, the pieces of a cut rope) "NAME #2", ...
@@ -74,5 +74,11 @@ std::vector<CutBody> splitCutBodies(const SketchCells& cells, const BodyPlan& pl
 // remove cut into more chains than it was drawn as, for lint.
 std::vector<CutBody> appendStrandBodies(const Strands& strands, const BodyPlan& plan, const StrokeFile& file,
                                         Sketch& sk);
+
+// Puts the bodies in the order of their planned bodies (stably: a cut body's pieces stay
+// together, in their order), so rope and cloth bodies, appended last, take their place in
+// file order; moves the particles with them and keeps M, the operations' bodies and `cuts`
+// in step. Does nothing (no copy) when they are in order already.
+void orderBodiesAsPlanned(const BodyPlan& plan, std::vector<CutBody>& cuts, Sketch& sk);
 
 }  // namespace physketch::sketch

@@ -100,7 +100,10 @@ Sketch replay(const StrokeFile& file, const GridMapping& mapping, const std::vec
   const BodyPlan plan = planBodies(file);
   const std::vector<int> planned = compactIntoBodies(cells, plan, sk);
   std::vector<CutBody> cuts = splitCutBodies(cells, plan, planned, file, sk);
-  for (const CutBody& cut : appendStrandBodies(strands, plan, file, sk)) cuts.push_back(cut);
+  if (!strands.empty()) {
+    for (const CutBody& cut : appendStrandBodies(strands, plan, file, sk)) cuts.push_back(cut);
+    orderBodiesAsPlanned(plan, cuts, sk);
+  }
   if (!createsLater.empty()) {
     CreatesAfterPlay later(footprints, checks, liveParticles(sk.particles));
     for (int id : createsLater) {

@@ -58,8 +58,8 @@ struct RuntimeOp {
   std::vector<std::pair<double, Vec3>> path;
 };
 
-// Every particle is in a body range. Voxel bodies (kVoxels) come first, in the order of their
-// first operation; rope and cloth bodies (kChain, kLattice) follow, in file order.
+// Every particle is in a body range; bodies are in the order of their first operation (the
+// pieces of a cut body together), whatever their layout.
 // M holds exactly the voxel particles (one per voxel, at its centre). Rope and cloth
 // particles are not in M: they are not voxel centres and several may share a cell; a voxel
 // create may fill a cell a rope runs through (docs/formats.md, "Ropes and cloth").

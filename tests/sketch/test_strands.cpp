@@ -264,6 +264,36 @@ TEST(Strands, ANamedBodyCannotMixARigidPartWithAFluidRopeClothOrSoftOne) {
   expectConsistent(sk);
 }
 
+// Bodies are in file order whatever their layout, and M follows the voxel particles there.
+TEST(Strands, BodiesAreInFileOrderWithVoxelsInM) {
+  const Sketch sk = sketchOf("primitive box wood 0  0 0.5 0  0.1 0.1 0.1\n"
+                             "stroke create sphere 0.01 cord\nsample 1 -0.2 0.7 0\nsample 2 0.2 0.7 0\n"
+                             "primitive sphere jelly 3  0.3 0.5 0  0.05\n"
+                             "stroke create disc 0.1 linen\nsample 4 -0.2 0.3 0\nsample 5 0.2 0.3 0\n"
+                             "primitive sphere water 6  -0.3 0.5 0  0.05\n"
+                             "stroke remove sphere 0.05\nsample 7 0 0.5 0.05\n"  // a dent in the box
+                             "stroke remove sphere 0.02\nsample 8 0.05 0.7 0\n");   // cuts the rope in two
+  ASSERT_EQ(sk.bodies.size(), 6u);
+  EXPECT_EQ(sk.bodyNames,
+            (std::vector<std::string>{"stroke 0", "stroke 1", "stroke 1 #2", "stroke 2", "stroke 3", "stroke 4"}));
+  const BodyLayout layout[] = {BodyLayout::kVoxels,  BodyLayout::kChain,   BodyLayout::kChain,
+                               BodyLayout::kVoxels, BodyLayout::kLattice, BodyLayout::kVoxels};
+  const int op[] = {0, 1, 1, 2, 3, 4};
+  for (std::size_t b = 0; b < 6; ++b) {
+    EXPECT_EQ(sk.bodies[b].layout, layout[b]) << b;
+    EXPECT_EQ(sk.bodies[b].stroke, op[b]);
+    for (std::int32_t i = sk.bodies[b].first; i < sk.bodies[b].first + sk.bodies[b].count; ++i)
+      ASSERT_EQ(sk.particles.stroke[static_cast<std::size_t>(i)], op[b]);
+  }
+  for (int o = 0; o < 5; ++o) EXPECT_EQ(sk.operations[static_cast<std::size_t>(o)].body, o < 2 ? o : o + 1) << o;
+  bool named = false;  // lint names the pieces of the cut rope where they now are
+  for (const auto& w : sk.warnings)
+    named = named || w.find("body 'stroke 1' was cut by a remove or move into 2 bodies: 'stroke 1', 'stroke 1 #2'") !=
+                         std::string::npos;
+  EXPECT_TRUE(named);
+  expectConsistent(sk);
+}
+
 // --- Remove and move by position ------------------------------------------------------
 
 // A rope along x at x0 + k h; a sphere remove of radius r at xc takes exactly the particles
