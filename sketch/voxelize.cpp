@@ -47,10 +47,11 @@ void withinCap(const StrokeFile& file, const std::vector<Material>& materials, c
   try {
     apply();
   } catch (const CapReached&) {
-    throw InputError(file.path, op.line, capField(op, materials),
+    const std::string field = capField(op, materials);
+    throw InputError(file.path, op.line, field,
                      sum.what + " crosses the particle cap of " + std::to_string(kMaxParticles) +
                          " (20 % of the 151^3 grid" + (sum.afterPlay ? ", creates after play included" : "") +
-                         "); use a smaller brush or fewer strokes");
+                         "); use " + (field == "samples" ? "a shorter rope" : "a smaller brush") + " or fewer strokes");
   }
 }
 

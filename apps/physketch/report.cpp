@@ -38,9 +38,13 @@ json sketchJson(const Prepared& p) {
   }
   const std::map<std::string, std::int64_t> perMaterial = particlesPerMaterial(p);
   json bodies = json::array();
-  for (std::size_t b = 0; b < sk.bodies.size(); ++b)
-    bodies.push_back({{"name", sk.bodyNames[b]}, {"particles", sk.bodies[b].count}, {"first", sk.bodies[b].first},
-                      {"layout", toString(sk.bodies[b].layout)}});
+  for (std::size_t b = 0; b < sk.bodies.size(); ++b) {
+    const BodyRange& r = sk.bodies[b];
+    json j = {{"name", sk.bodyNames[b]}, {"particles", r.count}, {"first", r.first}, {"layout", toString(r.layout)}};
+    if (r.layout == BodyLayout::kLattice) j["rows"] = r.rows, j["cols"] = r.cols;
+    if (r.layout != BodyLayout::kVoxels) j["radius_m"] = r.radius;
+    bodies.push_back(j);
+  }
   const std::int64_t live = sketch::liveParticles(sk.particles);
   return {{"particles", live},
           {"cloth_holes", static_cast<std::int64_t>(sk.particles.size()) - live},
