@@ -70,7 +70,8 @@ struct BodyInit {
 //   first + k is linked to first + k + 1 (one particle across).
 // - kLattice: a cloth, the surface the brush swept resampled as a rows x cols lattice at the
 //   particle spacing, row-major: particle first + r * cols + c is lattice node (r, c);
-//   count == rows * cols.
+//   count == rows * cols. A node a remove took away before play stays in the range as a
+//   hole (phase::kRemoved set, never simulated): the solver drops the constraints to it.
 enum class BodyLayout : std::uint8_t { kVoxels, kChain, kLattice };
 const char* toString(BodyLayout layout);
 
@@ -86,6 +87,9 @@ struct BodyRange {
   BodyInit init;
   BodyLayout layout = BodyLayout::kVoxels;
   std::int32_t rows = 0, cols = 0;  // kLattice only: rows * cols == count
+  // kChain, kLattice: the contact and render radius of each particle (m), from the brush (a
+  // rope: half the brush size; a cloth: half the disc's thickness). 0 for kVoxels: h/2.
+  float radius = 0.0f;
 };
 
 // Pose of a rigid body: world = R (rest - restCentre) + centre.

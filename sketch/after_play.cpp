@@ -73,8 +73,40 @@ void strokeAfterPlay(const Operation& op, double play, const InputChecks& checks
   }
 }
 
+// A rope or cloth create after play: one new body per mirror copy, laid out as drawn.
+void CreatesAfterPlay::addStrand(const Operation& op, MaterialKind kind, double play, OperationSummary& sum,
+                                 std::vector<RuntimeOp>& out) {
+  const std::string name = op.body.empty() ? "stroke " + std::to_string(op.id) : op.body;
+  int copy = 0;
+  for (const StrandShape& shape : strandCopies(op, kind, checks_, sum)) {
+    cells_.admit(static_cast<std::int64_t>(shape.nodes.size()));
+    RuntimeOp r;
+    r.kind = RuntimeOp::Kind::kCreate;
+    r.op = op.id;
+    r.line = op.line;
+    r.start = op.startTime() - play;
+    r.end = op.endTime() - play;
+    r.bodyName = copy++ == 0 ? name : name + " #" + std::to_string(copy);
+    r.init = bodyInit(op);
+    r.layout = shape.layout;
+    r.rows = shape.layout == BodyLayout::kLattice ? shape.rows : 0;  // as BodyRange: kLattice only
+    r.cols = shape.layout == BodyLayout::kLattice ? shape.cols : 0;
+    r.radius = shape.radius;
+    r.particles.reserve(shape.nodes.size());
+    for (const Vec3& q : shape.nodes) {
+      r.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op.id,
+                       sum.material);
+      r.cells.push_back(checks_.mapping().discretize(  // of the position as stored
+          Vec3(r.particles.x.back(), r.particles.y.back(), r.particles.z.back())));
+    }
+    out.push_back(std::move(r));
+  }
+  sum.remaining = sum.created;
+}
+
 void CreatesAfterPlay::add(const Operation& op, double play, OperationSummary& sum, std::vector<RuntimeOp>& out) {
   cells_.begin(sum);
+  if (const std::optional<MaterialKind> kind = checks_.strandKind(op)) return addStrand(op, *kind, play, sum, out);
   const std::size_t from = cells_.cells().size();
   createIn(createFootprint(op, footprints_, checks_, sum), cells_);
   sum.remaining = sum.created;

@@ -2,6 +2,7 @@
 // RuntimeOps, which the app applies to the solver at their times (docs/formats.md).
 #pragma once
 
+#include <optional>
 #include <vector>
 
 #include "sketch/operations.h"
@@ -17,7 +18,9 @@ void strokeAfterPlay(const Operation& op, double play, const InputChecks& checks
 // Creates after play, voxelized in file order into a grid of their own (the sketch's
 // bodies have moved away from their voxels by then), so they never overlap each
 // other; each becomes a new body (one RuntimeOp; none when it creates nothing).
-// Their particles count towards the cap with the sketch's `sketchParticles`.
+// A rope or cloth becomes one body per mirror copy, laid out as before play
+// (sketch/strands.h), and takes no cells of that grid.
+// Their particles count towards the cap with the sketch's `sketchParticles` (live ones).
 class CreatesAfterPlay {
  public:
   CreatesAfterPlay(Footprints& footprints, const InputChecks& checks, std::int64_t sketchParticles)
@@ -26,6 +29,9 @@ class CreatesAfterPlay {
   void add(const Operation& op, double play, OperationSummary& sum, std::vector<RuntimeOp>& out);
 
  private:
+  void addStrand(const Operation& op, MaterialKind kind, double play, OperationSummary& sum,
+                 std::vector<RuntimeOp>& out);
+
   Footprints& footprints_;
   const InputChecks& checks_;
   NewBodyCells cells_;

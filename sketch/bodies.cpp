@@ -7,6 +7,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
+#include "core/error.h"
 #include "sketch/brush.h"
 
 namespace physketch::sketch {
@@ -308,6 +309,141 @@ std::vector<CutBody> splitCutBodies(const SketchCells& cells, const BodyPlan& pl
   sk.bodies = std::move(bodies);
   sk.bodyNames = std::move(names);
   return cuts;
+}
+
+}  // namespace physketch::sketch
+
+namespace physketch::sketch {
+
+void checkBodyKinds(const StrokeFile& file, const std::vector<Material>& materials) {
+  const double play = file.playTime();
+  struct FirstPart {
+    int line;
+    const Material* material;
+  };
+  std::map<std::string, FirstPart> first;
+  for (int id : file.active) {
+    const Operation& op = file.operations[static_cast<std::size_t>(id)];
+    if (!createsParticles(op) || op.body.empty() || op.startTime() > play) continue;
+    const int m = findMaterial(materials, op.material);
+    if (m < 0) continue;
+    const Material& mat = materials[static_cast<std::size_t>(m)];
+    const auto [it, fresh] = first.emplace(op.body, FirstPart{op.line, &mat});
+    if (fresh) continue;
+    const Material& other = *it->second.material;
+    const std::string here = "material '" + mat.name + "' is kind " + toString(mat.kind);
+    const std::string there = "its part at line " + std::to_string(it->second.line) + " is kind " +
+                              toString(other.kind) + " (material '" + other.name + "')";
+    auto strand = [](const Material& x) { return layoutOf(x.kind) != BodyLayout::kVoxels; };
+    if (strand(mat) || strand(other))
+      throw InputError(file.path, op.line, "body",
+                       "body '" + op.body + "': " + here + " and " + there +
+                           ": a rope or a cloth is a body of its own (one chain, one lattice); drop body= or rename it");
+    if (mat.kind != other.kind)
+      throw InputError(file.path, op.line, "body",
+                       "body '" + op.body + "' mixes kinds: " + here + " and " + there +
+                           "; a named body is of one kind (rigid parts may mix rigid materials)");
+  }
+}
+
+std::vector<CutBody> appendStrandBodies(const Strands& strands, const BodyPlan& plan, const StrokeFile& file,
+                                        Sketch& sk) {
+  std::vector<CutBody> cuts;
+  const std::vector<Strands::Piece>& pieces = strands.pieces();
+  ParticleArrays& out = sk.particles;
+  for (std::size_t k = 0; k < pieces.size();) {
+    // The pieces of one operation (its drawn shape and mirror copy) are consecutive.
+    const int op = pieces[k].op;
+    OperationSummary& sum = sk.operations[static_cast<std::size_t>(op)];
+    const std::string& name = plan.names[static_cast<std::size_t>(plan.bodyOfOp[static_cast<std::size_t>(op)])];
+    const int firstBody = static_cast<int>(sk.bodies.size());
+    bool cut = false;
+    for (; k < pieces.size() && pieces[k].op == op; ++k) {
+      const Strands::Piece& piece = pieces[k];
+      const std::vector<StrandBody> made = bodiesOf(strands, piece);
+      cut = cut || made.size() > 1;
+      for (const StrandBody& b : made) {
+        BodyRange r;
+        r.first = static_cast<std::int32_t>(out.size());
+        r.count = b.rows * b.cols;
+        r.stroke = op;
+        r.init = plan.init[static_cast<std::size_t>(plan.bodyOfOp[static_cast<std::size_t>(op)])];
+        r.layout = b.layout;
+        r.rows = b.layout == BodyLayout::kLattice ? b.rows : 0;
+        r.cols = b.layout == BodyLayout::kLattice ? b.cols : 0;
+        r.radius = piece.radius;
+        for (std::int32_t row = 0; row < b.rows; ++row)
+          for (std::int32_t col = 0; col < b.cols; ++col) {
+            const std::int32_t node = b.layout == BodyLayout::kLattice
+                                          ? piece.first + (b.row0 + row) * piece.cols + b.col0 + col
+                                          : b.firstNode + row;
+            const Vec3& q = strands.positions()[static_cast<std::size_t>(node)];
+            out.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op,
+                     piece.material);
+            // The cell of the position as stored (float), which is what the solver and the runtime see.
+            sk.cells.push_back(sk.mapping.discretize(Vec3(out.x.back(), out.y.back(), out.z.back())));
+            if (strands.alive(node)) ++sum.remaining;
+            else out.phase.back() |= phase::kRemoved;  // a hole in a cut cloth
+          }
+        const int n = static_cast<int>(sk.bodies.size()) - firstBody;
+        sk.bodies.push_back(r);
+        sk.bodyNames.push_back(n == 0 ? name : name + " #" + std::to_string(n + 1));
+      }
+    }
+    const int made = static_cast<int>(sk.bodies.size()) - firstBody;
+    sum.body = made > 0 ? firstBody : -1;
+    if (cut) cuts.push_back({firstBody, made, file.operations[static_cast<std::size_t>(op)].line});
+  }
+  return cuts;
+}
+
+namespace {
+
+// out[j] = in[from[j]].
+template <class T>
+void gather(std::vector<T>& v, const std::vector<std::int32_t>& from) {
+  std::vector<T> out(from.size());
+  for (std::size_t j = 0; j < from.size(); ++j) out[j] = v[static_cast<std::size_t>(from[j])];
+  v = std::move(out);
+}
+
+}  // namespace
+
+void orderBodiesAsPlanned(const BodyPlan& plan, std::vector<CutBody>& cuts, Sketch& sk) {
+  const std::size_t n = sk.bodies.size();
+  // A body's planned body: that of the operation of its first particle (a cut piece's too).
+  auto planned = [&](std::size_t b) { return plan.bodyOfOp[static_cast<std::size_t>(sk.bodies[b].stroke)]; };
+  std::vector<std::size_t> order(n);
+  for (std::size_t b = 0; b < n; ++b) order[b] = b;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return planned(a) < planned(b); });
+  bool same = true;
+  for (std::size_t b = 0; b < n; ++b) same = same && order[b] == b;
+  if (same) return;
+  std::vector<std::int32_t> from;  // per new particle index: its old index
+  from.reserve(sk.particles.size());
+  std::vector<BodyRange> bodies;
+  std::vector<std::string> names;
+  std::vector<int> newIndex(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    BodyRange r = sk.bodies[order[k]];
+    newIndex[order[k]] = static_cast<int>(k);
+    const std::int32_t first = static_cast<std::int32_t>(from.size());
+    for (std::int32_t i = r.first; i < r.first + r.count; ++i) from.push_back(i);
+    r.first = first;
+    bodies.push_back(r);
+    names.push_back(sk.bodyNames[order[k]]);
+  }
+  ParticleArrays& p = sk.particles;
+  gather(p.x, from), gather(p.y, from), gather(p.z, from), gather(p.vx, from), gather(p.vy, from), gather(p.vz, from);
+  gather(p.mass, from), gather(p.phase, from), gather(p.stroke, from), gather(p.material, from), gather(sk.cells, from);
+  sk.bodies = std::move(bodies);
+  sk.bodyNames = std::move(names);
+  for (const BodyRange& r : sk.bodies)  // M with the new indices of the voxel particles
+    if (r.layout == BodyLayout::kVoxels)
+      for (std::int32_t i = r.first; i < r.first + r.count; ++i) sk.grid.set(sk.cells[static_cast<std::size_t>(i)], i);
+  for (auto& sum : sk.operations)
+    if (sum.body >= 0) sum.body = newIndex[static_cast<std::size_t>(sum.body)];
+  for (CutBody& cut : cuts) cut.firstBody = newIndex[static_cast<std::size_t>(cut.firstBody)];
 }
 
 }  // namespace physketch::sketch

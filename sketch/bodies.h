@@ -6,7 +6,9 @@
 #include <string>
 #include <vector>
 
+#include "core/material.h"
 #include "sketch/sketch_cells.h"
+#include "sketch/strands.h"
 #include "sketch/strokes.h"
 #include "sketch/voxelize.h"
 
@@ -26,6 +28,14 @@ struct BodyPlan {
 // How a body starts, from the create options of an operation that made it.
 BodyInit bodyInit(const Operation& op);
 BodyPlan planBodies(const StrokeFile& file);
+
+// The parts of a named body (body=NAME, operations in effect before play) are of one
+// material kind: rigid parts may mix rigid materials, but a rigid part cannot join a
+// soft, fluid, rope or cloth one (nor those each other), and a rope or a cloth is a body
+// of its own (one chain, one lattice) that no other part can join. Throws InputError
+// naming the line of the first part that breaks this and the field 'body'. Operations with
+// an unknown material are left to the voxelizer's check.
+void checkBodyKinds(const StrokeFile& file, const std::vector<Material>& materials);
 
 // Compacts away removed particles and groups the rest by planned body (in body
 // order; in creation order within a body), so every body is a contiguous range;
@@ -54,5 +64,21 @@ struct CutBody {
 // `planned` is what compactIntoBodies returned.
 std::vector<CutBody> splitCutBodies(const SketchCells& cells, const BodyPlan& plan, const std::vector<int>& planned,
                                     const StrokeFile& file, Sketch& sk);
+
+// Appends the bodies the ropes and cloths left (sketch/strands.h: bodiesOf) after the voxel
+// bodies, in file order (orderBodiesAsPlanned then moves them to their places): their particles to sk.particles (holes of a cut cloth with
+// phase::kRemoved) and sk.cells (the cell each position falls in; not in M), a BodyRange
+// each with its layout and radius, and a name: an operation's first body has the planned
+// name, its further ones (the mirror copy, the pieces of a cut rope) "NAME #2", ...
+// Sets each such operation's `remaining` and `body`. Returns the operations whose rope a
+// remove cut into more chains than it was drawn as, for lint.
+std::vector<CutBody> appendStrandBodies(const Strands& strands, const BodyPlan& plan, const StrokeFile& file,
+                                        Sketch& sk);
+
+// Puts the bodies in the order of their planned bodies (stably: a cut body's pieces stay
+// together, in their order), so rope and cloth bodies, appended last, take their place in
+// file order; moves the particles with them and keeps M, the operations' bodies and `cuts`
+// in step. Does nothing (no copy) when they are in order already.
+void orderBodiesAsPlanned(const BodyPlan& plan, std::vector<CutBody>& cuts, Sketch& sk);
 
 }  // namespace physketch::sketch

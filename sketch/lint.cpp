@@ -50,8 +50,8 @@ void lint(const StrokeFile& file, const std::vector<Material>& materials, const 
   // A named body whose strokes do not touch is one rigid body held together by nothing.
   for (const std::string& name : namedBefore) {
     for (std::size_t b = 0; b < sk.bodies.size(); ++b) {
-      if (sk.bodyNames[b] != name) continue;
       const BodyRange& r = sk.bodies[b];
+      if (sk.bodyNames[b] != name || r.layout != BodyLayout::kVoxels) continue;  // a rope or cloth is one piece as drawn
       const std::vector<int> comp = connectedComponents26(
           std::vector<Vec3i>(sk.cells.begin() + r.first, sk.cells.begin() + r.first + r.count));
       const int parts = *std::max_element(comp.begin(), comp.end()) + 1;

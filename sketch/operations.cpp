@@ -19,7 +19,57 @@ const char* kAxisNames[] = {"x", "y", "z"};
 // translated exactly; the mirror copy moves mirrored. Particles they land on are
 // replaced. Carrying one out of the workspace names the last sample's line and
 // the axis it leaves by.
-void applyMove(const Operation& op, const InputChecks& checks, SketchCells& cells, OperationSummary& sum) {
+// Move (before play), ropes and cloth: the brush at the first sample grabs every rope
+// (every chain a remove left of one) and every cloth with a live node inside it (the mirror
+// copy: inside its mirror image) and carries the whole of it by the same whole-voxel shift as
+// the voxels (mirrored for the mirror copy), so a rope drawn on a body and moved with it
+// stays where it was drawn on it.
+void moveStrands(const Operation& op, const Solid& brush, const Vec3i& shift, const InputChecks& checks,
+                 Strands& strands, SketchCells& cells) {
+  std::vector<std::pair<Strands::Span, Vec3>> grabbed;  // both copies grab before either moves, like the voxels
+  for (int pass = 0; pass < (op.mirror.axis >= 0 ? 2 : 1); ++pass) {
+    Vec3i sh = shift;
+    if (pass == 1) sh[op.mirror.axis] = -sh[op.mirror.axis];
+    const Vec3 offset = sh.cast<double>() * checks.mapping().voxelSize();
+    for (const Strands::Span& span :
+         strands.spansWhere([&](const Vec3& p) { return brush.contains(pass == 0 ? p : mirrorPoint(p, op.mirror)); }))
+      if (std::none_of(grabbed.begin(), grabbed.end(), [&](const auto& g) { return g.first == span; }))
+        grabbed.emplace_back(span, offset);
+  }
+  for (const auto& [span, offset] : grabbed)
+    for (std::int32_t i = span.first; i < span.end; ++i)
+      if (strands.alive(i))
+        checks.inside(strands.positions()[static_cast<std::size_t>(i)] + offset, op.stroke.samples.back().line,
+                      "move carries a rope or cloth node");
+  for (const auto& [span, offset] : grabbed) {
+    strands.translate(span, offset);
+    cells.carried(strands.aliveIn(span));
+  }
+}
+
+// Alg. 2 by position for ropes and cloth: every live node inside the brush at any stamp
+// of the stroke (or inside its mirror image) is removed.
+std::int64_t removeStrands(const Operation& op, double h, Strands& strands) {
+  std::vector<Solid> solids;
+  Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);  // around every stamp: a cheap first test
+  for (const Stamp& st : stampsOf(op.stroke, h)) {
+    solids.push_back(brushSolid(op.stroke, st.position, st.pressure, st.direction, h));
+    const double r = solids.back().boundingRadius();
+    lo = lo.cwiseMin(st.position - Vec3::Constant(r));
+    hi = hi.cwiseMax(st.position + Vec3::Constant(r));
+  }
+  auto under = [&](const Vec3& q) {
+    if ((q.array() < lo.array()).any() || (q.array() > hi.array()).any()) return false;
+    for (const Solid& s : solids)
+      if ((q - s.centre).squaredNorm() <= s.boundingRadius() * s.boundingRadius() && s.contains(q)) return true;
+    return false;
+  };
+  return strands.removeWhere(
+      [&](const Vec3& p) { return under(p) || (op.mirror.axis >= 0 && under(mirrorPoint(p, op.mirror))); });
+}
+
+void applyMove(const Operation& op, const InputChecks& checks, SketchCells& cells, Strands& strands,
+               OperationSummary& sum) {
   const GridMapping& m = checks.mapping();
   const double h = m.voxelSize();
   const Stroke& s = op.stroke;
@@ -32,7 +82,8 @@ void applyMove(const Operation& op, const InputChecks& checks, SketchCells& cell
   Vec3 firstDir = s.axis;
   if (s.samples.size() > 1 && travel.norm() > 0) firstDir = travel.normalized();
   std::vector<Vec3i> under;
-  rasterize(brushSolid(s, first.position, first.pressure, firstDir, h), m, under);
+  const Solid brush = brushSolid(s, first.position, first.pressure, firstDir, h);
+  rasterize(brush, m, under);
   std::vector<std::pair<std::int32_t, Vec3i>> grabbed;
   std::unordered_set<std::int32_t> seen;
   const int copies = op.mirror.axis >= 0 ? 2 : 1;
@@ -60,6 +111,7 @@ void applyMove(const Operation& op, const InputChecks& checks, SketchCells& cell
     }
   }
   sum.stamps += copies;
+  if (!strands.empty()) moveStrands(op, brush, shift, checks, strands, cells);
   cells.relocate(grabbed);
 }
 
@@ -75,6 +127,15 @@ std::int16_t InputChecks::material(const Operation& op) const {
                          (known.empty() ? std::string("none") : known) + ")");
   }
   return static_cast<std::int16_t>(mat);
+}
+
+std::optional<MaterialKind> InputChecks::strandKind(const Operation& op) const {
+  if (!createsParticles(op)) return std::nullopt;
+  const int mat = findMaterial(materials_, op.material);
+  if (mat < 0) return std::nullopt;
+  const MaterialKind kind = materials_[static_cast<std::size_t>(mat)].kind;
+  if (layoutOf(kind) == BodyLayout::kVoxels) return std::nullopt;
+  return kind;
 }
 
 void InputChecks::inside(const Vec3& p, int line, const char* what) const {
@@ -168,20 +229,42 @@ Footprint createFootprint(const Operation& op, Footprints& footprints, const Inp
   throw RuntimeError("createFootprint: unknown operation kind");
 }
 
+std::vector<StrandShape> strandCopies(const Operation& op, MaterialKind kind, const InputChecks& checks,
+                                      OperationSummary& sum) {
+  if (op.kind == Operation::Kind::kStroke) checks.samplesInside(op.stroke);
+  sum.material = checks.material(op);
+  std::vector<StrandShape> out{strandOf(op, kind, checks.mapping().voxelSize(), checks.path())};
+  if (op.mirror.axis >= 0) out.push_back(mirrored(out.front(), op.mirror));
+  const char* what = kind == MaterialKind::kRope ? "rope particle" : "cloth node";
+  for (const StrandShape& shape : out) {
+    for (std::size_t i = 0; i < shape.nodes.size(); ++i) checks.inside(shape.nodes[i], shape.lines[i], what);
+    sum.stamps += static_cast<std::int64_t>(shape.nodes.size());
+  }
+  return out;
+}
+
 void applyBeforePlay(const Operation& op, Footprints& footprints, const InputChecks& checks, SketchCells& cells,
-                     OperationSummary& sum) {
+                     Strands& strands, OperationSummary& sum) {
   cells.begin(sum);
+  if (const std::optional<MaterialKind> kind = checks.strandKind(op)) {
+    for (const StrandShape& shape : strandCopies(op, *kind, checks, sum)) {
+      cells.admit(static_cast<std::int64_t>(shape.nodes.size()));
+      strands.add(op.id, sum.material, shape);
+    }
+    return;
+  }
   if (createsParticles(op)) return createIn(createFootprint(op, footprints, checks, sum), cells);
   checks.samplesInside(op.stroke);
   switch (op.stroke.op) {  // no default: a new stroke operation must be handled here (-Wswitch)
     case StrokeOp::kCreate: return;  // handled above
     case StrokeOp::kTool: throw RuntimeError("applyBeforePlay: tool strokes are the solver's (see replay)");
-    case StrokeOp::kMove: return applyMove(op, checks, cells, sum);
+    case StrokeOp::kMove: return applyMove(op, checks, cells, strands, sum);
     case StrokeOp::kRemove: {
-      // Alg. 2: free every cell under the brush at every stamp.
+      // Alg. 2: free every cell under the brush at every stamp; ropes and cloth by position.
       const Footprint fp = footprints.stroke(op);
       sum.stamps += fp.stamps();
       fp.forEachCell([&](const Vec3i& c) { cells.drop(c); });
+      if (!strands.empty()) cells.release(removeStrands(op, checks.mapping().voxelSize(), strands));
       return;
     }
   }

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "sketch/mesh_stamp.h"
 #include "sketch/rasterize.h"
 #include "sketch/sketch_cells.h"
+#include "sketch/strands.h"
 #include "sketch/strokes.h"
 
 namespace physketch::sketch {
@@ -26,6 +28,9 @@ class InputChecks {
       : path_(std::move(strokeFile)), materials_(materials), mapping_(mapping) {}
   // The index of the operation's material in the scene (field 'material').
   std::int16_t material(const Operation& op) const;
+  // The kind of a create's material when it makes a rope or a cloth (sketch/strands.h);
+  // nothing for a voxel kind or an unknown material (material() reports that).
+  std::optional<MaterialKind> strandKind(const Operation& op) const;
   // A point that must lie in the workspace (field: the axis it leaves by, 'x', 'y' or 'z').
   void inside(const Vec3& p, int line, const char* what) const;
   // Every sample of a stroke.
@@ -115,8 +120,15 @@ void createIn(const Footprint& fp, Store& store) {
 Footprint createFootprint(const Operation& op, Footprints& footprints, const InputChecks& checks,
                           OperationSummary& sum);
 
-// Applies an operation that starts before play to the sketch.
+// Checks a rope or cloth create's input and makes its shapes: the drawn one, then its
+// mirror copy; every node must lie in the workspace (an error names its sample's line and
+// the axis). Records its material and nodes (as stamps) in `sum`.
+std::vector<StrandShape> strandCopies(const Operation& op, MaterialKind kind, const InputChecks& checks,
+                                      OperationSummary& sum);
+
+// Applies an operation that starts before play to the sketch: voxels go to `cells`, ropes
+// and cloth to `strands` (counted against the cap in `cells`); removes and moves act on both.
 void applyBeforePlay(const Operation& op, Footprints& footprints, const InputChecks& checks, SketchCells& cells,
-                     OperationSummary& sum);
+                     Strands& strands, OperationSummary& sum);
 
 }  // namespace physketch::sketch

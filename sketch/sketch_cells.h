@@ -41,6 +41,19 @@ class CellLog {
     const std::size_t want = cell_.size() + static_cast<std::size_t>(std::min<std::int64_t>(more, kMaxParticles));
     if (want > cell_.capacity()) cell_.reserve(std::max(want, 2 * cell_.capacity()));
   }
+  // Particles kept outside the cells (ropes and cloth, sketch/strands.h): `n` more count
+  // towards the cap and into the current operation's summary.
+  void admit(std::int64_t n) {
+    if (live_ + n > kMaxParticles) throw CapReached{};
+    live_ += n;
+    cur_->created += static_cast<std::int32_t>(n);
+  }
+  // ... and `n` of them removed, or carried by a move.
+  void release(std::int64_t n) {
+    live_ -= n;
+    cur_->removed += static_cast<std::int32_t>(n);
+  }
+  void carried(std::int64_t n) { cur_->moved += static_cast<std::int32_t>(n); }
   // Per particle: the linear index of its cell; ~index (< 0) once removed.
   const std::vector<std::int32_t>& cells() const { return cell_; }
   const std::vector<OpRun>& runs() const { return runs_; }

@@ -18,10 +18,13 @@
 namespace physketch::sketch {
 namespace {
 
-// The field to name when an operation crosses the particle cap: what makes it big.
-std::string capField(const Operation& op) {
+// The field to name when an operation crosses the particle cap: what makes it big (a
+// rope: its path, the samples).
+std::string capField(const Operation& op, const std::vector<Material>& materials) {
+  const int m = findMaterial(materials, op.material);
+  const bool rope = m >= 0 && materials[static_cast<std::size_t>(m)].kind == MaterialKind::kRope;
   switch (op.kind) {
-    case Operation::Kind::kStroke: return "size";
+    case Operation::Kind::kStroke: return rope ? "samples" : "size";
     case Operation::Kind::kStamp: return "scale";
     case Operation::Kind::kPrimitive: break;
   }
@@ -39,14 +42,16 @@ std::string capField(const Operation& op) {
 // Runs `apply` (which creates particles for `op`), turning CapReached into an
 // InputError naming the operation's line and field.
 template <class Apply>
-void withinCap(const StrokeFile& file, const Operation& op, const OperationSummary& sum, Apply&& apply) {
+void withinCap(const StrokeFile& file, const std::vector<Material>& materials, const Operation& op,
+               const OperationSummary& sum, Apply&& apply) {
   try {
     apply();
   } catch (const CapReached&) {
-    throw InputError(file.path, op.line, capField(op),
+    const std::string field = capField(op, materials);
+    throw InputError(file.path, op.line, field,
                      sum.what + " crosses the particle cap of " + std::to_string(kMaxParticles) +
                          " (20 % of the 151^3 grid" + (sum.afterPlay ? ", creates after play included" : "") +
-                         "); use a smaller brush or fewer strokes");
+                         "); use " + (field == "samples" ? "a shorter rope" : "a smaller brush") + " or fewer strokes");
   }
 }
 
@@ -72,31 +77,40 @@ Sketch replay(const StrokeFile& file, const GridMapping& mapping, const std::vec
     sum.what = describe(op);
     sum.active = isActive[static_cast<std::size_t>(op.id)];
     sum.afterPlay = sum.active && op.startTime() > play;
-    if (sum.active) sum.minFeature = smallestFeature(op, mapping.voxelSize());
     sk.operations.push_back(sum);
   }
   const InputChecks checks(file.path, materials, mapping);
+  for (const Operation& op : file.operations)  // ropes and cloth are one particle thick by design: no thin warning
+    if (sk.operations[static_cast<std::size_t>(op.id)].active && !checks.strandKind(op))
+      sk.operations[static_cast<std::size_t>(op.id)].minFeature = smallestFeature(op, mapping.voxelSize());
+  checkBodyKinds(file, materials);
   Footprints footprints(mapping, threads);
   SketchCells cells(sk.grid);
+  Strands strands;
   std::vector<int> createsLater;
   for (int id : file.active) {
     const Operation& op = file.operations[static_cast<std::size_t>(id)];
     OperationSummary& sum = sk.operations[static_cast<std::size_t>(id)];
     // Tool strokes push material in the solver (docs/formats.md); the sketch never sees them.
     if (op.kind == Operation::Kind::kStroke && op.stroke.op == StrokeOp::kTool) continue;
-    if (!sum.afterPlay) withinCap(file, op, sum, [&] { applyBeforePlay(op, footprints, checks, cells, sum); });
+    if (!sum.afterPlay)
+      withinCap(file, materials, op, sum, [&] { applyBeforePlay(op, footprints, checks, cells, strands, sum); });
     else if (createsParticles(op)) createsLater.push_back(id);
     else strokeAfterPlay(op, play, checks, sum, sk.runtime);
   }
   const BodyPlan plan = planBodies(file);
   const std::vector<int> planned = compactIntoBodies(cells, plan, sk);
-  const std::vector<CutBody> cuts = splitCutBodies(cells, plan, planned, file, sk);
+  std::vector<CutBody> cuts = splitCutBodies(cells, plan, planned, file, sk);
+  if (!strands.empty()) {
+    for (const CutBody& cut : appendStrandBodies(strands, plan, file, sk)) cuts.push_back(cut);
+    orderBodiesAsPlanned(plan, cuts, sk);
+  }
   if (!createsLater.empty()) {
-    CreatesAfterPlay later(footprints, checks, static_cast<std::int64_t>(sk.particles.size()));
+    CreatesAfterPlay later(footprints, checks, liveParticles(sk.particles));
     for (int id : createsLater) {
       const Operation& op = file.operations[static_cast<std::size_t>(id)];
       OperationSummary& sum = sk.operations[static_cast<std::size_t>(id)];
-      withinCap(file, op, sum, [&] { later.add(op, play, sum, sk.runtime); });
+      withinCap(file, materials, op, sum, [&] { later.add(op, play, sum, sk.runtime); });
     }
   }
   std::stable_sort(sk.runtime.begin(), sk.runtime.end(),
@@ -106,6 +120,12 @@ Sketch replay(const StrokeFile& file, const GridMapping& mapping, const std::vec
 }
 
 }  // namespace
+
+std::int64_t liveParticles(const ParticleArrays& particles) {
+  std::int64_t n = 0;
+  for (std::uint32_t ph : particles.phase) n += !phase::has(ph, phase::kRemoved);
+  return n;
+}
 
 Sketch voxelize(const StrokeFile& file, const GridMapping& mapping, const std::vector<Material>& materials,
                 const VoxelizeOptions& options) {

@@ -42,10 +42,14 @@ struct RuntimeOp {
   int line = 0;
   double start = 0.0, end = 0.0;
   // kCreate: a new body, static from `start` until `end` (while it is being drawn), then dynamic.
-  ParticleArrays particles;    // at voxel centres, grouped as one body
-  std::vector<Vec3i> cells;
+  // A rope or cloth create makes one kCreate per mirror copy (a chain or lattice each).
+  ParticleArrays particles;    // at voxel centres (kVoxels), or a rope's or cloth's nodes in layout order
+  std::vector<Vec3i> cells;    // per particle: its voxel, or the cell a node's position falls in
   std::string bodyName;
   BodyInit init;               // vel=, spin=, fixed of the create
+  BodyLayout layout = BodyLayout::kVoxels;  // as BodyRange: how the particles hang together
+  std::int32_t rows = 0, cols = 0;          // kLattice
+  float radius = 0.0f;                      // kChain, kLattice: contact and render radius (m)
   // kRemove: at each time, the particles whose current cell is in the set are removed.
   std::vector<std::pair<double, std::vector<Vec3i>>> removals;
   // kMove: at `start` the bodies of the particles whose current cell is in `grab` become
@@ -54,11 +58,18 @@ struct RuntimeOp {
   std::vector<std::pair<double, Vec3>> path;
 };
 
+// Every particle is in a body range; bodies are in the order of their first operation (the
+// pieces of a cut body together), whatever their layout.
+// M holds exactly the voxel particles (one per voxel, at its centre). Rope and cloth
+// particles are not in M: they are not voxel centres and several may share a cell; a voxel
+// create may fill a cell a rope runs through (docs/formats.md, "Ropes and cloth").
 struct Sketch {
   GridMapping mapping;
-  OccupancyGrid grid;                 // M (final, particle indices after compaction)
-  ParticleArrays particles;           // final particles at voxel centres (Eq. 5), at rest, grouped by body
-  std::vector<Vec3i> cells;           // grid cell of each particle
+  OccupancyGrid grid;                 // M (final, particle indices after compaction): the voxel particles
+  ParticleArrays particles;           // final particles, at rest, grouped by body: voxel centres (Eq. 5) for
+                                      // kVoxels bodies, a rope's or cloth's nodes in layout order (holes of a cut
+                                      // cloth have phase::kRemoved)
+  std::vector<Vec3i> cells;           // per particle: its voxel, or (rope, cloth) the cell its position falls in
   std::vector<OperationSummary> operations;  // one per operation in the file (undone ones too)
   std::vector<BodyRange> bodies;      // contiguous particle ranges; material = the first particle's
   std::vector<std::string> bodyNames; // "chair" for body=chair, else "stroke N"; "chair #2", "stroke N #2", ... for
@@ -68,6 +79,9 @@ struct Sketch {
 
   explicit Sketch(const GridMapping& m) : mapping(m) {}
 };
+
+// Particles that are in the simulation: all but the holes of cut cloths (phase::kRemoved).
+std::int64_t liveParticles(const ParticleArrays& particles);
 
 struct VoxelizeOptions {
   // Threads for the parallel parts (a long stroke is swept in this many parts, the
@@ -82,7 +96,8 @@ struct VoxelizeOptions {
 // grid of their own, in file order, so they never overlap each other). A body that
 // a remove or a move disconnects becomes one body per piece (sketch/bodies.h).
 // Throws InputError (stroke file:line:field) for an unknown material, a sample
-// outside the workspace, a move that carries particles out of the workspace,
+// outside the workspace, a rope or cloth that cannot be made (sketch/strands.h), a named
+// body whose parts mix kinds (sketch/bodies.h), a move that carries particles out of the workspace,
 // an unreadable stamp mesh, or a sketch that crosses the particle cap (naming
 // the line and field of the operation that crossed it).
 // Mesh stamps are voxelized with StampMesh (CGAL, sketch/mesh_stamp.cpp).

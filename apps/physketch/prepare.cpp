@@ -24,7 +24,24 @@ SolverSupport supportOf(SolverKind solver) {
   return s;
 }
 
-Prepared prepare(const std::string& scenePath, int threads, const std::function<void(SceneDesc&)>& adjust) {
+namespace {
+
+// Everything a solver simulates once complete: every kind solverModel gives it, every feature.
+SolverSupport eventualSupportOf(SolverKind solver) {
+  SolverSupport s;
+  s.solver = solver;
+  for (int k = 0; k < kMaterialKindCount; ++k) {
+    const SolverModel model = solverModel(static_cast<MaterialKind>(k), solver);
+    if (model.simulated) s.kinds.push_back(model.runsAs);
+  }
+  s.meshColliders = s.toolStrokes = s.initialMotion = s.fixedBodies = true;
+  return s;
+}
+
+}  // namespace
+
+Prepared prepare(const std::string& scenePath, int threads, bool forLint,
+                 const std::function<void(SceneDesc&)>& adjust) {
   Prepared p;
   p.scene = loadScene(scenePath);
   if (adjust) adjust(p.scene);
@@ -32,7 +49,14 @@ Prepared prepare(const std::string& scenePath, int threads, const std::function<
   if (!std::ifstream(p.scene.strokesPath))
     throw InputError(p.scene.path, p.scene.strokesLine, "path", "cannot open stroke file '" + p.scene.strokesPath + "'");
   p.strokes = sketch::loadStrokes(p.scene.strokesPath);
-  checkSupport(p.scene, sketch::usesOf(p.strokes), supportOf(p.scene.solver));
+  const SketchUses uses = sketch::usesOf(p.strokes);
+  try {
+    checkSupport(p.scene, uses, supportOf(p.scene.solver));
+  } catch (const InputError& e) {
+    if (!forLint) throw;
+    checkSupport(p.scene, uses, eventualSupportOf(p.scene.solver));  // never simulated: still an error
+    p.notYet = e.what();
+  }
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
   p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials, {threads}));
   return p;

@@ -9,7 +9,18 @@ using nlohmann::json;
 std::map<std::string, std::int64_t> particlesPerMaterial(const Prepared& p) {
   std::map<std::string, std::int64_t> n;
   for (const auto& m : p.scene.materials) n[m.name] = 0;
-  for (auto m : p.sketch->particles.material) ++n[p.scene.materials[static_cast<std::size_t>(m)].name];
+  const ParticleArrays& pa = p.sketch->particles;
+  for (std::size_t i = 0; i < pa.size(); ++i)
+    if (!phase::has(pa.phase[i], phase::kRemoved))  // not the holes of a cut cloth
+      ++n[p.scene.materials[static_cast<std::size_t>(pa.material[i])].name];
+  return n;
+}
+
+std::map<std::string, std::int64_t> particlesPerKind(const Prepared& p) {
+  std::map<std::string, std::int64_t> n;
+  for (const auto& m : p.scene.materials) n[toString(m.kind)] += 0;
+  for (const auto& [name, count] : particlesPerMaterial(p))
+    n[toString(p.scene.materials[static_cast<std::size_t>(findMaterial(p.scene.materials, name))].kind)] += count;
   return n;
 }
 
@@ -27,13 +38,21 @@ json sketchJson(const Prepared& p) {
   }
   const std::map<std::string, std::int64_t> perMaterial = particlesPerMaterial(p);
   json bodies = json::array();
-  for (std::size_t b = 0; b < sk.bodies.size(); ++b)
-    bodies.push_back({{"name", sk.bodyNames[b]}, {"particles", sk.bodies[b].count}, {"first", sk.bodies[b].first}});
-  return {{"particles", sk.particles.size()},
+  for (std::size_t b = 0; b < sk.bodies.size(); ++b) {
+    const BodyRange& r = sk.bodies[b];
+    json j = {{"name", sk.bodyNames[b]}, {"particles", r.count}, {"first", r.first}, {"layout", toString(r.layout)}};
+    if (r.layout == BodyLayout::kLattice) j["rows"] = r.rows, j["cols"] = r.cols;
+    if (r.layout != BodyLayout::kVoxels) j["radius_m"] = r.radius;
+    bodies.push_back(j);
+  }
+  const std::int64_t live = sketch::liveParticles(sk.particles);
+  return {{"particles", live},
+          {"cloth_holes", static_cast<std::int64_t>(sk.particles.size()) - live},
           {"cap", sketch::kMaxParticles},
           {"play_time_s", p.strokes.playTime()},
           {"per_operation", ops},
           {"per_material", perMaterial},
+          {"per_kind", particlesPerKind(p)},
           {"bodies", bodies},
           {"warnings", sk.warnings}};
 }

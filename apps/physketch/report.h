@@ -15,8 +15,11 @@
 
 namespace physketch::app {
 
-// Particles per material name (every material of the scene, 0 if unused).
+// Particles per material name (every material of the scene, 0 if unused), holes of cut
+// cloths left out.
 std::map<std::string, std::int64_t> particlesPerMaterial(const Prepared& p);
+// The same per material kind (every kind the scene's materials have).
+std::map<std::string, std::int64_t> particlesPerKind(const Prepared& p);
 // Provenance of the sketch: particles per operation, per material and per body, and lint warnings.
 nlohmann::json sketchJson(const Prepared& p);
 nlohmann::json planJson(const std::vector<PlanEntry>& plan);

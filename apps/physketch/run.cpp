@@ -88,14 +88,18 @@ class Progress {
 
 int lintScene(const std::string& scenePath) {
   return withExitCodes([&] {
-    const Prepared p = prepare(scenePath);
+    const Prepared p = prepare(scenePath, 0, /*forLint=*/true);
     const SceneDesc& sc = p.scene;
     const sketch::Sketch& sk = *p.sketch;
+    const std::int64_t live = sketch::liveParticles(sk.particles);
     std::printf("scene   %s\nstrokes %s\n", sc.path.c_str(), sc.strokesPath.c_str());
     std::printf("grid    151^3 cells of %.6g m over a %.6g m workspace\n", sk.mapping.voxelSize(), sc.workspaceSize);
-    std::printf("particles %zu of the %d cap (%.1f %%), %zu bodies, play at t = %.6g s\n", sk.particles.size(),
-                sketch::kMaxParticles, 100.0 * double(sk.particles.size()) / sketch::kMaxParticles, sk.bodies.size(),
-                p.strokes.playTime());
+    std::printf("particles %lld of the %d cap (%.1f %%), %zu bodies, play at t = %.6g s\n",
+                static_cast<long long>(live), sketch::kMaxParticles, 100.0 * double(live) / sketch::kMaxParticles,
+                sk.bodies.size(), p.strokes.playTime());
+    if (static_cast<std::size_t>(live) != sk.particles.size())
+      std::printf("  and %lld holes of cut cloths (kept in their lattices, not simulated)\n",
+                  static_cast<long long>(sk.particles.size()) - static_cast<long long>(live));
     std::printf("memory estimate %.1f MiB (solver arrays + sketch grid)\n", memoryEstimateMiB(sk.particles.size()));
     std::printf("operations:\n");
     for (const auto& o : sk.operations) {
@@ -114,7 +118,13 @@ int lintScene(const std::string& scenePath) {
     std::map<std::string, std::int64_t> perMaterial = particlesPerMaterial(p);
     for (const auto& m : sc.materials)
       std::printf("  %-12s %lld particles\n", m.name.c_str(), static_cast<long long>(perMaterial[m.name]));
+    std::printf("kinds:\n");
+    for (const auto& [kind, n] : particlesPerKind(p))
+      std::printf("  %-12s %lld particles\n", kind.c_str(), static_cast<long long>(n));
     for (const auto& w : sk.warnings) std::printf("warning: %s\n", w.c_str());
+    if (!p.notYet.empty())
+      std::printf("note: the sketch is fine, but 'physketch run' refuses this scene until its solver simulates it: %s\n",
+                  p.notYet.c_str());
     std::printf("%zu warning(s), no errors\n", sk.warnings.size());
     return kExitOk;
   });

@@ -157,7 +157,7 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
   arena.execute([&] {
     Prepared p;
     try {
-      p = prepare(scenePath, threads, [&](SceneDesc& sc) { applySetting(setting, sc, option); });
+      p = prepare(scenePath, threads, false, [&](SceneDesc& sc) { applySetting(setting, sc, option); });
     } catch (const InputError& e) {
       // A voxel knob can push a stroke out of the workspace or past the particle cap: say which setting.
       throw InputError(e.file(), e.line(), e.field(), e.reason() + " (with " + settingText(setting) + ")");
