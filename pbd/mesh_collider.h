@@ -19,6 +19,8 @@
 // query finds anyway, and has none of ray parity's double counts where a ray grazes an edge
 // or a vertex. An open mesh has no inside: its normal points to the particle's side.
 //
+// Threads: the queries are const and may run on several threads at once; setSubstep may not.
+//
 // Determinism: every query is a pure function of its input (the BVH is traversed in a fixed
 // order, ties go to the lower triangle and collider index); contacts() splits particles into
 // fixed chunks of kChunk, whatever the thread count, and concatenates them in order.
@@ -105,6 +107,7 @@ class ColliderSet {
                 std::vector<MeshContact>& out) const;
   // The same query for one point against every collider: the contact with the smallest
   // signed distance within `reach` (m) of a surface, if any (contact.particle is left as is).
+  // A larger reach finds a particle deeper inside a closed mesh (at the cost of a larger box).
   bool closest(const Vec3& p, double reach, MeshContact& contact) const;
 
   // First touch of a sphere of `radius` whose centre moves from `from` (at t0) to `to` (at
