@@ -12,6 +12,9 @@ PACKAGES=(
   libopenvdb-dev libboost-iostreams-dev   # FindOpenVDB needs Boost.Iostreams but the package does not pull it in
   libtbb-dev
   libcgal-dev
+  # Mesh colliders (pbd/mesh_collider.cpp), found with pkg-config `bullet` (the float build;
+  # never the float64 one). Its only dependency is the runtime library libbullet3.24.
+  libbullet-dev
   # EGL surfaceless + Mesa llvmpipe. find_package(OpenGL COMPONENTS EGL OpenGL) needs glvnd's
   # libOpenGL.so (libopengl-dev): libgl-dev and libegl-dev do not pull it in, so a minimal root
   # without it stops at configure with "missing: OPENGL_opengl_LIBRARY".

@@ -1,6 +1,7 @@
 #include "sketch/mesh_stamp.h"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdint>
@@ -28,6 +29,7 @@
 #include <CGAL/boost/graph/helpers.h>
 
 #include "core/error.h"
+#include "core/triangle_soup.h"
 
 namespace physketch::sketch {
 namespace {
@@ -156,6 +158,36 @@ void readSoup(const std::string& path, const std::string& ext, std::vector<Point
   if (polygons.empty()) fail(path, "mesh has no faces");
 }
 
+// Reads `path` (OBJ, OFF or PLY by its extension, case-insensitive) and checks the soup as
+// written, numbering vertices and faces from 1 in file order: finite coordinates, faces of
+// three or more vertices that exist, at most maxTriangles triangles after splitting polygons.
+void readValidatedSoup(const std::string& path, std::size_t maxTriangles, std::vector<Point>& points,
+                       std::vector<Polygon>& polygons) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext != ".obj" && ext != ".off" && ext != ".ply")
+    fail(path, (ext.empty() ? std::string("mesh file has no extension") : "unknown mesh format '" + ext + "'") +
+                   ": use .obj, .off or .ply");
+  readSoup(path, ext, points, polygons);
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (!std::isfinite(points[i].x()) || !std::isfinite(points[i].y()) || !std::isfinite(points[i].z()))
+      fail(path, "vertex " + std::to_string(i + 1) + " has a non-finite coordinate");
+  std::size_t triangles = 0;
+  for (std::size_t f = 0; f < polygons.size(); ++f) {
+    const Polygon& poly = polygons[f];
+    const std::string face = "face " + std::to_string(f + 1);
+    if (poly.size() < 3) fail(path, face + " has " + std::to_string(poly.size()) + " vertices; a face needs 3 or more");
+    for (std::size_t v : poly)
+      if (v >= points.size())
+        fail(path, face + " refers to a vertex that does not exist (the file has " +
+                       std::to_string(points.size()) + " vertices)");
+    triangles += poly.size() - 2;
+  }
+  if (triangles > maxTriangles)
+    fail(path, "mesh has " + std::to_string(triangles) + " triangles (after splitting polygons); the limit is " +
+                   std::to_string(maxTriangles));
+}
+
 }  // namespace
 
 struct StampMesh::Impl {
@@ -176,34 +208,9 @@ Vec3 StampMesh::boundsMax() const { return impl_->hi; }
 double StampMesh::volume() const { return impl_->volume; }
 
 StampMesh StampMesh::load(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (ext != ".obj" && ext != ".off" && ext != ".ply")
-    fail(path, (ext.empty() ? std::string("mesh file has no extension") : "unknown mesh format '" + ext + "'") +
-                   ": use .obj, .off or .ply");
-
   std::vector<Point> points;
   std::vector<Polygon> polygons;
-  readSoup(path, ext, points, polygons);
-
-  // Validate the soup as written, numbering vertices and faces from 1 in file order.
-  for (std::size_t i = 0; i < points.size(); ++i)
-    if (!std::isfinite(points[i].x()) || !std::isfinite(points[i].y()) || !std::isfinite(points[i].z()))
-      fail(path, "vertex " + std::to_string(i + 1) + " has a non-finite coordinate");
-  std::size_t triangles = 0;
-  for (std::size_t f = 0; f < polygons.size(); ++f) {
-    const Polygon& poly = polygons[f];
-    const std::string face = "face " + std::to_string(f + 1);
-    if (poly.size() < 3) fail(path, face + " has " + std::to_string(poly.size()) + " vertices; a face needs 3 or more");
-    for (std::size_t v : poly)
-      if (v >= points.size())
-        fail(path, face + " refers to a vertex that does not exist (the file has " +
-                       std::to_string(points.size()) + " vertices)");
-    triangles += poly.size() - 2;
-  }
-  if (triangles > kMaxFaces)
-    fail(path, "mesh has " + std::to_string(triangles) + " triangles (after splitting polygons); the limit is " +
-                   std::to_string(kMaxFaces));
+  readValidatedSoup(path, kMaxFaces, points, polygons);
 
   // Benign repairs: exporters split vertices along UV seams and sharp edges (the same
   // position twice) and may leave unused vertices. Merging exact duplicates is what
@@ -349,6 +356,92 @@ std::vector<Vec3i> voxelizeMesh(const StampMesh& stamp, const GridMapping& mappi
         if (inside(Point(c.x(), c.y(), c.z())) != CGAL::ON_UNBOUNDED_SIDE) cells.push_back(cell);
       }
   return cells;
+}
+
+namespace {
+
+// Drops repeated corners that follow each other (a b b c -> a b c, cyclic), which exact
+// duplicate positions leave once merged; a face left with fewer than three corners, or
+// with a corner twice elsewhere, has no area and is dropped: a collider needs no slivers.
+void dropDegenerateFaces(std::vector<Polygon>& polygons) {
+  std::vector<Polygon> kept;
+  kept.reserve(polygons.size());
+  for (Polygon& poly : polygons) {
+    Polygon p;
+    for (std::size_t i = 0; i < poly.size(); ++i)
+      if (poly[i] != poly[(i + 1) % poly.size()]) p.push_back(poly[i]);
+    Polygon sorted = p;
+    std::sort(sorted.begin(), sorted.end());
+    if (p.size() >= 3 && std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end()) kept.push_back(std::move(p));
+  }
+  polygons.swap(kept);
+}
+
+// The soup as a solid, when it is one: closed, manifold (edges and vertices), orientable,
+// no zero-area face, no self-intersection, positive volume. Then it is triangulated and
+// oriented to bound its volume (outer shells outward, cavities inward) and written to
+// `out`; otherwise `out` is untouched and the answer is false. Same checks as a stamp
+// (StampMesh::load), but failing one makes the collider an open sheet, not an error.
+bool solidTriangles(std::vector<Point> points, std::vector<Polygon> polygons, TriangleSoup& out) {
+  const SoupTopology topo = analyse(points.size(), polygons);
+  if (topo.borderEdges > 0 || topo.nonManifoldEdges > 0 || topo.nonManifoldVertices > 0) return false;
+  const std::size_t pointsBefore = points.size();
+  if (!topo.consistentlyWound && (!PMP::orient_polygon_soup(points, polygons) || points.size() != pointsBefore))
+    return false;
+  Mesh mesh;
+  PMP::polygon_soup_to_polygon_mesh(points, polygons, mesh);
+  if (!CGAL::is_triangle_mesh(mesh) && !PMP::triangulate_faces(mesh)) return false;
+  if (!CGAL::is_closed(mesh)) return false;
+  for (Mesh::Face_index f : mesh.faces())
+    if (PMP::is_degenerate_triangle_face(f, mesh)) return false;  // no normal: the inside test needs one per face
+  if (PMP::does_self_intersect(mesh)) return false;
+  PMP::orient_to_bound_a_volume(mesh);
+  if (!(CGAL::to_double(PMP::volume(mesh)) > 0)) return false;
+
+  out.vertices.resize(mesh.number_of_vertices());
+  for (Mesh::Vertex_index v : mesh.vertices()) {
+    const Point& p = mesh.point(v);
+    out.vertices[v.idx()] = Vec3(p.x(), p.y(), p.z());
+  }
+  out.triangles.clear();
+  out.triangles.reserve(mesh.number_of_faces());
+  for (Mesh::Face_index f : mesh.faces()) {
+    std::array<std::int32_t, 3> t{};
+    int k = 0;
+    for (Mesh::Vertex_index v : CGAL::vertices_around_face(mesh.halfedge(f), mesh))
+      t[static_cast<std::size_t>(k++)] = static_cast<std::int32_t>(v.idx());
+    out.triangles.push_back(t);
+  }
+  out.closed = true;
+  return true;
+}
+
+}  // namespace
+
+TriangleSoup readTriangleSoup(const std::string& path, std::size_t maxTriangles) {
+  std::vector<Point> points;
+  std::vector<Polygon> polygons;
+  readValidatedSoup(path, maxTriangles, points, polygons);
+  // The same benign repairs as a stamp (exact duplicate positions merged, unused vertices
+  // dropped), then faces without area dropped instead of refused.
+  PMP::merge_duplicate_points_in_polygon_soup(points, polygons);
+  dropDegenerateFaces(polygons);
+  PMP::remove_isolated_points_in_polygon_soup(points, polygons);
+  if (polygons.empty()) fail(path, "every face of the mesh repeats a vertex (or vertex position): no triangle is left");
+  if (points.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
+    fail(path, "mesh has too many vertices (" + std::to_string(points.size()) + ")");
+
+  TriangleSoup soup;
+  if (solidTriangles(points, polygons, soup)) return soup;
+  // An open sheet: the file's vertices and winding, polygons split as fans (0, i, i + 1).
+  soup.vertices.reserve(points.size());
+  for (const Point& p : points) soup.vertices.emplace_back(p.x(), p.y(), p.z());
+  for (const Polygon& poly : polygons)
+    for (std::size_t i = 1; i + 1 < poly.size(); ++i)
+      soup.triangles.push_back({static_cast<std::int32_t>(poly[0]), static_cast<std::int32_t>(poly[i]),
+                                static_cast<std::int32_t>(poly[i + 1])});
+  soup.closed = false;
+  return soup;
 }
 
 }  // namespace physketch::sketch

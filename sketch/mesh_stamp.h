@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/math.h"
+#include "core/triangle_soup.h"
 #include "sketch/grid.h"
 
 namespace physketch::sketch {
@@ -64,5 +65,21 @@ class StampMesh {
 // parser validates user input).
 std::vector<Vec3i> voxelizeMesh(const StampMesh& mesh, const GridMapping& mapping, double scale,
                                 const Mat3& rotation, const Vec3& translation);
+
+// More triangles than this in a collider mesh is an InputError: Bullet's quantized BVH
+// (btBvhTriangleMeshShape) numbers a mesh part's triangles in 21 bits (2,097,152).
+constexpr std::size_t kMaxColliderTriangles = 2'000'000;
+
+// A mesh collider's triangles, read leniently: open or closed, any file a stamp accepts and
+// also open sheets, non-manifold or self-intersecting ones. Same formats and the same checks
+// of the file as StampMesh::load (missing, unreadable or empty file, unknown extension, parse
+// errors, a non-finite coordinate, a face with fewer than three vertices or an index out of
+// range, more than maxTriangles triangles: InputError(path, 0, "", reason), naming the file).
+// Exact duplicate positions are merged, unused vertices dropped, and faces that repeat a
+// vertex (no area) dropped; a file with no face left is an error. The result is `closed`
+// (and oriented outward, triangulated by CGAL) when it passes a stamp's solid checks (closed,
+// manifold, orientable, no zero-area face, no self-intersection, positive volume); otherwise
+// it keeps the file's winding, polygons split as fans.
+TriangleSoup readTriangleSoup(const std::string& path, std::size_t maxTriangles = kMaxColliderTriangles);
 
 }  // namespace physketch::sketch
