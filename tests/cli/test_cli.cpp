@@ -443,6 +443,7 @@ TEST(Cli, TheJellyExampleRestsSoftBodiesOnTheTable) {
   EXPECT_GT(last[2][1].get<double>(), last[1][1].get<double>());  // the block on the jelly
   EXPECT_LT(last[4][1].get<double>(), 0.04);                   // the clay flattened
   fs::remove_all(dir);
+}
 
 // The sketch part of report.json counts particles per kind and gives each body its layout:
 // the rope example's rope is one chain of 1 cm thickness (radius 5 mm), its beam and weight
