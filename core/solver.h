@@ -49,9 +49,10 @@ class Solver {
   virtual std::uint64_t stateHash() const = 0;
 
   // --- changes while the simulation runs (sketching after play) -------------
-  // Appends a body made of `particles` (positions at rest, stroke and material set);
-  // returns its index. A kinematic body stays where it is until released.
-  virtual int addBody(const ParticleArrays& particles, const BodyInit& init, bool kinematic) = 0;
+  // Appends a body made of `particles` (positions at rest, stroke and material set; a rope's
+  // or cloth's nodes in layout order) with the start, layout and radius of `shape` (its first
+  // and count are ignored); returns its index. A kinematic body stays where it is until released.
+  virtual int addBody(const ParticleArrays& particles, const BodyRange& shape, bool kinematic) = 0;
   // Switches a body between dynamic and kinematic. A released body keeps the
   // velocity of its prescribed motion.
   virtual void setMode(int body, BodyMode mode) = 0;

@@ -116,9 +116,12 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   for (const BodyRange& br : bodies) {
     if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
       throw RuntimeError("PbdWorld: body " + std::to_string(members_.size()) + " has an invalid particle range");
-    std::vector<std::int32_t> ids(static_cast<std::size_t>(br.count));
-    for (std::int32_t k = 0; k < br.count; ++k) ids[std::size_t(k)] = br.first + k;
-    const MaterialKind kind = kindOf(parts_.material[std::size_t(br.first)]);
+    // A cloth cut before play keeps its lattice with holes (removed nodes): not members.
+    std::vector<std::int32_t> ids;
+    for (std::int32_t k = 0; k < br.count; ++k)
+      if (!phase::has(parts_.phase[std::size_t(br.first + k)], phase::kRemoved)) ids.push_back(br.first + k);
+    if (ids.empty()) throw RuntimeError("PbdWorld: body " + std::to_string(members_.size()) + " has no particles");
+    const MaterialKind kind = kindOf(parts_.material[std::size_t(ids.front())]);
     appendBody(std::move(ids), br.init, br.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic, kind);
     if (kind != MaterialKind::kRigid) setupParticleBody(members_.size() - 1, br);
   }
@@ -230,7 +233,8 @@ double PbdWorld::bodyMass(int body) const {
 
 Mat3 PbdWorld::bodyInertiaRest(int body) const { return inertiaRest_.at(std::size_t(body)); }
 
-int PbdWorld::addBody(const ParticleArrays& p, const BodyInit& init, bool kinematic) {
+int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kinematic) {
+  const BodyInit& init = shape.init;
   if (p.size() == 0) throw RuntimeError("PbdWorld::addBody: a body needs particles");
   const double spacing = 2.0 * params_.particleRadius;
   std::vector<std::int32_t> ids;
@@ -256,7 +260,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyInit& init, bool kinema
   appendBody(std::move(ids), init, mode, kind);
   const std::size_t b = members_.size() - 1;
   if (kind != MaterialKind::kRigid) {
-    BodyRange range;
+    BodyRange range = shape;
     range.first = members_[b].front();
     range.count = static_cast<std::int32_t>(members_[b].size());
     setupParticleBody(b, range);

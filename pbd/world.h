@@ -112,7 +112,7 @@ class PbdWorld final : public Solver {
   double dt() const override { return params_.dt; }
   std::uint64_t stateHash() const override;
 
-  int addBody(const ParticleArrays& particles, const BodyInit& init, bool kinematic) override;
+  int addBody(const ParticleArrays& particles, const BodyRange& shape, bool kinematic) override;
   void setMode(int body, BodyMode mode) override;
   void setKinematicTarget(int body, const Vec3& centre) override;
   void setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) override;

@@ -189,6 +189,7 @@ void PbdWorld::buildStrand(std::size_t b, const BodyRange& range) {
   const float stretch = static_cast<float>(mat.strand.stretchCompliance);
   const float bend = static_cast<float>(mat.strand.bendCompliance);
   const auto link = [&](std::int32_t a, std::int32_t c, float alpha, std::int32_t via = -1) {
+    if (!alive(a) || !alive(c) || (via >= 0 && !alive(via))) return;  // a hole of a cut cloth
     const float len = static_cast<float>(
         (at(parts_.x, parts_.y, parts_.z, std::size_t(a)) - at(parts_.x, parts_.y, parts_.z, std::size_t(c))).norm());
     distances_.add(a, c, len, alpha);

@@ -52,7 +52,13 @@ std::vector<int> RuntimeDriver::beforeStep() {
       case RuntimeOp::Kind::kCreate:
         if (!st.started) {
           // Static while being drawn (Phys-Sketch §4): kinematic until the stroke ends.
-          st.body = solver_.addBody(op.particles, op.init, /*kinematic=*/op.end >= t1);
+          BodyRange shape;
+          shape.init = op.init;
+          shape.layout = op.layout;
+          shape.rows = op.rows;
+          shape.cols = op.cols;
+          shape.radius = op.radius;
+          st.body = solver_.addBody(op.particles, shape, /*kinematic=*/op.end >= t1);
           restCells_.insert(restCells_.end(), op.cells.begin(), op.cells.end());
           reshaped.push_back(st.body);
           st.started = true;

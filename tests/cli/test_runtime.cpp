@@ -230,7 +230,7 @@ class StretchingBlock final : public Solver {
   std::int64_t stepCount() const override { return steps_; }
   double dt() const override { return 0.01; }
   std::uint64_t stateHash() const override { return 0; }
-  int addBody(const ParticleArrays&, const BodyInit&, bool) override { return -1; }
+  int addBody(const ParticleArrays&, const BodyRange&, bool) override { return -1; }
   void setMode(int, BodyMode) override {}
   void setVelocity(int, const Vec3&, const Vec3&) override {}
   void setKinematicTarget(int, const Vec3&) override {}
