@@ -5,6 +5,7 @@
 #include <limits>
 #include <sstream>
 
+#include <Eigen/Eigenvalues>
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
@@ -289,20 +290,26 @@ Vec3 MpmWorld::velocity(int body) const {
   return m > 0.0 ? Vec3(p / m) : Vec3::Zero();
 }
 
-// w = I^-1 L about the centre of mass; each particle adds its own cube's inertia m h^2/6.
+// w = I^-1 L about the centre of mass, from the particles as points (a rigid rotation w x r
+// gives back w exactly); a body too thin for that (one particle, a line) adds each particle's
+// own cube inertia m h^2/6 so that I stays invertible.
 Vec3 MpmWorld::angularVelocity(int body) const {
   const Vec3 c = centreOfMass(std::size_t(body));
   Mat3 I = Mat3::Zero();
   Vec3 L = Vec3::Zero();
+  double cube = 0.0;
   const double h2 = params_.spacing * params_.spacing;
   for (std::int32_t i : members_.at(std::size_t(body))) {
     const auto k = std::size_t(i);
     const double m = parts_.mass[k];
     const Vec3 r = Vec3(parts_.x[k], parts_.y[k], parts_.z[k]) - c;
     L += m * r.cross(Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]));
-    I += m * ((r.squaredNorm() + h2 / 6.0) * Mat3::Identity() - r * r.transpose());
+    I += m * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+    cube += m * h2 / 6.0;
   }
-  if (!(I.trace() > 0.0)) return Vec3::Zero();
+  if (!(cube > 0.0)) return Vec3::Zero();
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(I);
+  if (!(eig.eigenvalues().minCoeff() > 1e-6 * eig.eigenvalues().maxCoeff())) I += cube * Mat3::Identity();
   return I.ldlt().solve(L);
 }
 

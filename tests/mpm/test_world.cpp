@@ -7,6 +7,7 @@
 #include <cmath>
 #include <random>
 
+#include "core/error.h"
 #include "mpm_test_util.h"
 
 using namespace physketch;
@@ -257,4 +258,38 @@ TEST(MpmWorld, RemovedParticlesLeaveTheirBodyAndTheSimulation) {
   std::vector<std::int32_t> all(w.bodyParticles(0).begin(), w.bodyParticles(0).end());
   w.removeParticles(all);
   EXPECT_EQ(w.mode(0), BodyMode::kEmpty);
+}
+
+// Sketching after play through the Solver interface: a body being drawn is held (kinematic:
+// it does not fall), a carried body moves to its target in one step, a released one keeps
+// the velocity of its carried motion, and vel=/spin= come back as the body's velocity and
+// angular velocity (a rigid field v + w x r, exactly: the particles are points).
+TEST(MpmWorld, BodiesAddedHeldCarriedAndReleasedAfterPlay) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.2, 0.05, 0.2), 4, 4, 4, h, 0);
+  MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));
+  ParticleArrays drawn;
+  for (int i = 0; i < 5; ++i)
+    for (int j = 0; j < 5; ++j)
+      for (int k = 0; k < 5; ++k) drawn.push(float(0.6 + i * h), float(0.5 + j * h), float(0.5 + k * h), 7, 0);
+  const int b = w.addBody(drawn, BodyInit{}, /*kinematic=*/true);
+  ASSERT_EQ(b, 1);
+  EXPECT_EQ(w.mode(b), BodyMode::kKinematic);
+  const Vec3 c0 = w.pose(b).centre;
+  ASSERT_TRUE(w.step());
+  EXPECT_EQ(w.pose(b).centre, c0);  // held where it is drawn
+  const Vec3 target = c0 + Vec3(0.05, 0.0, -0.02);
+  w.setKinematicTarget(b, target);
+  ASSERT_TRUE(w.step());
+  EXPECT_LT((w.pose(b).centre - target).norm(), 1e-6);  // float positions near 0.6 m
+  w.setKinematicTarget(b, target + Vec3(0.01, 0.0, 0.0));
+  w.setMode(b, BodyMode::kDynamic);  // released: keeps the carried velocity dx / dt
+  EXPECT_LT((w.velocity(b) - Vec3(0.01 * 60.0, 0.0, 0.0)).norm(), 1e-4);
+  w.setVelocity(b, Vec3(0.5, 1.0, 0.0), Vec3(0.0, 2.0, 1.0));
+  EXPECT_LT((w.velocity(b) - Vec3(0.5, 1.0, 0.0)).norm(), 1e-5);
+  EXPECT_LT((w.angularVelocity(b) - Vec3(0.0, 2.0, 1.0)).norm(), 1e-4);
+  EXPECT_THROW(w.setKinematicTarget(b, target), RuntimeError);  // only a carried body has a target
+  ASSERT_TRUE(w.step());
 }
