@@ -293,3 +293,40 @@ TEST(MpmWorld, BodiesAddedHeldCarriedAndReleasedAfterPlay) {
   EXPECT_THROW(w.setKinematicTarget(b, target), RuntimeError);  // only a carried body has a target
   ASSERT_TRUE(w.step());
 }
+
+// Checking after every pass (--validate) changes nothing but the checks: the same states.
+// And a step far above the explicit bound (E = 5e6 with one substep of 1/60 s, 137 needed)
+// is stopped by the guard, which names a pass of the table (found by the replay), the
+// particle's material and the knob to change; the world then refuses to step.
+TEST(MpmWorld, ValidateGivesTheSameStatesAndTheGuardNamesPassAndMaterial) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  BodyInit down;
+  down.velocity = Vec3(0.0, -2.0, 0.0);
+  addBox(p, bodies, Vec3(0.4, 0.05, 0.4), 8, 8, 8, h, 0, down);
+  std::vector<std::uint64_t> hashes[2];
+  for (int v = 0; v < 2; ++v) {
+    MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));
+    w.setValidate(v == 1);
+    for (int s = 0; s < 10; ++s) {
+      ASSERT_TRUE(w.step()) << w.guard().message();
+      hashes[v].push_back(w.stateHash());
+    }
+  }
+  EXPECT_EQ(hashes[0], hashes[1]);
+  MpmWorld w(p, bodies, {elastic(5e6)}, unitDomain(h, 1));
+  ASSERT_FALSE(w.warnings().empty());
+  bool ran = true;
+  for (int s = 0; s < 50 && ran; ++s) ran = w.step();
+  ASSERT_FALSE(ran);
+  const GuardRecord& g = w.guard();
+  EXPECT_NE(g.pass, "guard") << g.message();
+  bool known = false;
+  for (const PassSpec& spec : kMpmPasses) known = known || g.pass == spec.name;
+  EXPECT_TRUE(known) << g.message();
+  EXPECT_EQ(g.material, "jelly");
+  EXPECT_GE(g.particle, 0);
+  EXPECT_NE(g.hint.find("substeps"), std::string::npos) << g.message();
+  EXPECT_FALSE(w.step());
+}
