@@ -8,6 +8,7 @@
 #include <random>
 
 #include "core/error.h"
+#include "mpm/kernels.h"
 #include "mpm_test_util.h"
 
 using namespace physketch;
@@ -27,6 +28,34 @@ Material elastic(double E, ElasticModel model = ElasticModel::kCorotated) {
 double comY(const MpmWorld& w, int body) { return w.pose(body).centre.y(); }
 
 }  // namespace
+
+// Quadratic B-splines: partition of unity, zero first moment (so sum of gradients is 0 and
+// P2G's affine term carries no net momentum), and second moment 1/4 per axis: D_p = dx^2/4,
+// the 4/dx^2 of MLS-MPM's affine matrix (Jiang et al. 2016 §10.1). Over every offset f in
+// [0.5, 1.5) on a fine sweep; float rounding tolerance 1e-6.
+TEST(MpmKernels, BSplineWeightsSumToOneWithZeroFirstMomentAndQuarterSecondMoment) {
+  for (int k = 0; k <= 1000; ++k) {
+    const float f = 0.5f + 0.999f * float(k) / 1000.0f;
+    float w[3];
+    detail::bsplineWeights(f, w);
+    double s0 = 0, s1 = 0, s2 = 0;
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_GE(w[i], 0.0f);
+      s0 += w[i];
+      s1 += w[i] * (i - double(f));
+      s2 += w[i] * (i - double(f)) * (i - double(f));
+    }
+    EXPECT_NEAR(s0, 1.0, 1e-6) << f;
+    EXPECT_NEAR(s1, 0.0, 1e-6) << f;
+    EXPECT_NEAR(s2, 0.25, 1e-6) << f;
+  }
+  // The stencil never leaves a grid of n nodes, wherever the particle is (even outside).
+  for (float x : {-5.0f, -0.01f, 0.0f, 0.7f, 63.2f, 64.0f, 1e6f}) {
+    const int b = detail::stencilBase(x, 1.0f, 64);
+    EXPECT_GE(b, 0);
+    EXPECT_LE(b + 2, 63);
+  }
+}
 
 // With no stress (F = I) and a uniform velocity, P2G/G2P pass v through unchanged (weights
 // sum to 1, sum w (x_i - x_p) = 0), so each particle follows symplectic Euler exactly:
