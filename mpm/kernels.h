@@ -41,20 +41,20 @@ inline void bsplineWeights(float f, float w[3]) {
 }
 
 // Coulomb friction on a node velocity whose normal part vn < 0 was removed: the tangential
-// part t loses mu |vn| of its length (and stops when that is more than it has).
-inline void applyFriction(float v[3], int axis, float vn, float mu) {
+// part t stops when |t| <= mus |vn| (static), else loses muk |vn| of its length (dynamic).
+inline void applyFriction(float v[3], int axis, float vn, float mus, float muk) {
   float t2 = 0.0f;
   for (int a = 0; a < 3; ++a)
     if (a != axis) t2 += v[a] * v[a];
   if (t2 <= 0.0f) return;
   const float t = std::sqrt(t2);
-  const float scale = std::max(0.0f, 1.0f - mu * (-vn) / t);
+  const float scale = t <= mus * (-vn) ? 0.0f : std::max(0.0f, 1.0f - muk * (-vn) / t);
   for (int a = 0; a < 3; ++a)
     if (a != axis) v[a] *= scale;
 }
 
 // A wall with inward normal +axis (side = +1) or -axis (side = -1) acting on a node velocity.
-inline void applyWall(float v[3], int axis, float side, WallKind kind, float mu) {
+inline void applyWall(float v[3], int axis, float side, WallKind kind, float mus, float muk) {
   const float vn = side * v[axis];
   switch (kind) {
     case WallKind::kSticky: v[0] = v[1] = v[2] = 0.0f; break;
@@ -62,7 +62,7 @@ inline void applyWall(float v[3], int axis, float side, WallKind kind, float mu)
     case WallKind::kSeparate:
       if (vn < 0.0f) {
         v[axis] = 0.0f;
-        applyFriction(v, axis, vn, mu);
+        applyFriction(v, axis, vn, mus, muk);
       }
       break;
   }

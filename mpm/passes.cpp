@@ -101,6 +101,8 @@ void MpmWorld::p2g(float h) {
     std::fill_n(gx_.begin() + std::ptrdiff_t(first), 64, 0.0f);
     std::fill_n(gy_.begin() + std::ptrdiff_t(first), 64, 0.0f);
     std::fill_n(gz_.begin() + std::ptrdiff_t(first), 64, 0.0f);
+    std::fill_n(gfs_.begin() + std::ptrdiff_t(first), 64, 0.0f);
+    std::fill_n(gfk_.begin() + std::ptrdiff_t(first), 64, 0.0f);
     std::fill_n(held_.begin() + std::ptrdiff_t(first), 64, std::uint8_t(0));
   });
   const float inv = float(1.0 / dx_), dx = float(dx_);
@@ -116,6 +118,8 @@ void MpmWorld::p2g(float h) {
     float w[3][3];
     for (int a = 0; a < 3; ++a) bsplineWeights(f[a], w[a]);
     const float mp = parts_.mass[i];
+    const MatModel& mat = models_[std::size_t(parts_.material[i])];
+    const float ms = mp * mat.mus, mk = mp * mat.muk;
     const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
     const float mv[3] = {mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]};
     for (int a = 0; a < 3; ++a) {
@@ -128,6 +132,8 @@ void MpmWorld::p2g(float h) {
           const float wt = wab * w[2][c];
           const std::size_t node = nodeIndex(bx + a, by + b, bz + c);
           gm_[node] += wt * mp;
+          gfs_[node] += wt * ms;
+          gfk_[node] += wt * mk;
           gx_[node] += wt * (mv[0] + A(0, 0) * dxa + A(0, 1) * dyb + A(0, 2) * dzc);
           gy_[node] += wt * (mv[1] + A(1, 0) * dxa + A(1, 1) * dyb + A(1, 2) * dzc);
           gz_[node] += wt * (mv[2] + A(2, 0) * dxa + A(2, 1) * dyb + A(2, 2) * dzc);
@@ -167,7 +173,6 @@ void MpmWorld::p2g(float h) {
 void MpmWorld::gridUpdate(float h) {
   const float g[3] = {float(h * params_.gravity.x()), float(h * params_.gravity.y()), float(h * params_.gravity.z())};
   const WallKind kind = params_.walls;
-  const float mu = float(params_.wallFriction);
   const int floorNode = std::max(wallLo_[1], groundNode_);
   forEach(activeNodeBlocks_.size(), [&](std::size_t k) {
     const auto block = std::size_t(activeNodeBlocks_[k]);
@@ -189,8 +194,8 @@ void MpmWorld::gridUpdate(float h) {
         const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
         for (int a = 0; a < 3; ++a) {
           const int lowest = a == 1 ? floorNode : wallLo_[a];
-          if (idx[a] <= lowest) applyWall(v, a, 1.0f, kind, mu);
-          else if (idx[a] >= wallHi_[a]) applyWall(v, a, -1.0f, kind, mu);
+          if (idx[a] <= lowest) applyWall(v, a, 1.0f, kind, gfs_[node] / m, gfk_[node] / m);
+          else if (idx[a] >= wallHi_[a]) applyWall(v, a, -1.0f, kind, gfs_[node] / m, gfk_[node] / m);
         }
       }
       gx_[node] = v[0];

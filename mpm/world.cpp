@@ -98,6 +98,8 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     mm.mu = float(l.mu);
     mm.lambda = float(l.lambda);
     mm.mass = float(r.density * params_.spacing * params_.spacing * params_.spacing);
+    mm.mus = float(r.staticFriction);
+    mm.muk = float(r.dynamicFriction);
     mm.frictionDeg = float(r.sand.frictionAngleDeg);
     mm.hardeningDeg = float(r.sand.hardening);
     mm.alpha = float(druckerPragerAlpha(r.sand.frictionAngleDeg * kPi / 180.0));
@@ -172,6 +174,8 @@ void MpmWorld::initGrid() {
   gx_.assign(nodes, 0.0f);
   gy_.assign(nodes, 0.0f);
   gz_.assign(nodes, 0.0f);
+  gfs_.assign(nodes, 0.0f);
+  gfk_.assign(nodes, 0.0f);
   held_.assign(nodes, 0);
   nodeBlockMark_.assign(std::size_t(nb_) * nb_ * nb_, 0);
 }
@@ -447,8 +451,8 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
     case MpmPass::kG2P:
       return on ? "materials " + list : "no dynamic particle (all fixed, held or removed)";
     case MpmPass::kGridUpdate:
-      return on ? std::string("gravity, ") + toString(params_.walls) + " walls (friction " + num(params_.wallFriction) +
-                      "), ground y = " + num(params_.groundY)
+      return on ? std::string("gravity, ") + toString(params_.walls) +
+                      " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY)
                 : "no dynamic particle";
     case MpmPass::kProjection: return on ? "walls and ground" : "no dynamic particle";
     case MpmPass::kPlasticity:

@@ -36,7 +36,9 @@ namespace physketch::mpm {
 
 // How a domain wall or the ground acts on grid velocities (VR-Doh supplement §1.1):
 // sticky: v = 0; slip: the normal component into the wall removed; separate: as slip, and
-// only while moving into the wall, with Coulomb friction on the tangential part.
+// only while moving into the wall, with Coulomb friction on the tangential part: each node's
+// coefficients are the mass-weighted means of the materials whose particles reach it
+// (static_friction, dynamic_friction).
 enum class WallKind { kSticky, kSlip, kSeparate };
 const char* toString(WallKind kind);
 
@@ -50,7 +52,6 @@ struct MpmParams {
   Vec3 domainMin = Vec3(-0.5, 0.0, -0.5);  // m, corner of the simulated cube (the workspace)
   double domainSize = 1.0;                 // m, its edge
   WallKind walls = WallKind::kSeparate;    // the domain walls and the ground
-  double wallFriction = 0.5;               // Coulomb coefficient of separate walls
   double waveCourant = 0.5;    // C in h <= C dx / c_p (c_p the material's P-wave speed)
   double velocityCourant = 0.5;  // h <= velocityCourant dx / |v|max
   double maxSpeed = 100.0;     // m/s, the guard's explosion bound
@@ -133,6 +134,7 @@ class MpmWorld final : public Solver {
     ElasticModel elastic = ElasticModel::kCorotated;
     float mu = 0.0f, lambda = 0.0f;    // Pa
     float mass = 0.0f;                 // kg per particle, density * h^3
+    float mus = 0.0f, muk = 0.0f;      // static and dynamic friction against walls and ground
     float alpha = 0.0f, shift = 0.0f;  // sand: Drucker-Prager alpha and cohesion strain
     float frictionDeg = 0.0f, hardeningDeg = 0.0f;
     float thetaC = 0.0f, thetaS = 0.0f, xi = 0.0f;  // snow
@@ -185,6 +187,7 @@ class MpmWorld final : public Solver {
   int groundNode_ = -1;              // nodes with j <= groundNode are ground nodes
   float lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the walls (m), for the projection
   std::vector<float> gm_, gx_, gy_, gz_;  // kg; momentum (kg m/s), then velocity (m/s)
+  std::vector<float> gfs_, gfk_;          // kg: mass times static / dynamic friction (wall friction per node)
   std::vector<std::uint8_t> held_;        // 1: a node a fixed or carried body holds
   std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
   // Sorting: dynamic particles by block, and the blocks that have any, by colour.
