@@ -11,6 +11,8 @@ const char* toString(GuardKind kind) {
     case GuardKind::kNaN: return "nan";
     case GuardKind::kExplosion: return "explosion";
     case GuardKind::kPenetration: return "penetration";
+    case GuardKind::kInverted: return "inverted";
+    case GuardKind::kCfl: return "cfl";
   }
   return "?";
 }

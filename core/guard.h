@@ -17,7 +17,9 @@
 
 namespace physketch {
 
-enum class GuardKind { kNone, kNaN, kExplosion, kPenetration };
+// kInverted: a deformation gradient with J = det F <= 0 (MPM); kCfl: a particle moved more than
+// one grid cell in a substep, or the time-step bound needs more substeps than allowed (MPM).
+enum class GuardKind { kNone, kNaN, kExplosion, kPenetration, kInverted, kCfl };
 const char* toString(GuardKind kind);
 
 struct GuardRecord {

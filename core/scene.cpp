@@ -167,7 +167,9 @@ SceneDesc build(const RecordFile& file) {
       dtLine = r.line;
     } else if (kw == "substeps") {
       FieldReader f(file, r, {"count"});
-      s.substeps = static_cast<int>(f.integer(0, 1, 1000));
+      s.substepsLine = r.line;
+      if (f.word(0) == "auto") s.substepsAuto = true;
+      else s.substeps = static_cast<int>(f.integer(0, 1, 1000));
     } else if (kw == "iterations") {
       FieldReader f(file, r, {"count"});
       s.iterations = static_cast<int>(f.integer(0, 1, 1000));
@@ -229,6 +231,10 @@ SceneDesc build(const RecordFile& file) {
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");
+  if (s.substepsAuto && s.solver != SolverKind::kMpm)
+    throw InputError(file.path, s.substepsLine, "count",
+                     std::string("'substeps auto' needs solver mpm (this scene runs solver ") + toString(s.solver) +
+                         "): give a count, 1-1000");
   for (std::size_t i = 0; i < s.colliders.size(); ++i)
     if (colliderAtLine[i] && !s.colliders[i].keyframes.empty())
       throw InputError(file.path, colliderAtLine[i], "at",

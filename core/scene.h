@@ -68,6 +68,8 @@ struct SceneDesc {
   int solverLine = 0;        // line of the 'solver' record, 0 = the default
   double dt = 1.0 / 60.0;    // s, one solver step
   int substeps = 4;          // substeps per step
+  bool substepsAuto = false; // `substeps auto` (mpm): the fewest per step that meet the time-step bounds
+  int substepsLine = 0;      // line of the 'substeps' record, 0 = the default
   int iterations = 4;        // constraint iterations per substep
   Vec3 gravity{0.0, -9.81, 0.0};  // m/s^2
   double groundY = 0.0;      // m, height of the ground plane (y up)

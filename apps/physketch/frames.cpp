@@ -28,8 +28,10 @@ std::size_t FrameWriter::meshesLive() const {
   return n;
 }
 
-render::SurfaceKind surfaceOf(MaterialKind kind) {
-  return kind == MaterialKind::kRigid ? render::SurfaceKind::kRigidRestMesh : render::SurfaceKind::kParticles;
+render::SurfaceKind surfaceOf(MaterialKind kind, SolverKind solver) {
+  // What the solver runs decides: rigid under mpm is a stiff elastic that deforms.
+  const MaterialKind runs = solverModel(kind, solver).simulated ? solverModel(kind, solver).runsAs : kind;
+  return runs == MaterialKind::kRigid ? render::SurfaceKind::kRigidRestMesh : render::SurfaceKind::kParticles;
 }
 
 // (Re)builds the meshes of one body: one mesh per material (mixed-material bodies). A
@@ -47,7 +49,7 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
   bool deforming = false;
   const Vec3 origin = mapping_.toWorld(Vec3i(0, 0, 0));
   for (const auto& [material, ids] : byMaterial) {
-    const render::SurfaceKind surface = surfaceOf(scene_.materials[static_cast<std::size_t>(material)].kind);
+    const render::SurfaceKind surface = surfaceOf(scene_.materials[static_cast<std::size_t>(material)].kind, scene_.solver);
     render::TriangleMesh mesh;
     if (surface == render::SurfaceKind::kRigidRestMesh) {
       std::vector<Vec3i> cells;

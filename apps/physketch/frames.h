@@ -62,8 +62,8 @@ class FrameWriter {
 };
 
 std::string frameName(int index);
-// How a material's particles become a surface: rigid kinds keep their rest mesh and move
+// How a material's particles become a surface under a solver: kinds it runs as rigid keep their rest mesh and move
 // with the body pose; every other kind deforms and is meshed from its particles each frame.
-render::SurfaceKind surfaceOf(MaterialKind kind);
+render::SurfaceKind surfaceOf(MaterialKind kind, SolverKind solver = SolverKind::kPbd);
 
 }  // namespace physketch::app

@@ -1,8 +1,12 @@
 #include "apps/physketch/prepare.h"
 
+#include <cmath>
 #include <fstream>
+#include <iostream>
 
 #include "core/error.h"
+#include "core/material_table.h"
+#include "mpm/world.h"
 #include "pbd/world.h"
 
 namespace physketch::app {
@@ -19,7 +23,12 @@ SolverSupport supportOf(SolverKind solver) {
       s.fixedBodies = true;
       break;
     case SolverKind::kMpm:
-      break;  // the MPM issue
+      // Kinds as run (solverModel): rigid and soft run as elastic.
+      s.kinds = {MaterialKind::kElastic, MaterialKind::kFluid, MaterialKind::kSand, MaterialKind::kSnow,
+                 MaterialKind::kPlasticine};
+      s.initialMotion = true;
+      s.fixedBodies = true;
+      break;
   }
   return s;
 }
@@ -62,17 +71,39 @@ Prepared prepare(const std::string& scenePath, int threads, bool forLint,
   return p;
 }
 
+namespace {
+
+// The MPM world on the sketch's particles (one particle per voxel, grid spacing 2 h). A time
+// step the explicit bound cannot meet within 1000 substeps is the scene's error, naming the
+// material; a fixed substep count above the bound is a warning naming bound and material.
+std::unique_ptr<Solver> makeMpm(const Prepared& p) {
+  const SceneDesc& sc = p.scene;
+  auto world = std::make_unique<mpm::MpmWorld>(p.sketch->particles, p.sketch->bodies, sc.materials,
+                                               mpm::paramsFromScene(sc, p.sketch->mapping.voxelSize()));
+  const mpm::StepBound b = world->waveBound();
+  if (b.material >= 0 && sc.dt / b.h > mpm::MpmWorld::kMaxSubsteps + 1e-9) {
+    const Material& m = sc.materials[static_cast<std::size_t>(b.material)];
+    throw InputError(sc.path, m.line, "kind",
+                     "material '" + m.name + "' needs " + std::to_string(long(std::ceil(sc.dt / b.h))) +
+                         " MPM substeps per step of dt = " + std::to_string(sc.dt) + " s (h <= C dx / c_p = " +
+                         std::to_string(b.h) + " s, c_p = " + std::to_string(b.waveSpeed) +
+                         " m/s), more than 1000: lower dt or the material's E");
+  }
+  for (const std::string& w : world->warnings()) std::cerr << "warning: " << sc.path << ":" << sc.substepsLine << ": " << w << "\n";
+  return world;
+}
+
+}  // namespace
+
 std::unique_ptr<Solver> makeSolver(const Prepared& p) {
   const SceneDesc& sc = p.scene;
   switch (sc.solver) {
     case SolverKind::kPbd:
       return std::make_unique<pbd::PbdWorld>(p.sketch->particles, p.sketch->bodies, sc.materials,
                                              pbd::paramsFromScene(sc, 0.5 * p.sketch->mapping.voxelSize()));
-    case SolverKind::kMpm:
-      break;
+    case SolverKind::kMpm: return makeMpm(p);
   }
-  throw InputError(sc.path, sc.solverLine, "name",
-                   std::string("solver ") + toString(sc.solver) + " is not available in this build yet (use pbd)");
+  throw InputError(sc.path, sc.solverLine, "name", std::string("solver ") + toString(sc.solver) + " is not available");
 }
 
 }  // namespace physketch::app

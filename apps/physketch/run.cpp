@@ -160,7 +160,7 @@ int printPlan(const PlanOptions& opt) {
     const SceneDesc& sc = p.scene;
     const std::map<std::string, double> ms = opt.afterDir.empty() ? std::map<std::string, double>{} : measuredMs(opt.afterDir);
     std::cout << "scene " << sc.path << ": " << p.sketch->particles.size() << " particles, " << solver->bodyCount()
-              << " bodies; solver " << solver->name() << ", dt " << sc.dt << " s, " << sc.substeps << " substeps, "
+              << " bodies; solver " << solver->name() << ", dt " << sc.dt << " s, " << (sc.substepsAuto ? std::string("auto") : std::to_string(sc.substeps)) << " substeps, "
               << sc.iterations << " iterations\n";
     std::cout << (opt.all ? "every pass of the step, at play:\n" : "per step, at play:\n");
     for (const auto& pass : opt.all ? solver->planAll() : solver->plan()) {
@@ -267,6 +267,7 @@ int runScene(const RunOptions& opt) {
     rep["sketch"] = sketchJson(p);
     rep["runtime"] = runtimeJson(sk, runtime);
     rep["solver"] = {{"name", solver->name()},  {"dt", sc.dt},         {"substeps", sc.substeps},
+                     {"substeps_auto", sc.substepsAuto},
                      {"iterations", sc.iterations}, {"steps", solver->stepCount()}, {"simulated_s", solver->time()},
                      {"validate", opt.validate}, {"plan", planJson(solver->plan())}};
     rep["passes"] = passesJson(solver->profile(), frameWriter ? &frameWriter->profile() : nullptr, written);

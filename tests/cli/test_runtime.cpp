@@ -252,6 +252,8 @@ TEST(Frames, ADeformingMaterialIsMeshedFromItsParticlesEveryFrameInPlace) {
   // longer: more triangles), it is meshed once per frame, and one mesh stays alive.
   EXPECT_EQ(app::surfaceOf(MaterialKind::kRigid), render::SurfaceKind::kRigidRestMesh);
   EXPECT_EQ(app::surfaceOf(MaterialKind::kSoft), render::SurfaceKind::kParticles);
+  // Under mpm, rigid runs as a stiff elastic that deforms: meshed from its particles.
+  EXPECT_EQ(app::surfaceOf(MaterialKind::kRigid, SolverKind::kMpm), render::SurfaceKind::kParticles);
   StretchingBlock block(kMap);
   SceneDesc sc;
   Material soft;

@@ -480,6 +480,30 @@ TEST(Scene, SolverIsPbdOrMpm) {
   EXPECT_EQ(sceneError("solver flip\n").field(), "name");
 }
 
+TEST(Scene, SubstepsAutoIsForSolverMpmOnly) {
+  std::string text = kGood;
+  text.replace(text.find("substeps 2"), 10, "substeps auto");
+  const SceneDesc s = parseScene(text + "solver mpm\n", "x.scene");
+  EXPECT_TRUE(s.substepsAuto);
+  EXPECT_EQ(s.substepsLine, 5);
+  EXPECT_FALSE(parseScene(std::string(kGood), "x.scene").substepsAuto);
+  try {
+    parseScene(text, "x.scene");  // solver pbd, the default
+    FAIL() << "substeps auto accepted under pbd";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.line(), 5);
+    EXPECT_EQ(e.field(), "count");
+    EXPECT_TRUE(mentions(e, "'substeps auto' needs solver mpm")) << e.what();
+  }
+  text.replace(text.find("substeps auto"), 13, "substeps often");
+  try {
+    parseScene(text + "solver mpm\n", "x.scene");
+    FAIL() << "substeps often accepted";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.field(), "count");
+  }
+}
+
 // --- docs/formats.md reproduces the tables in code: they must not drift ---
 
 namespace {

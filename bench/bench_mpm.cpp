@@ -1,0 +1,133 @@
+// MLS-MPM speed (mpm/world.h): particle-steps per second and ms per pass for cubes of
+// particles built through the solver API (not the sketch), so that results compare with
+// the peers' scripts (../shared/peers/mpm3d_taichi.py): a unit box, particles at spacing
+// dx/2 (8 per cell), dt = 2e-4 s, one substep per step.
+//   fluid_cube / corotated_cube: 64,000 particles (40^3) on a 64^3 grid, the peers' constants
+//     (rho = 1; fluid E = 400 as the bulk modulus, gamma = 1; fixed corotated E = 1000, nu = 0.2);
+//   elastic_cube / sand_cube: 262,144 particles (64^3) on a 128^3 grid (E = 1e4, nu = 0.2, rho = 1).
+// Prints CSV rows `bench,case,particles,threads,metric,value,unit`: particle_steps_per_s (the
+// median of --repeats timed runs of --steps steps, after one warm-up step), ms_<pass> per
+// step, and the process's peak resident memory after the case.
+//
+//   bench_mpm [--threads N] [--steps S] [--repeats R] [--only SUBSTRING]
+#include <sys/resource.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <tbb/global_control.h>
+
+#include "bench/bench_common.h"
+#include "core/material_table.h"
+#include "core/profile.h"
+#include "mpm/world.h"
+
+using namespace physketch;
+using physketch::bench::median;
+using physketch::bench::row;
+
+namespace {
+
+struct Case {
+  const char* name;
+  int side;       // particles per cube edge
+  int gridCells;  // grid cells across the unit box
+  Material material;
+};
+
+Material peerMaterial(MaterialKind kind, double E, double nu) {
+  Material m = makeMaterial(kind, "m");
+  m.density = 1.0;
+  m.elastic.youngs = E;
+  m.elastic.poisson = nu;
+  m.fluid.bulkModulus = E;  // mpm3d's fluid: p = E (1 - J), i.e. K = E, gamma = 1
+  m.fluid.gamma = 1.0;
+  m.fluid.viscosity = 0.0;
+  return m;
+}
+
+double peakRssMiB() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;
+}
+
+void runCase(const Case& c, int threads, int steps, int repeats) {
+  const double dx = 1.0 / c.gridCells, h = 0.5 * dx;
+  ParticleArrays p;
+  BodyRange body;
+  const double lo = 0.5 - 0.5 * c.side * h;  // a centred cube, like the peers' (they start at 0.25..0.3)
+  for (int i = 0; i < c.side; ++i)
+    for (int j = 0; j < c.side; ++j)
+      for (int k = 0; k < c.side; ++k)
+        p.push(float(lo + (i + 0.5) * h), float(lo + (j + 0.5) * h), float(lo + (k + 0.5) * h), 0, 0);
+  body.count = static_cast<std::int32_t>(p.size());
+  mpm::MpmParams q;
+  q.dt = 2e-4;
+  q.substeps = 1;
+  q.spacing = h;
+  q.domainMin = Vec3::Zero();
+  q.domainSize = 1.0;
+  q.maxSpeed = 1e3;
+  std::vector<double> rates;
+  std::vector<double> passMs;
+  std::vector<std::string> passNames;
+  for (int r = 0; r < repeats; ++r) {
+    mpm::MpmWorld w(p, {body}, {c.material}, q);
+    w.step();  // warm-up: first touch of the grid
+    const double t0 = nowSeconds();
+    for (int s = 0; s < steps; ++s)
+      if (!w.step()) {
+        std::fprintf(stderr, "bench_mpm %s: %s\n", c.name, w.guard().message().c_str());
+        std::exit(2);
+      }
+    const double t = nowSeconds() - t0;
+    rates.push_back(double(p.size()) * steps / t);
+    if (r == 0) {
+      for (const auto& e : w.profile().entries()) {
+        passNames.push_back(e.name);
+        passMs.push_back(e.calls > 0 ? 1e3 * e.seconds / double(steps + 1) : 0.0);
+      }
+    }
+  }
+  row("mpm", c.name, p.size(), threads, "particle_steps_per_s", median(rates), "1/s");
+  for (std::size_t k = 0; k < passNames.size(); ++k)
+    if (passMs[k] > 0.0) row("mpm", c.name, p.size(), threads, ("ms_" + passNames[k]).c_str(), passMs[k], "ms");
+  row("mpm", c.name, p.size(), threads, "peak_rss", peakRssMiB(), "MiB");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int threads = 1, steps = 20, repeats = 3;
+  std::string only;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool more = i + 1 < argc;
+    if (a == "--threads" && more) threads = std::atoi(argv[++i]);
+    else if (a == "--steps" && more) steps = std::atoi(argv[++i]);
+    else if (a == "--repeats" && more) repeats = std::atoi(argv[++i]);
+    else if (a == "--only" && more) only = argv[++i];
+    else {
+      std::fprintf(stderr, "usage: bench_mpm [--threads N] [--steps S] [--repeats R] [--only SUBSTRING]\n");
+      return 1;
+    }
+  }
+  if (threads < 1 || steps < 1 || repeats < 1) {
+    std::fprintf(stderr, "bench_mpm: --threads, --steps and --repeats must be >= 1\n");
+    return 1;
+  }
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+  const std::vector<Case> cases = {
+      {"fluid_cube", 40, 64, peerMaterial(MaterialKind::kFluid, 400.0, 0.2)},
+      {"corotated_cube", 40, 64, peerMaterial(MaterialKind::kElastic, 1000.0, 0.2)},
+      {"elastic_cube", 64, 128, peerMaterial(MaterialKind::kElastic, 1e4, 0.2)},
+      {"sand_cube", 64, 128, peerMaterial(MaterialKind::kSand, 1e4, 0.2)},
+  };
+  for (const Case& c : cases)
+    if (only.empty() || std::string(c.name).find(only) != std::string::npos) runCase(c, threads, steps, repeats);
+  return 0;
+}

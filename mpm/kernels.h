@@ -1,0 +1,77 @@
+// The small kernels the MPM passes share (internal to mpm/): fixed-chunk parallel loops,
+// quadratic B-spline weights, a particle's stencil base, and the wall conditions.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+#include <tbb/parallel_for.h>
+
+#include "mpm/world.h"
+
+namespace physketch::mpm::detail {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr int kBlock = 4;        // cells per block edge (P2G's unit of work)
+constexpr std::size_t kChunk = 4096;  // per-particle loops: fixed chunks, serial below one chunk
+
+template <class F>
+inline void forRange(std::size_t n, F&& f) {
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  if (chunks <= 1) {
+    if (n > 0) f(std::size_t(0), n);
+    return;
+  }
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) { f(j * kChunk, std::min(n, (j + 1) * kChunk)); });
+}
+
+template <class F>
+inline void forEach(std::size_t n, F&& f) {
+  if (n == 1) f(std::size_t(0));
+  else if (n > 1) tbb::parallel_for(std::size_t(0), n, f);
+}
+
+// Quadratic B-spline weights (Hu et al. 2018 §5; Jiang et al. 2016 Eq. 123) of the three nodes
+// base, base+1, base+2 for a particle at fractional offset f = x/dx - base in [0.5, 1.5).
+inline void bsplineWeights(float f, float w[3]) {
+  w[0] = 0.5f * (1.5f - f) * (1.5f - f);
+  w[1] = 0.75f - (f - 1.0f) * (f - 1.0f);
+  w[2] = 0.5f * (f - 0.5f) * (f - 0.5f);
+}
+
+// Coulomb friction on a node velocity whose normal part vn < 0 was removed: the tangential
+// part t stops when |t| <= mus |vn| (static), else loses muk |vn| of its length (dynamic).
+inline void applyFriction(float v[3], int axis, float vn, float mus, float muk) {
+  float t2 = 0.0f;
+  for (int a = 0; a < 3; ++a)
+    if (a != axis) t2 += v[a] * v[a];
+  if (t2 <= 0.0f) return;
+  const float t = std::sqrt(t2);
+  const float scale = t <= mus * (-vn) ? 0.0f : std::max(0.0f, 1.0f - muk * (-vn) / t);
+  for (int a = 0; a < 3; ++a)
+    if (a != axis) v[a] *= scale;
+}
+
+// A wall with inward normal +axis (side = +1) or -axis (side = -1) acting on a node velocity.
+inline void applyWall(float v[3], int axis, float side, WallKind kind, float mus, float muk) {
+  const float vn = side * v[axis];
+  switch (kind) {
+    case WallKind::kSticky: v[0] = v[1] = v[2] = 0.0f; break;
+    case WallKind::kSlip: v[axis] = 0.0f; break;
+    case WallKind::kSeparate:
+      if (vn < 0.0f) {
+        v[axis] = 0.0f;
+        applyFriction(v, axis, vn, mus, muk);
+      }
+      break;
+  }
+}
+
+// The lowest node of a particle's 3-node stencil along one axis: floor(x/dx - 1/2), clamped
+// so that base + 2 is still a node of the grid (nodes 0..n-1): no write ever leaves the grid.
+inline int stencilBase(float fromOrigin, float invDx, int n) {
+  return std::clamp(int(std::floor(fromOrigin * invDx - 0.5f)), 0, n - 3);
+}
+
+}  // namespace physketch::mpm::detail

@@ -1,0 +1,688 @@
+#include "mpm/world.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <Eigen/Eigenvalues>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+#include "core/material_table.h"
+#include "mpm/constitutive.h"
+#include "mpm/kernels.h"
+#include "mpm/plasticity.h"
+
+namespace physketch::mpm {
+
+using namespace detail;
+
+const PassSpec kMpmPasses[static_cast<int>(MpmPass::kCount)] = {
+    {"p2g", Cadence::kPerSubstep,
+     "sort particles by grid block; scatter mass and APIC momentum with the stress term -h V 4/dx^2 tau (Hu 2018 Eq. 16)"},
+    {"grid_update", Cadence::kPerSubstep,
+     "grid velocities v = mv/m + h g; held nodes, walls and ground (sticky, slip or separate with friction)"},
+    {"g2p", Cadence::kPerSubstep,
+     "particle v and affine C = 4/dx^2 sum w v (x_i - x_p)^T from the grid, x += h v, F <- (I + h C) F"},
+    {"projection", Cadence::kPerSubstep, "particles past a wall or the ground put back on it (VR-Doh Alg. 1 line 4)"},
+    {"plasticity", Cadence::kPerSubstep,
+     "return maps on F: Drucker-Prager (sand), von Mises (plasticine), snow clamp with J_p hardening"},
+    {"guard", Cadence::kPerStep, "first NaN, explosion, inverted F (J <= 0) or particle faster than a cell per substep"},
+};
+
+namespace {
+
+constexpr int kPad = 3;          // grid cells beyond each wall: the B-spline stencil of a particle on the wall
+
+void hashBytes(std::uint64_t& h, const void* data, std::size_t n) {
+  const auto* b = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < n; ++i) {
+    h ^= b[i];
+    h *= 1099511628211ull;  // FNV-1a
+  }
+}
+
+Eigen::Matrix3f skew(const Vec3& w) {
+  Eigen::Matrix3f m;
+  m << 0.0f, float(-w.z()), float(w.y()), float(w.z()), 0.0f, float(-w.x()), float(-w.y()), float(w.x()), 0.0f;
+  return m;
+}
+
+std::string num(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+
+}  // namespace
+
+const char* toString(WallKind kind) {
+  switch (kind) {
+    case WallKind::kSticky: return "sticky";
+    case WallKind::kSlip: return "slip";
+    case WallKind::kSeparate: return "separate";
+  }
+  return "?";
+}
+
+MpmParams paramsFromScene(const SceneDesc& scene, double spacing) {
+  MpmParams p;
+  p.dt = scene.dt;
+  p.substeps = scene.substepsAuto ? 0 : scene.substeps;
+  p.gravity = scene.gravity;
+  p.groundY = scene.groundY;
+  p.spacing = spacing;
+  p.domainSize = scene.workspaceSize;
+  p.domainMin = scene.workspaceCenter - Vec3::Constant(0.5 * scene.workspaceSize);
+  return p;
+}
+
+// --- construction ------------------------------------------------------------------
+
+MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodies, std::vector<Material> materials,
+                   const MpmParams& params)
+    : params_(params), parts_(std::move(particles)), materials_(std::move(materials)) {
+  if (!(params_.dt > 0) || params_.substeps < 0 || params_.substeps > kMaxSubsteps || !(params_.spacing > 0) ||
+      !(params_.dxPerSpacing > 0) || !(params_.domainSize > 0) || !params_.domainMin.allFinite() ||
+      !params_.gravity.allFinite() || !std::isfinite(params_.groundY))
+    throw RuntimeError("MpmWorld: dt, spacing, grid and domain must be positive and finite, substeps in [0, 1000]");
+  for (const Material& m : materials_) {
+    const SolverModel sm = solverModel(m.kind, SolverKind::kMpm);
+    if (!sm.simulated) throw RuntimeError("MpmWorld: material '" + m.name + "' is kind " + toString(m.kind) + ", which mpm does not simulate");
+    const Material r = asRunBy(m, SolverKind::kMpm);
+    MatModel mm;
+    mm.kind = r.kind;
+    mm.elastic = r.elastic.model;
+    const Lame l = lameFromYoungs(r.elastic.youngs, r.elastic.poisson);
+    mm.mu = float(l.mu);
+    mm.lambda = float(l.lambda);
+    mm.mass = float(r.density * params_.spacing * params_.spacing * params_.spacing);
+    mm.mus = float(r.staticFriction);
+    mm.muk = float(r.dynamicFriction);
+    mm.frictionDeg = float(r.sand.frictionAngleDeg);
+    mm.hardeningDeg = float(r.sand.hardening);
+    mm.alpha = float(druckerPragerAlpha(r.sand.frictionAngleDeg * kPi / 180.0));
+    mm.shift = float(cohesionStrain(r.sand.cohesion, l.mu, l.lambda));
+    mm.thetaC = float(r.snow.thetaC);
+    mm.thetaS = float(r.snow.thetaS);
+    mm.xi = float(r.snow.hardening);
+    mm.yield = float(r.plasticine.yieldStress);
+    mm.bulk = float(r.fluid.bulkModulus);
+    mm.gamma = float(r.fluid.gamma);
+    mm.viscosity = float(r.fluid.viscosity);
+    mm.plastic = r.kind == MaterialKind::kSand || r.kind == MaterialKind::kSnow || r.kind == MaterialKind::kPlasticine;
+    models_.push_back(mm);
+  }
+  initGrid();
+  const std::size_t n = parts_.size();
+  C_.assign(n, Eigen::Matrix3f::Zero());
+  F_.assign(n, Eigen::Matrix3f::Identity());
+  plastic_.assign(n, 0.0f);
+  for (std::size_t i = 0; i < n; ++i) initParticle(i);
+  for (const BodyRange& br : bodies) {
+    if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
+      throw RuntimeError("MpmWorld: body " + std::to_string(members_.size()) + " has an invalid particle range");
+    std::vector<std::int32_t> ids(static_cast<std::size_t>(br.count));
+    for (std::int32_t k = 0; k < br.count; ++k) ids[std::size_t(k)] = br.first + k;
+    const int b = static_cast<int>(members_.size());
+    members_.push_back(ids);
+    mode_.push_back(BodyMode::kDynamic);
+    carry_.push_back(Vec3::Zero());
+    for (std::int32_t i : ids) parts_.phase[std::size_t(i)] = phase::make(b);
+    if (br.init.fixed) setMode(b, BodyMode::kFixed);
+    else applyInit(ids, br.init);
+  }
+  // Particles outside every body (none from the sketch) simulate as free material.
+  if (params_.substeps > 0) {
+    const StepBound b = waveBound();
+    const double h = params_.dt / params_.substeps;
+    if (b.material >= 0 && h > b.h) {
+      const int need = int(std::ceil(params_.dt / b.h - 1e-9));
+      warnings_.push_back("substeps " + std::to_string(params_.substeps) + ": h = dt/substeps = " + num(h) +
+                          " s is above the explicit bound h <= C dx / c_p = " + num(b.h) + " s of material '" +
+                          materials_[std::size_t(b.material)].name + "' (c_p = " + num(b.waveSpeed) + " m/s, C = " +
+                          num(params_.waveCourant) + ", dx = " + num(dx_) + " m): raise substeps to " +
+                          std::to_string(need) + " or write 'substeps auto'");
+    }
+  }
+}
+
+void MpmWorld::initGrid() {
+  dx_ = params_.dxPerSpacing * params_.spacing;
+  const int cells = int(std::ceil(params_.domainSize / dx_ - 1e-9));
+  if (cells < 1 || cells > 4096) throw RuntimeError("MpmWorld: the domain spans " + std::to_string(cells) + " grid cells (1..4096)");
+  n_ = cells + 2 * kPad + 1;
+  n_ = (n_ + kBlock - 1) / kBlock * kBlock;
+  nb_ = n_ / kBlock;
+  origin_ = params_.domainMin - Vec3::Constant(kPad * dx_);
+  const Vec3 lo = params_.domainMin, hi = params_.domainMin + Vec3::Constant(params_.domainSize);
+  for (int a = 0; a < 3; ++a) {
+    wallLo_[a] = int(std::floor((lo[a] - origin_[a]) / dx_ + 1e-4));
+    wallHi_[a] = int(std::ceil((hi[a] - origin_[a]) / dx_ - 1e-4));
+    lo_[a] = float(lo[a]);
+    hi_[a] = float(hi[a]);
+  }
+  // The ground acts where it is inside the domain; below it, the floor wall does.
+  if (params_.groundY > lo.y()) {
+    const double g = std::min(params_.groundY, hi.y());
+    groundNode_ = int(std::floor((g - origin_.y()) / dx_ + 1e-4));
+    lo_[1] = float(g);
+  }
+  const std::size_t nodes = std::size_t(n_) * std::size_t(n_) * std::size_t(n_);
+  gm_.assign(nodes, 0.0f);
+  gx_.assign(nodes, 0.0f);
+  gy_.assign(nodes, 0.0f);
+  gz_.assign(nodes, 0.0f);
+  gfs_.assign(nodes, 0.0f);
+  gfk_.assign(nodes, 0.0f);
+  held_.assign(nodes, 0);
+  nodeBlockMark_.assign(std::size_t(nb_) * nb_ * nb_, 0);
+}
+
+// Mass, state and a position inside the walls (the grid has no node outside them to write).
+void MpmWorld::initParticle(std::size_t i) {
+  const auto m = static_cast<std::size_t>(parts_.material[i]);
+  if (m >= models_.size()) throw RuntimeError("MpmWorld: particle " + std::to_string(i) + " has an unknown material");
+  parts_.mass[i] = models_[m].mass;
+  C_[i].setZero();
+  F_[i].setIdentity();
+  plastic_[i] = models_[m].kind == MaterialKind::kSand ? 0.0f : 1.0f;  // q = 0; snow J_p = 1; fluid J = 1
+  float* pos[3] = {&parts_.x[i], &parts_.y[i], &parts_.z[i]};
+  for (int a = 0; a < 3; ++a) *pos[a] = std::clamp(*pos[a], lo_[a], hi_[a]);
+}
+
+std::size_t MpmWorld::nodeIndex(int i, int j, int k) const {
+  const std::size_t block = (std::size_t(i >> 2) * std::size_t(nb_) + std::size_t(j >> 2)) * std::size_t(nb_) + std::size_t(k >> 2);
+  return block * 64 + std::size_t(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
+}
+
+Vec3 MpmWorld::centreOfMass(std::size_t b) const {
+  double m = 0.0;
+  Vec3 c = Vec3::Zero();
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    m += parts_.mass[k];
+    c += double(parts_.mass[k]) * Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
+  }
+  return m > 0.0 ? Vec3(c / m) : Vec3::Zero();
+}
+
+// v = v0 + w x (x - c) per particle, and C = [w]x: the APIC affine field of that motion.
+void MpmWorld::applyInit(const std::vector<std::int32_t>& ids, const BodyInit& init) {
+  const auto b = static_cast<std::size_t>(parts_.group(std::size_t(ids.front())));
+  const Vec3 c = centreOfMass(b);
+  const Eigen::Matrix3f W = skew(init.spin);
+  for (std::int32_t i : ids) {
+    const auto k = std::size_t(i);
+    const Vec3 v = init.velocity + init.spin.cross(Vec3(parts_.x[k], parts_.y[k], parts_.z[k]) - c);
+    parts_.vx[k] = float(v.x());
+    parts_.vy[k] = float(v.y());
+    parts_.vz[k] = float(v.z());
+    C_[k] = W;
+  }
+}
+
+// --- bodies ------------------------------------------------------------------------
+
+BodyPose MpmWorld::pose(int body) const {
+  BodyPose p;
+  p.centre = p.restCentre = centreOfMass(std::size_t(body));
+  return p;
+}
+
+Vec3 MpmWorld::velocity(int body) const {
+  double m = 0.0;
+  Vec3 p = Vec3::Zero();
+  for (std::int32_t i : members_.at(std::size_t(body))) {
+    const auto k = std::size_t(i);
+    m += parts_.mass[k];
+    p += double(parts_.mass[k]) * Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
+  }
+  return m > 0.0 ? Vec3(p / m) : Vec3::Zero();
+}
+
+// w = I^-1 L about the centre of mass, from the particles as points (a rigid rotation w x r
+// gives back w exactly); a body too thin for that (one particle, a line) adds each particle's
+// own cube inertia m h^2/6 so that I stays invertible.
+Vec3 MpmWorld::angularVelocity(int body) const {
+  const Vec3 c = centreOfMass(std::size_t(body));
+  Mat3 I = Mat3::Zero();
+  Vec3 L = Vec3::Zero();
+  double cube = 0.0;
+  const double h2 = params_.spacing * params_.spacing;
+  for (std::int32_t i : members_.at(std::size_t(body))) {
+    const auto k = std::size_t(i);
+    const double m = parts_.mass[k];
+    const Vec3 r = Vec3(parts_.x[k], parts_.y[k], parts_.z[k]) - c;
+    L += m * r.cross(Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]));
+    I += m * (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+    cube += m * h2 / 6.0;
+  }
+  if (!(cube > 0.0)) return Vec3::Zero();
+  const Eigen::SelfAdjointEigenSolver<Mat3> eig(I);
+  if (!(eig.eigenvalues().minCoeff() > 1e-6 * eig.eigenvalues().maxCoeff())) I += cube * Mat3::Identity();
+  return I.ldlt().solve(L);
+}
+
+int MpmWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kinematic) {
+  const BodyInit& init = shape.init;
+  if (p.size() == 0) throw RuntimeError("MpmWorld::addBody: a body needs particles");
+  const int b = static_cast<int>(members_.size());
+  std::vector<std::int32_t> ids;
+  ids.reserve(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (p.material[i] < 0 || static_cast<std::size_t>(p.material[i]) >= models_.size())
+      throw RuntimeError("MpmWorld::addBody: unknown material index");
+    const std::int32_t id = parts_.push(p.x[i], p.y[i], p.z[i], p.stroke[i], p.material[i]);
+    C_.push_back(Eigen::Matrix3f::Zero());
+    F_.push_back(Eigen::Matrix3f::Identity());
+    plastic_.push_back(1.0f);
+    initParticle(std::size_t(id));
+    parts_.phase[std::size_t(id)] = phase::make(b);
+    ids.push_back(id);
+  }
+  members_.push_back(ids);
+  mode_.push_back(BodyMode::kDynamic);
+  carry_.push_back(Vec3::Zero());
+  if (kinematic) setMode(b, BodyMode::kKinematic);
+  else if (init.fixed) setMode(b, BodyMode::kFixed);
+  else applyInit(ids, init);
+  return b;
+}
+
+// Fixed and carried bodies are prescribed (infinite mass): they do not scatter to the grid;
+// the nodes they touch take their velocity (sticky). A released carried body keeps the
+// velocity of its last prescribed motion.
+void MpmWorld::setMode(int body, BodyMode mode) {
+  const auto b = static_cast<std::size_t>(body);
+  if (mode_.at(b) == BodyMode::kEmpty || mode == BodyMode::kEmpty) return;
+  const BodyMode before = mode_[b];
+  mode_[b] = mode;
+  const std::uint32_t flags = mode == BodyMode::kDynamic ? 0u : phase::kPrescribed;
+  const Vec3 v = before == BodyMode::kKinematic && mode == BodyMode::kDynamic ? carry_[b] : Vec3::Zero();
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    parts_.phase[k] = phase::make(body, flags);
+    if (mode != BodyMode::kDynamic || before != BodyMode::kDynamic) {
+      parts_.vx[k] = float(v.x());
+      parts_.vy[k] = float(v.y());
+      parts_.vz[k] = float(v.z());
+      C_[k].setZero();
+    }
+  }
+  carry_[b] = Vec3::Zero();
+}
+
+void MpmWorld::setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) {
+  const auto b = static_cast<std::size_t>(body);
+  if (mode_.at(b) != BodyMode::kDynamic) throw RuntimeError("MpmWorld::setVelocity: body is not dynamic");
+  if (!velocity.allFinite() || !angularVelocity.allFinite()) throw RuntimeError("MpmWorld::setVelocity: not finite");
+  if (members_[b].empty()) return;
+  BodyInit init;
+  init.velocity = velocity;
+  init.spin = angularVelocity;
+  applyInit(members_[b], init);
+}
+
+// The body's particles move by (centre - current centre of mass) over the next step.
+void MpmWorld::setKinematicTarget(int body, const Vec3& centre) {
+  const auto b = static_cast<std::size_t>(body);
+  if (mode_.at(b) != BodyMode::kKinematic) throw RuntimeError("MpmWorld::setKinematicTarget: body is not kinematic");
+  if (!centre.allFinite()) throw RuntimeError("MpmWorld::setKinematicTarget: not finite");
+  const Vec3 v = (centre - centreOfMass(b)) / params_.dt;
+  carry_[b] = v;
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    parts_.vx[k] = float(v.x());
+    parts_.vy[k] = float(v.y());
+    parts_.vz[k] = float(v.z());
+  }
+}
+
+std::vector<int> MpmWorld::removeParticles(const std::vector<std::int32_t>& ids) {
+  std::vector<int> changed;
+  for (std::int32_t i : ids) {
+    if (i < 0 || static_cast<std::size_t>(i) >= parts_.size() || !alive(i)) continue;
+    const auto k = std::size_t(i);
+    const int b = parts_.group(k);
+    parts_.phase[k] = phase::make(-1, phase::kRemoved | phase::kPrescribed);
+    parts_.vx[k] = parts_.vy[k] = parts_.vz[k] = 0.0f;
+    if (b >= 0 && std::find(changed.begin(), changed.end(), b) == changed.end()) changed.push_back(b);
+  }
+  std::sort(changed.begin(), changed.end());
+  for (int b : changed) {
+    auto& mem = members_[std::size_t(b)];
+    mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
+    if (mem.empty()) mode_[std::size_t(b)] = BodyMode::kEmpty;
+  }
+  return changed;
+}
+
+// --- time step bounds --------------------------------------------------------------
+
+// c_p = sqrt((lambda + 2 mu) / rho) for the solids (snow with its current largest hardening
+// factor), sqrt(K / rho0 J_min^(1 - gamma)) for the Tait fluid (the sound speed at its most
+// compressed particle), and the explicit viscous bound h <= rho dx^2 / (6 mu_v).
+StepBound MpmWorld::waveBound() const {
+  std::vector<char> used(models_.size(), 0);
+  std::vector<float> snowFactor(models_.size(), 1.0f), fluidJ(models_.size(), 1.0f);
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!phase::dynamic(parts_.phase[i])) continue;
+    const auto m = std::size_t(parts_.material[i]);
+    used[m] = 1;
+    if (models_[m].kind == MaterialKind::kSnow)
+      snowFactor[m] = std::max(snowFactor[m], snowHardening(models_[m].xi, plastic_[i]));
+    if (models_[m].kind == MaterialKind::kFluid) fluidJ[m] = std::min(fluidJ[m], std::max(plastic_[i], 1e-3f));
+  }
+  StepBound best;
+  best.h = std::numeric_limits<double>::infinity();
+  for (std::size_t m = 0; m < models_.size(); ++m) {
+    if (!used[m]) continue;
+    const MatModel& mm = models_[m];
+    const double rho = materials_[m].density;
+    double c2;
+    double h = std::numeric_limits<double>::infinity();
+    if (mm.kind == MaterialKind::kFluid) {
+      c2 = double(mm.bulk) / rho * std::pow(double(fluidJ[m]), 1.0 - double(mm.gamma));
+      if (mm.viscosity > 0.0f) h = rho * dx_ * dx_ / (6.0 * double(mm.viscosity));
+    } else {
+      c2 = double(snowFactor[m]) * (double(mm.lambda) + 2.0 * double(mm.mu)) / rho;
+    }
+    const double c = std::sqrt(c2);
+    h = std::min(h, params_.waveCourant * dx_ / c);
+    if (h < best.h) best = StepBound{h, c, int(m)};
+  }
+  return best;
+}
+
+int MpmWorld::substepsForNextStep() const {
+  if (params_.substeps > 0) return params_.substeps;
+  const StepBound b = waveBound();
+  float vmax2 = 0.0f;
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!phase::dynamic(parts_.phase[i])) continue;
+    const float v2 = parts_.vx[i] * parts_.vx[i] + parts_.vy[i] * parts_.vy[i] + parts_.vz[i] * parts_.vz[i];
+    vmax2 = std::max(vmax2, v2);
+  }
+  // The fastest particle may speed up by |g| dt within the step.
+  const double vmax = std::sqrt(double(vmax2)) + params_.gravity.norm() * params_.dt;
+  double h = b.h;
+  if (vmax > 0.0) h = std::min(h, params_.velocityCourant * dx_ / vmax);
+  if (!std::isfinite(h)) return 1;
+  const double n = std::ceil(params_.dt / h - 1e-9);
+  if (n > kMaxSubsteps) return 0;
+  return std::max(1, int(n));
+}
+
+// --- the plan ----------------------------------------------------------------------
+
+std::vector<bool> MpmWorld::work() const {
+  std::vector<bool> on(static_cast<std::size_t>(MpmPass::kCount), false);
+  bool dynamic = false, plastic = false, any = false;
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    any = any || !phase::has(parts_.phase[i], phase::kRemoved);
+    if (!phase::dynamic(parts_.phase[i])) continue;
+    dynamic = true;
+    plastic = plastic || models_[std::size_t(parts_.material[i])].plastic;
+  }
+  const bool carried = std::count(mode_.begin(), mode_.end(), BodyMode::kKinematic) > 0;
+  on[int(MpmPass::kP2G)] = dynamic;
+  on[int(MpmPass::kGridUpdate)] = dynamic;
+  on[int(MpmPass::kG2P)] = dynamic || carried;
+  on[int(MpmPass::kProjection)] = dynamic;
+  on[int(MpmPass::kPlasticity)] = plastic;
+  on[int(MpmPass::kGuard)] = any;
+  return on;
+}
+
+std::string MpmWorld::reason(MpmPass pass, bool on) const {
+  std::vector<std::string> names;
+  for (std::size_t m = 0; m < models_.size(); ++m) {
+    bool used = false;
+    for (std::size_t i = 0; i < parts_.size() && !used; ++i)
+      used = phase::dynamic(parts_.phase[i]) && std::size_t(parts_.material[i]) == m &&
+             (pass != MpmPass::kPlasticity || models_[m].plastic);
+    if (used) names.push_back(materials_[m].name + " (" + toString(models_[m].kind) + ")");
+  }
+  std::string list;
+  for (const auto& s : names) list += (list.empty() ? "" : ", ") + s;
+  switch (pass) {
+    case MpmPass::kP2G:
+    case MpmPass::kG2P:
+      return on ? "materials " + list : "no dynamic particle (all fixed, held or removed)";
+    case MpmPass::kGridUpdate:
+      return on ? std::string("gravity, ") + toString(params_.walls) +
+                      " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY)
+                : "no dynamic particle";
+    case MpmPass::kProjection: return on ? "walls and ground" : "no dynamic particle";
+    case MpmPass::kPlasticity:
+      return on ? "plastic materials " + list : "no dynamic particle of a plastic kind (sand, snow, plasticine)";
+    case MpmPass::kGuard: return on ? "checks every step" : "no particles";
+    case MpmPass::kCount: break;
+  }
+  return "";
+}
+
+std::string MpmWorld::touches(MpmPass pass) const {
+  long dyn = 0, plastic = 0;
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!phase::dynamic(parts_.phase[i])) continue;
+    ++dyn;
+    plastic += models_[std::size_t(parts_.material[i])].plastic;
+  }
+  const long cells = long(n_) * n_ * n_;
+  switch (pass) {
+    case MpmPass::kGridUpdate:
+      return "the nodes near " + std::to_string(dyn) + " particles (grid " + std::to_string(n_) + "^3 = " +
+             std::to_string(cells) + " nodes, dx = " + num(dx_) + " m)";
+    case MpmPass::kPlasticity: return std::to_string(plastic) + " particles";
+    default: return std::to_string(dyn) + " particles";
+  }
+}
+
+std::vector<PlanEntry> MpmWorld::planAll() const {
+  std::vector<PlanEntry> out;
+  const std::vector<bool> on = work();
+  const int s = substepsForNextStep();
+  std::string runs;
+  if (params_.substeps > 0) {
+    runs = "substeps = " + std::to_string(s);
+  } else {
+    const StepBound b = waveBound();
+    runs = "substeps auto = " + (s > 0 ? std::to_string(s) : std::string("more than 1000")) + " now";
+    if (b.material >= 0)
+      runs += " (h <= " + num(b.h) + " s from material " + materials_[std::size_t(b.material)].name + ", c_p = " +
+              num(b.waveSpeed) + " m/s)";
+  }
+  for (int k = 0; k < int(MpmPass::kCount); ++k) {
+    const PassSpec& spec = kMpmPasses[k];
+    PlanEntry e;
+    e.pass = k;
+    e.name = spec.name;
+    e.does = spec.does;
+    e.on = on[std::size_t(k)];
+    e.runs = spec.cadence == Cadence::kPerSubstep ? runs : "once";
+    e.perStep = e.on ? (spec.cadence == Cadence::kPerSubstep ? s : 1) : 0;
+    e.reason = reason(MpmPass(k), e.on);
+    if (e.on) e.touches = touches(MpmPass(k));
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+std::vector<PlanEntry> MpmWorld::plan() const {
+  std::vector<PlanEntry> out;
+  for (PlanEntry& e : planAll())
+    if (e.on) out.push_back(std::move(e));
+  return out;
+}
+
+// --- the step and its guard ----------------------------------------------------------
+
+struct MpmWorld::Saved {
+  std::vector<float> x, y, z, vx, vy, vz, plastic;
+  std::vector<Eigen::Matrix3f> C, F;
+  std::int64_t stopped = 0;
+};
+
+GuardRecord MpmWorld::check(MpmPass pass) const {
+  GuardRecord r = checkParticles(parts_, params_.maxSpeed);
+  if (r.tripped()) return r;
+  const auto fill = [&](std::size_t i, GuardKind kind, double value, double bound, const char* hint) {
+    r.kind = kind;
+    r.particle = static_cast<std::int32_t>(i);
+    r.body = parts_.group(i);
+    r.stroke = parts_.stroke[i];
+    r.value = value;
+    r.bound = bound;
+    r.hint = hint;
+  };
+  // J is checked after the passes that change F (g2p, plasticity) and at the end of the step.
+  if (pass == MpmPass::kG2P || pass == MpmPass::kPlasticity || pass == MpmPass::kGuard)
+    for (std::size_t i = 0; i < parts_.size(); ++i) {
+      if (!phase::dynamic(parts_.phase[i])) continue;
+      const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
+      const float J = fluid ? plastic_[i] : F_[i].determinant();
+      if (!(J > 0.0f)) {
+        fill(i, GuardKind::kInverted, J, 0.0,
+             "The deformation gradient inverted (J <= 0): write 'substeps auto' or raise 'substeps', or lower 'dt'.");
+        return r;
+      }
+    }
+  // Moving more than one cell per substep breaks the transfer's locality (Hu et al. 2018 §5).
+  if (lastSubsteps_ > 0 && (pass == MpmPass::kG2P || pass == MpmPass::kGuard)) {
+    const double h = params_.dt / lastSubsteps_;
+    const double vmax = dx_ / h;
+    for (std::size_t i = 0; i < parts_.size(); ++i) {
+      if (!phase::dynamic(parts_.phase[i])) continue;
+      const double v2 = double(parts_.vx[i]) * parts_.vx[i] + double(parts_.vy[i]) * parts_.vy[i] +
+                        double(parts_.vz[i]) * parts_.vz[i];
+      if (v2 > vmax * vmax) {
+        fill(i, GuardKind::kCfl, std::sqrt(v2), vmax,
+             "A particle moves more than one grid cell per substep (speed above dx/h): write 'substeps auto' or raise "
+             "'substeps'.");
+        return r;
+      }
+    }
+  }
+  return r;
+}
+
+template <class F>
+bool MpmWorld::runPass(MpmPass pass, int substep, bool checkNow, F&& f) {
+  {
+    ScopedPass t(profile_, pass);
+    f();
+  }
+  if (!checkNow) return true;
+  GuardRecord r = check(pass);
+  if (!r.tripped()) return true;
+  r.pass = kMpmPasses[int(pass)].name;
+  r.step = steps_;
+  r.substep = substep;
+  guard_ = std::move(r);
+  return false;
+}
+
+bool MpmWorld::runStep(int substeps, bool checkEachPass) {
+  const float h = float(params_.dt / substeps);
+  const auto runs = [&](MpmPass p) { return bool(work_[std::size_t(p)]); };
+  for (int s = 0; s < substeps; ++s) {
+    if (runs(MpmPass::kP2G) && !runPass(MpmPass::kP2G, s, checkEachPass, [&] { p2g(h); })) return false;
+    if (runs(MpmPass::kGridUpdate) && !runPass(MpmPass::kGridUpdate, s, checkEachPass, [&] { gridUpdate(h); }))
+      return false;
+    if (runs(MpmPass::kG2P) && !runPass(MpmPass::kG2P, s, checkEachPass, [&] { g2p(h); })) return false;
+    if (runs(MpmPass::kProjection) && !runPass(MpmPass::kProjection, s, checkEachPass, [&] { projection(); }))
+      return false;
+    if (runs(MpmPass::kPlasticity) && !runPass(MpmPass::kPlasticity, s, checkEachPass, [&] { plasticity(); }))
+      return false;
+  }
+  return true;
+}
+
+bool MpmWorld::step() {
+  if (guard_.tripped()) return false;
+  work_ = work();
+  const int substeps = substepsForNextStep();
+  if (substeps == 0) {
+    // `substeps auto` would need more than kMaxSubsteps: name the material that sets the bound.
+    const StepBound b = waveBound();
+    guard_.kind = GuardKind::kCfl;
+    guard_.pass = "guard";
+    guard_.step = steps_;
+    guard_.value = params_.dt / kMaxSubsteps;
+    guard_.bound = b.h;
+    if (b.material >= 0) guard_.material = materials_[std::size_t(b.material)].name;
+    guard_.hint = "The time-step bound needs more than 1000 substeps per step: lower 'dt' (or the material's E).";
+    return false;
+  }
+  lastSubsteps_ = substeps;
+  if (validate_) {
+    runStep(substeps, true);
+  } else {
+    Saved start{parts_.x, parts_.y, parts_.z, parts_.vx, parts_.vy, parts_.vz, plastic_, C_, F_, stopped_};
+    runStep(substeps, false);
+    if (work_[std::size_t(MpmPass::kGuard)]) {
+      GuardRecord r;
+      {
+        ScopedPass t(profile_, MpmPass::kGuard);
+        r = check(MpmPass::kGuard);
+      }
+      if (r.tripped()) {
+        // Replay the step from its start with a check after every pass, so the record names
+        // the pass that produced the bad value (the step is deterministic).
+        parts_.x = start.x, parts_.y = start.y, parts_.z = start.z;
+        parts_.vx = start.vx, parts_.vy = start.vy, parts_.vz = start.vz;
+        plastic_ = start.plastic, C_ = start.C, F_ = start.F, stopped_ = start.stopped;
+        if (runStep(substeps, true)) {
+          r.pass = "guard";
+          r.step = steps_;
+          guard_ = std::move(r);
+        }
+      }
+    }
+  }
+  // A carried body moved to its target: it stays there until given the next one.
+  for (std::size_t b = 0; b < members_.size(); ++b)
+    if (mode_[b] == BodyMode::kKinematic)
+      for (std::int32_t i : members_[b]) parts_.vx[std::size_t(i)] = parts_.vy[std::size_t(i)] = parts_.vz[std::size_t(i)] = 0.0f;
+  if (!guard_.tripped()) {
+    ++steps_;
+    return true;
+  }
+  if (guard_.particle >= 0)
+    guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+  return false;
+}
+
+// --- observers -----------------------------------------------------------------------
+
+double MpmWorld::gridMass() const {
+  double m = 0.0;
+  for (std::int32_t b : activeNodeBlocks_)
+    for (std::size_t l = 0; l < 64; ++l) m += gm_[std::size_t(b) * 64 + l];
+  return m;
+}
+
+Vec3 MpmWorld::gridMomentum() const {
+  Vec3 p = Vec3::Zero();
+  for (std::int32_t b : activeNodeBlocks_)
+    for (std::size_t l = 0; l < 64; ++l) {
+      const std::size_t k = std::size_t(b) * 64 + l;
+      p += double(gm_[k]) * Vec3(gx_[k], gy_[k], gz_[k]);
+    }
+  return p;
+}
+
+std::uint64_t MpmWorld::stateHash() const {
+  std::uint64_t h = 1469598103934665603ull;
+  for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz, &plastic_})
+    hashBytes(h, a->data(), a->size() * sizeof(float));
+  hashBytes(h, parts_.phase.data(), parts_.phase.size() * sizeof(std::uint32_t));
+  for (const auto* a : {&C_, &F_})
+    for (const Eigen::Matrix3f& m : *a) hashBytes(h, m.data(), sizeof(float) * 9);
+  return h;
+}
+
+}  // namespace physketch::mpm

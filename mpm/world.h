@@ -1,0 +1,209 @@
+// The MPM world: MLS-MPM (Hu et al. 2018) with APIC transfers (Jiang et al. 2015) and
+// quadratic B-splines on a background grid over the scene's workspace. One step runs the
+// passes of kMpmPasses, substeps times (VR-Doh supplement Algorithm 1), then the guard:
+//
+//   for each substep (h = dt / substeps):
+//     p2g          particles sorted by 4^3 block; mass and momentum scattered to the grid
+//                  block colour by block colour (no float atomics):
+//                    m_i += w_ip m_p,
+//                    (m v)_i += w_ip (m_p v_p + (m_p C_p - h V_p 4/dx^2 tau_p)(x_i - x_p))
+//                  (Hu et al. 2018 Eq. 16-17; tau = P F^T the Kirchhoff stress)
+//     grid_update  v_i = (m v)_i / m_i + h g; held nodes (fixed and carried bodies) take the
+//                  body's velocity; walls and ground: sticky, slip or separate with friction
+//     g2p          v_p = sum w v_i, C_p = 4/dx^2 sum w v_i (x_i - x_p)^T, x_p += h v_p,
+//                  F_p <- (I + h C_p) F_p (fluid: J_p <- (1 + h tr C_p) J_p)
+//     projection   particles the grid let past a wall or the ground are put back on it and
+//                  lose their velocity into it (never outside the grid)
+//     plasticity   return maps on F: Drucker-Prager (sand), von Mises (plasticine), snow clamp
+//   guard          first NaN, explosion, inverted F (J <= 0) or CFL violation, once per step
+//
+// Particles keep their ids (ParticleArrays); the solver visits them through a permutation
+// sorted by grid block, rebuilt every substep with a stable counting sort.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/material.h"
+#include "core/math.h"
+#include "core/scene.h"
+#include "core/solver.h"
+
+namespace physketch::mpm {
+
+// How a domain wall or the ground acts on grid velocities (VR-Doh supplement §1.1):
+// sticky: v = 0; slip: the normal component into the wall removed; separate: as slip, and
+// only while moving into the wall, with Coulomb friction on the tangential part: each node's
+// coefficients are the mass-weighted means of the materials whose particles reach it
+// (static_friction, dynamic_friction).
+enum class WallKind { kSticky, kSlip, kSeparate };
+const char* toString(WallKind kind);
+
+struct MpmParams {
+  double dt = 1.0 / 60.0;  // s per step
+  int substeps = 0;        // per step; 0 = auto: the fewest that meet the bounds, chosen every step
+  Vec3 gravity{0.0, -9.81, 0.0};
+  double groundY = 0.0;    // m, the ground plane y = groundY (below the domain: none)
+  double spacing = 0.0;    // m, particle spacing h (the sketch's voxel size); volume h^3 per particle
+  double dxPerSpacing = 2.0;  // grid spacing dx = dxPerSpacing * h (2: eight particles per cell)
+  Vec3 domainMin = Vec3(-0.5, 0.0, -0.5);  // m, corner of the simulated cube (the workspace)
+  double domainSize = 1.0;                 // m, its edge
+  WallKind walls = WallKind::kSeparate;    // the domain walls and the ground
+  double waveCourant = 0.5;    // C in h <= C dx / c_p (c_p the material's P-wave speed)
+  double velocityCourant = 0.5;  // h <= velocityCourant dx / |v|max
+  double maxSpeed = 100.0;     // m/s, the guard's explosion bound
+};
+
+// The solver settings a scene asks for; `spacing` is the sketch's voxel size.
+MpmParams paramsFromScene(const SceneDesc& scene, double spacing);
+
+enum class MpmPass : int { kP2G, kGridUpdate, kG2P, kProjection, kPlasticity, kGuard, kCount };
+extern const PassSpec kMpmPasses[static_cast<int>(MpmPass::kCount)];
+
+// The explicit time-step bound of a material: h <= waveCourant dx / c_p.
+struct StepBound {
+  double h = 0.0;          // s, the largest stable substep
+  double waveSpeed = 0.0;  // m/s, c_p
+  int material = -1;       // the material that sets it
+};
+
+class MpmWorld final : public Solver {
+ public:
+  // particles: positions at rest; bodies: contiguous ranges (one group each). Masses are
+  // density * h^3; velocities start from each body's BodyInit (vel=, spin=).
+  MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodies, std::vector<Material> materials,
+           const MpmParams& params);
+
+  const char* name() const override { return "mpm"; }
+  bool step() override;
+  std::vector<PlanEntry> plan() const override;
+  std::vector<PlanEntry> planAll() const override;
+  const Profile& profile() const override { return profile_; }
+  const GuardRecord& guard() const override { return guard_; }
+  void setValidate(bool on) override { validate_ = on; }
+
+  const ParticleArrays& particles() const override { return parts_; }
+  int bodyCount() const override { return static_cast<int>(members_.size()); }
+  const std::vector<std::int32_t>& bodyParticles(int body) const override { return members_.at(std::size_t(body)); }
+  // MPM bodies deform: the pose is the identity placed at the body's centre of mass.
+  BodyPose pose(int body) const override;
+  BodyMode mode(int body) const override { return mode_.at(static_cast<std::size_t>(body)); }
+  Vec3 velocity(int body) const override;
+  Vec3 angularVelocity(int body) const override;
+  std::int64_t stepCount() const override { return steps_; }
+  double dt() const override { return params_.dt; }
+  std::uint64_t stateHash() const override;
+
+  int addBody(const ParticleArrays& particles, const BodyRange& shape, bool kinematic) override;
+  void setMode(int body, BodyMode mode) override;
+  void setKinematicTarget(int body, const Vec3& centre) override;
+  void setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) override;
+  // Marks the particles removed; bodies keep the rest (MPM material is not split into bodies
+  // by connectivity: a cut body stays one group). Returns the bodies that lost particles.
+  std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
+
+  const MpmParams& params() const { return params_; }
+  double dx() const { return dx_; }
+  // The tightest explicit bound over the materials of the dynamic particles (h = +inf when none).
+  StepBound waveBound() const;
+  // Substeps the next step runs: the fixed count, or (auto) the fewest meeting the wave and
+  // velocity bounds; 0 when auto would need more than kMaxSubsteps.
+  int substepsForNextStep() const;
+  int lastSubsteps() const { return lastSubsteps_; }
+  // Warnings about the settings (a fixed substep count above the bound), once, at start.
+  const std::vector<std::string>& warnings() const { return warnings_; }
+  // Per particle: deformation gradient (row-major 3x3) and the plastic scalar (snow J_p,
+  // sand's accumulated plastic strain q, fluid J).
+  Eigen::Matrix3f deformation(std::int32_t i) const { return F_.at(std::size_t(i)); }
+  float plasticScalar(std::int32_t i) const { return plastic_.at(std::size_t(i)); }
+  // Particles stopped at a wall or the ground by the projection pass, since the start.
+  std::int64_t stoppedAtWall() const { return stopped_; }
+  // Total mass (kg) and momentum (kg m/s) on the grid after the last P2G, and of the particles now.
+  double gridMass() const;
+  Vec3 gridMomentum() const;
+
+  static constexpr int kMaxSubsteps = 1000;
+
+ private:
+  // Per material, what the passes read (precomputed from Material).
+  struct MatModel {
+    MaterialKind kind = MaterialKind::kElastic;  // as run
+    ElasticModel elastic = ElasticModel::kCorotated;
+    float mu = 0.0f, lambda = 0.0f;    // Pa
+    float mass = 0.0f;                 // kg per particle, density * h^3
+    float mus = 0.0f, muk = 0.0f;      // static and dynamic friction against walls and ground
+    float alpha = 0.0f, shift = 0.0f;  // sand: Drucker-Prager alpha and cohesion strain
+    float frictionDeg = 0.0f, hardeningDeg = 0.0f;
+    float thetaC = 0.0f, thetaS = 0.0f, xi = 0.0f;  // snow
+    float yield = 0.0f;                // plasticine: tau_Y
+    float bulk = 0.0f, gamma = 7.0f, viscosity = 0.0f;  // fluid
+    bool plastic = false;
+  };
+  struct Saved;  // the state a step changes, for the guard's replay
+
+  void initGrid();
+  void initParticle(std::size_t i);
+  void applyInit(const std::vector<std::int32_t>& ids, const BodyInit& init);
+  Vec3 centreOfMass(std::size_t body) const;
+  std::vector<bool> work() const;
+  std::string reason(MpmPass pass, bool on) const;
+  std::string touches(MpmPass pass) const;
+  bool runStep(int substeps, bool checkEachPass);
+  template <class F>
+  bool runPass(MpmPass pass, int substep, bool check, F&& f);
+  GuardRecord check(MpmPass pass) const;
+
+  void sortByBlock();
+  void p2g(float h);
+  void gridUpdate(float h);
+  void g2p(float h);
+  void projection();
+  void plasticity();
+  Eigen::Matrix3f kirchhoff(std::size_t i) const;
+
+  std::size_t nodeIndex(int i, int j, int k) const;
+
+  MpmParams params_;
+  ParticleArrays parts_;
+  std::vector<Material> materials_;  // as the scene gives them (names for messages)
+  std::vector<MatModel> models_;     // per material, as MPM runs it
+  // Per particle (ids as parts_): affine velocity C (1/s), deformation gradient F, plastic scalar.
+  std::vector<Eigen::Matrix3f> C_, F_;
+  std::vector<float> plastic_;
+  // Per body.
+  std::vector<std::vector<std::int32_t>> members_;
+  std::vector<BodyMode> mode_;
+  std::vector<Vec3> carry_;  // m/s, a kinematic body's velocity this step (kept when released)
+
+  // Grid: nodes n_ per axis (a multiple of 4), stored block-major (4^3 nodes per block) so a
+  // block's nodes are contiguous. Node (i,j,k) sits at origin_ + dx_ (i,j,k).
+  double dx_ = 0.0;
+  Vec3 origin_ = Vec3::Zero();
+  int n_ = 0, nb_ = 0;  // nodes and blocks per axis
+  Eigen::Vector3i wallLo_, wallHi_;  // nodes with index <= wallLo or >= wallHi are wall nodes
+  int groundNode_ = -1;              // nodes with j <= groundNode are ground nodes
+  float lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the walls (m), for the projection
+  std::vector<float> gm_, gx_, gy_, gz_;  // kg; momentum (kg m/s), then velocity (m/s)
+  std::vector<float> gfs_, gfk_;          // kg: mass times static / dynamic friction (wall friction per node)
+  std::vector<std::uint8_t> held_;        // 1: a node a fixed or carried body holds
+  std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
+  // Sorting: dynamic particles by block, and the blocks that have any, by colour.
+  std::vector<std::int32_t> order_, blockStart_, blockKey_;
+  std::vector<std::int32_t> colourBlocks_[8];
+  std::vector<std::int32_t> activeNodeBlocks_;
+  std::vector<std::uint8_t> nodeBlockMark_;
+
+  std::int64_t steps_ = 0;
+  std::int64_t stopped_ = 0;
+  int lastSubsteps_ = 0;
+  bool validate_ = false;
+  std::vector<bool> work_;
+  std::vector<std::string> warnings_;
+  Profile profile_{kMpmPasses};
+  GuardRecord guard_;
+};
+
+}  // namespace physketch::mpm
