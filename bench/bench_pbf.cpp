@@ -1,0 +1,105 @@
+// PBF dam break (pbd/fluid.h through the tests' driver, tests/pbd/fluid_sim.h): the issue's
+// speed case, 80,000 particles (a 40 x 50 x 40 block, the layout of the Taichi peer
+// ../shared/peers/pbf3d_taichi.py: r = 0.025 m, container 5 (nx+1) d wide, (nz+1) d deep),
+// kernel radius h = 2.1 spacings (~30 neighbours), one step of 1/60 s with one substep and 8
+// density iterations, XSPH 0.01 and vorticity confinement on. The first --warmup steps are
+// untimed (the column starts to fall and spread); the next --steps are timed one by one.
+// Prints CSV rows `bench,case,particles,threads,metric,value,unit` (medians), one per pass,
+// and the density error of the same run; exits 1 when the mean compression exceeds 1 %, so
+// speed is never bought with accuracy.
+//
+//   bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--kernel scalar|avx2] [--n NX NY NZ]
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <tbb/global_control.h>
+
+#include "bench/bench_common.h"
+#include "core/profile.h"
+#include "tests/pbd/fluid_sim.h"
+
+using namespace physketch;
+using physketch::bench::median;
+using physketch::bench::row;
+
+int main(int argc, char** argv) {
+  int threads = 2, steps = 10, warmup = 20, substeps = 1, nx = 40, ny = 50, nz = 40;
+  auto kernel = pbd::FluidSolver::Kernel::kAuto;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (a == "--steps" && i + 1 < argc) steps = std::atoi(argv[++i]);
+    else if (a == "--warmup" && i + 1 < argc) warmup = std::atoi(argv[++i]);
+    else if (a == "--substeps" && i + 1 < argc) substeps = std::atoi(argv[++i]);
+    else if (a == "--n" && i + 3 < argc) nx = std::atoi(argv[++i]), ny = std::atoi(argv[++i]), nz = std::atoi(argv[++i]);
+    else if (a == "--kernel" && i + 1 < argc) {
+      const std::string k = argv[++i];
+      kernel = k == "scalar" ? pbd::FluidSolver::Kernel::kScalar : pbd::FluidSolver::Kernel::kAvx2;
+    } else {
+      std::fprintf(stderr, "usage: bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--kernel scalar|avx2] [--n NX NY NZ]\n");
+      return 2;
+    }
+  }
+  if (threads < 1 || steps < 1 || substeps < 1 || warmup < 0 || nx < 1 || ny < 1 || nz < 1) {
+    std::fprintf(stderr, "bench_pbf: counts must be positive\n");
+    return 2;
+  }
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+
+  pbd::FluidParams p;
+  p.particleRadius = 0.025f;
+  const float d = 2.0f * p.particleRadius;
+  p.kernelRadius = 2.1f * d;
+  p.xsph = 0.01f;
+  p.vorticity = 0.01f;
+  p.wallLo[0] = 0.0f, p.wallLo[1] = 0.0f, p.wallLo[2] = 0.0f;
+  p.wallHi[0] = 5.0f * float(nx + 1) * d, p.wallHi[1] = 4.0f, p.wallHi[2] = float(nz + 1) * d;
+  pbd::testing::FluidSim sim(p);
+  sim.kernel = kernel;
+  sim.substeps = substeps;
+  sim.addBlock(d, d, d, nx, ny, nz, 1000.0f);
+  const std::size_t n = sim.size();
+
+  for (int s = 0; s < warmup; ++s) sim.step();
+  std::vector<double> total, pass[6];
+  for (int s = 0; s < steps; ++s) {
+    sim.timing = {};
+    const double t0 = nowSeconds();
+    sim.step();
+    total.push_back(1e3 * (nowSeconds() - t0));
+    const auto& t = sim.timing;
+    const double parts[6] = {t.predict, t.neighbors, t.lambda, t.correction, t.update, t.velocity};
+    for (int k = 0; k < 6; ++k) pass[k].push_back(parts[k]);
+  }
+  // One lambda pass in isolation, on the last step's neighbourhoods (speed.md: measure it first).
+  std::vector<double> lambdaOnly;
+  for (int r = 0; r < 20; ++r) {
+    const double t0 = nowSeconds();
+    sim.solver().lambdaPass();
+    lambdaOnly.push_back(1e3 * (nowSeconds() - t0));
+  }
+  const pbd::DensityError err = sim.solver().densityError();
+
+  row("pbd", "dam_break", n, threads, "ms_per_step", median(total), "ms");
+  const char* names[6] = {"predict_ms", "neighbors_ms", "lambda_ms", "correction_ms", "update_ms", "velocity_ms"};
+  for (int k = 0; k < 6; ++k) row("pbd", "dam_break", n, threads, names[k], median(pass[k]), "ms");
+  row("pbd", "dam_break", n, threads, "one_lambda_pass_ms", median(lambdaOnly), "ms");
+  row("pbd", "dam_break", n, threads, "mean_neighbors",
+      double(sim.solver().lists().count.empty() ? 0 : [&] {
+        double s = 0;
+        for (auto c : sim.solver().lists().count) s += c;
+        return s / double(n);
+      }()),
+      "1");
+  row("pbd", "dam_break", n, threads, "density_error_mean", 100.0 * err.meanCompression, "%");
+  row("pbd", "dam_break", n, threads, "density_error_max", 100.0 * err.maxCompression, "%");
+  if (!(err.meanCompression <= 0.01f)) {
+    std::fprintf(stderr, "bench_pbf: FAIL: mean density error %.3f %% > 1 %% (max %.3f %%)\n",
+                 100.0 * err.meanCompression, 100.0 * err.maxCompression);
+    return 1;
+  }
+  return 0;
+}

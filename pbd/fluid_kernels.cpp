@@ -1,0 +1,260 @@
+#include "pbd/fluid_kernels.h"
+
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace physketch::pbd::detail {
+
+// ---- shared per-particle finish ----------------------------------------------------
+
+WallTerm wallTerm(const PairArgs& a, const float* p) {
+  WallTerm t;
+  for (int k = 0; k < 3; ++k)
+    for (int side = 0; side < 2; ++side) {
+      const float y = side ? a.wallPlaneHi[k] - p[k] : p[k] - a.wallPlaneLo[k];  // distance to the plane
+      if (!(y < a.h)) continue;
+      const float u = std::max(y, 0.0f) * a.wallInvStep;
+      const int s = std::min(int(u), a.wallSamples - 2);
+      const float f = u - float(s);
+      t.c += a.wallB[s] + f * (a.wallB[s + 1] - a.wallB[s]);
+      const float db = a.wallDB[s] + f * (a.wallDB[s + 1] - a.wallDB[s]);
+      t.g[k] += side ? -db : db;  // d/dp of B(y(p))
+    }
+  return t;
+}
+
+void finishLambda(const PairArgs& a, std::size_t i, const LambdaAcc& acc) {
+  if (i >= a.n) return;
+  float* ri = a.rec + i * kRecord;
+  float lambda = 0.0f;
+  if (ri[kFluid] != 0.0f) {
+    // C_i = sum_j nu_j W_ij + walls - 1 with the particle's own W(0) = cp h^6.
+    const WallTerm wall = wallTerm(a, ri);
+    const float c = (a.cp * (acc.rho + ri[kNu] * a.h6) + wall.c) - 1.0f;
+    if (c > 0.0f) {
+      // grad_i C_i = -cs sum_j nu_j g_ij d_ij + the walls' gradient
+      const float gx = wall.g[0] - a.cs * acc.gx, gy = wall.g[1] - a.cs * acc.gy, gz = wall.g[2] - a.cs * acc.gz;
+      const float grad2 = (gx * gx + gy * gy) + gz * gz;
+      const float denom = (ri[kW] * grad2 + (a.cs * a.cs) * acc.den) + a.epsK * ri[kW];
+      lambda = -c / denom;
+    }
+  }
+  ri[kLambda] = lambda;
+}
+
+void finishCorrection(const PairArgs& a, std::size_t i, const CorrectionAcc& acc) {
+  if (i >= a.n) return;
+  const float* ri = a.rec + i * kRecord;
+  // dp_i = w_i sum_j coef_ij gradW_ij with gradW_ij = -cs g_ij d_ij.
+  const float s = -a.cs * ri[kW];
+  float d[3] = {s * acc.x, s * acc.y, s * acc.z};
+  if (ri[kFluid] != 0.0f && ri[kLambda] != 0.0f) {  // the walls' share of lambda_i's correction
+    const WallTerm wall = wallTerm(a, ri);
+    const float wl = ri[kW] * ri[kLambda];
+    for (int k = 0; k < 3; ++k) d[k] = d[k] + wl * wall.g[k];
+  }
+  if (ri[kFluid] != 0.0f)
+    for (int k = 0; k < 3; ++k) {  // walls: the corrected centre stays r inside the box
+      const float p = ri[k] + d[k];
+      d[k] = std::min(std::max(p, a.wallLo[k]), a.wallHi[k]) - ri[k];
+    }
+  a.dx[i] = d[0], a.dy[i] = d[1], a.dz[i] = d[2];
+}
+
+// ---- scalar kernels: the reference -------------------------------------------------
+
+namespace {
+
+// The operations of one pair, written once; the AVX2 kernel below repeats them lane-wise.
+struct Pair {
+  float dx, dy, dz, r2, g, w;  // d = p_i - p_j; g = (h - r)^2 / r; w = (h^2 - r^2)^3 (0 outside h)
+};
+inline Pair pairTerms(const PairArgs& a, float xi, float yi, float zi, const float* rj) {
+  Pair p;
+  p.dx = xi - rj[kX], p.dy = yi - rj[kY], p.dz = zi - rj[kZ];
+  p.r2 = (p.dx * p.dx + p.dy * p.dy) + p.dz * p.dz;
+  const bool in = p.r2 < a.h2;
+  const float r = std::sqrt(p.r2);
+  const float t = a.h - r, s = a.h2 - p.r2;
+  const float g = (t * t) / std::max(r, kMinDistance);
+  const float w = (s * s) * s;
+  p.g = in ? g : 0.0f;
+  p.w = in ? w : 0.0f;
+  return p;
+}
+
+}  // namespace
+
+void lambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* ri = a.rec + i * kRecord;
+      LambdaAcc acc{0, 0, 0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* rj = a.rec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, ri[kX], ri[kY], ri[kZ], rj);
+        const float nu = rj[kNu], w = rj[kW];
+        const float gn = nu * p.g;
+        acc.rho = acc.rho + nu * p.w;
+        acc.gx = acc.gx + gn * p.dx;
+        acc.gy = acc.gy + gn * p.dy;
+        acc.gz = acc.gz + gn * p.dz;
+        acc.den = acc.den + w * ((gn * gn) * p.r2);
+      }
+      finishLambda(a, i, acc);
+    }
+  }
+}
+
+void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* ri = a.rec + i * kRecord;
+      CorrectionAcc acc{0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* rj = a.rec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, ri[kX], ri[kY], ri[kZ], rj);
+        // s_corr (Eq. 13) between fluid particles: (W / W(dq))^n, mass-symmetric.
+        const float q = p.w * a.invWdq;
+        float qn = q;
+        for (int m = 1; m < a.scorrN; ++m) qn = qn * q;
+        const float sm = (ri[kMass] + rj[kMass]) * (ri[kFluid] * rj[kFluid]);
+        const float coef = (ri[kLambda] * rj[kNu] + rj[kLambda] * ri[kNu]) - (a.scorrK * qn) * sm;
+        const float cg = coef * p.g;
+        acc.x = acc.x + cg * p.dx;
+        acc.y = acc.y + cg * p.dy;
+        acc.z = acc.z + cg * p.dz;
+      }
+      finishCorrection(a, i, acc);
+    }
+  }
+}
+
+// ---- AVX2: 8 lanes = the 8 ranks of a block; a neighbour slot is 8 record loads and an
+// 8x8 transpose (no gathers) -----------------------------------------------------------
+
+#define PHYSKETCH_AVX2 __attribute__((target("avx2"), always_inline)) inline
+
+namespace {
+
+// Loads the records of the 8 given ranks and transposes them: out[f] holds field f of
+// each lane. Pure data movement: no rounding, so lanes see the scalar kernel's values.
+PHYSKETCH_AVX2 void loadTransposed(const float* rec, const std::int32_t* ids, __m256 out[8]) {
+  __m256 r[8];
+  for (int l = 0; l < 8; ++l) r[l] = _mm256_loadu_ps(rec + std::size_t(ids[l]) * kRecord);
+  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+  const __m256 u0 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u1 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u2 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u3 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u4 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u5 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u6 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u7 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(3, 2, 3, 2));
+  out[0] = _mm256_permute2f128_ps(u0, u4, 0x20);
+  out[1] = _mm256_permute2f128_ps(u1, u5, 0x20);
+  out[2] = _mm256_permute2f128_ps(u2, u6, 0x20);
+  out[3] = _mm256_permute2f128_ps(u3, u7, 0x20);
+  out[4] = _mm256_permute2f128_ps(u0, u4, 0x31);
+  out[5] = _mm256_permute2f128_ps(u1, u5, 0x31);
+  out[6] = _mm256_permute2f128_ps(u2, u6, 0x31);
+  out[7] = _mm256_permute2f128_ps(u3, u7, 0x31);
+}
+
+struct Pair8 {
+  __m256 dx, dy, dz, r2, g, w;
+};
+struct Consts8 {
+  __m256 h, h2, rmin;
+};
+PHYSKETCH_AVX2 Pair8 pairTerms8(const Consts8& c, const __m256 i[3], const __m256 j[8]) {
+  Pair8 p;
+  p.dx = _mm256_sub_ps(i[0], j[kX]), p.dy = _mm256_sub_ps(i[1], j[kY]), p.dz = _mm256_sub_ps(i[2], j[kZ]);
+  p.r2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(p.dx, p.dx), _mm256_mul_ps(p.dy, p.dy)), _mm256_mul_ps(p.dz, p.dz));
+  const __m256 in = _mm256_cmp_ps(p.r2, c.h2, _CMP_LT_OQ);
+  const __m256 r = _mm256_sqrt_ps(p.r2);
+  const __m256 t = _mm256_sub_ps(c.h, r), s = _mm256_sub_ps(c.h2, p.r2);
+  const __m256 g = _mm256_div_ps(_mm256_mul_ps(t, t), _mm256_max_ps(r, c.rmin));
+  const __m256 w = _mm256_mul_ps(_mm256_mul_ps(s, s), s);
+  p.g = _mm256_and_ps(in, g);
+  p.w = _mm256_and_ps(in, w);
+  return p;
+}
+
+PHYSKETCH_AVX2 Consts8 consts8(const PairArgs& a) {
+  return {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+}
+
+}  // namespace
+
+__attribute__((target("avx2"))) void lambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = consts8(a);
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 ri[8];
+    loadTransposed(a.rec, self, ri);
+    __m256 rho = _mm256_setzero_ps(), gx = rho, gy = rho, gz = rho, den = rho;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 rj[8];
+      loadTransposed(a.rec, ids + k * kLanes, rj);
+      const Pair8 p = pairTerms8(c, ri, rj);
+      const __m256 gn = _mm256_mul_ps(rj[kNu], p.g);
+      rho = _mm256_add_ps(rho, _mm256_mul_ps(rj[kNu], p.w));
+      gx = _mm256_add_ps(gx, _mm256_mul_ps(gn, p.dx));
+      gy = _mm256_add_ps(gy, _mm256_mul_ps(gn, p.dy));
+      gz = _mm256_add_ps(gz, _mm256_mul_ps(gn, p.dz));
+      den = _mm256_add_ps(den, _mm256_mul_ps(rj[kW], _mm256_mul_ps(_mm256_mul_ps(gn, gn), p.r2)));
+    }
+    alignas(32) float s[5][8];
+    _mm256_store_ps(s[0], rho), _mm256_store_ps(s[1], gx), _mm256_store_ps(s[2], gy);
+    _mm256_store_ps(s[3], gz), _mm256_store_ps(s[4], den);
+    for (int l = 0; l < 8; ++l) finishLambda(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l], s[3][l], s[4][l]});
+  }
+}
+
+__attribute__((target("avx2"))) void correctionBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = consts8(a);
+  const __m256 invWdq = _mm256_set1_ps(a.invWdq), scorrK = _mm256_set1_ps(a.scorrK);
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 ri[8];
+    loadTransposed(a.rec, self, ri);
+    __m256 ax = _mm256_setzero_ps(), ay = ax, az = ax;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 rj[8];
+      loadTransposed(a.rec, ids + k * kLanes, rj);
+      const Pair8 p = pairTerms8(c, ri, rj);
+      const __m256 q = _mm256_mul_ps(p.w, invWdq);
+      __m256 qn = q;
+      for (int m = 1; m < a.scorrN; ++m) qn = _mm256_mul_ps(qn, q);
+      const __m256 sm = _mm256_mul_ps(_mm256_add_ps(ri[kMass], rj[kMass]), _mm256_mul_ps(ri[kFluid], rj[kFluid]));
+      const __m256 coef = _mm256_sub_ps(
+          _mm256_add_ps(_mm256_mul_ps(ri[kLambda], rj[kNu]), _mm256_mul_ps(rj[kLambda], ri[kNu])),
+          _mm256_mul_ps(_mm256_mul_ps(scorrK, qn), sm));
+      const __m256 cg = _mm256_mul_ps(coef, p.g);
+      ax = _mm256_add_ps(ax, _mm256_mul_ps(cg, p.dx));
+      ay = _mm256_add_ps(ay, _mm256_mul_ps(cg, p.dy));
+      az = _mm256_add_ps(az, _mm256_mul_ps(cg, p.dz));
+    }
+    alignas(32) float s[3][8];
+    _mm256_store_ps(s[0], ax), _mm256_store_ps(s[1], ay), _mm256_store_ps(s[2], az);
+    for (int l = 0; l < 8; ++l) finishCorrection(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l]});
+  }
+}
+
+#undef PHYSKETCH_AVX2
+
+}  // namespace physketch::pbd::detail
