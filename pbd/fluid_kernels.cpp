@@ -11,6 +11,9 @@ namespace physketch::pbd::detail {
 
 WallTerm wallTerm(const PairArgs& a, const float* p) {
   WallTerm t;
+  bool near = false;  // most particles are further than h from every wall
+  for (int k = 0; k < 3; ++k) near |= (p[k] - a.wallPlaneLo[k] < a.h) | (a.wallPlaneHi[k] - p[k] < a.h);
+  if (!near) return t;
   for (int k = 0; k < 3; ++k)
     for (int side = 0; side < 2; ++side) {
       const float y = side ? a.wallPlaneHi[k] - p[k] : p[k] - a.wallPlaneLo[k];  // distance to the plane
@@ -183,7 +186,7 @@ PHYSKETCH_AVX2 Pair8 pairTerms8(const Consts8& c, const __m256 i[3], const __m25
   const __m256 in = _mm256_cmp_ps(p.r2, c.h2, _CMP_LT_OQ);
   const __m256 r = _mm256_sqrt_ps(p.r2);
   const __m256 t = _mm256_sub_ps(c.h, r), s = _mm256_sub_ps(c.h2, p.r2);
-  const __m256 g = _mm256_div_ps(_mm256_mul_ps(t, t), _mm256_max_ps(r, c.rmin));
+  const __m256 g = _mm256_div_ps(_mm256_mul_ps(t, t), _mm256_max_ps(c.rmin, r));
   const __m256 w = _mm256_mul_ps(_mm256_mul_ps(s, s), s);
   p.g = _mm256_and_ps(in, g);
   p.w = _mm256_and_ps(in, w);
@@ -192,6 +195,82 @@ PHYSKETCH_AVX2 Pair8 pairTerms8(const Consts8& c, const __m256 i[3], const __m25
 
 PHYSKETCH_AVX2 Consts8 consts8(const PairArgs& a) {
   return {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+}
+
+// Lanes within h of a wall (bit l set): those take the scalar finish, which adds the walls.
+PHYSKETCH_AVX2 int nearWall8(const PairArgs& a, const __m256 ri[8]) {
+  const __m256 h = _mm256_set1_ps(a.h);
+  __m256 m = _mm256_setzero_ps();
+  for (int k = 0; k < 3; ++k) {
+    m = _mm256_or_ps(m, _mm256_cmp_ps(_mm256_sub_ps(ri[k], _mm256_set1_ps(a.wallPlaneLo[k])), h, _CMP_LT_OQ));
+    m = _mm256_or_ps(m, _mm256_cmp_ps(_mm256_sub_ps(_mm256_set1_ps(a.wallPlaneHi[k]), ri[k]), h, _CMP_LT_OQ));
+  }
+  return _mm256_movemask_ps(m);
+}
+
+// finishLambda for the 8 lanes of block b away from the walls, operation for operation
+// (a wall term of +0 adds nothing: x + 0 = x, 0 - y = -y), so the bits are the same.
+PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256 ri[8], __m256 rho, __m256 gx,
+                                  __m256 gy, __m256 gz, __m256 den) {
+  const __m256 zero = _mm256_setzero_ps(), cs = _mm256_set1_ps(a.cs);
+  const __m256 c = _mm256_sub_ps(
+      _mm256_mul_ps(_mm256_set1_ps(a.cp), _mm256_add_ps(rho, _mm256_mul_ps(ri[kNu], _mm256_set1_ps(a.h6)))),
+      _mm256_set1_ps(1.0f));
+  const __m256 x = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gx));
+  const __m256 y = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gy));
+  const __m256 z = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gz));
+  const __m256 grad2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z));
+  const __m256 denom = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ri[kW], grad2), _mm256_mul_ps(_mm256_mul_ps(cs, cs), den)),
+                                     _mm256_mul_ps(_mm256_set1_ps(a.epsK), ri[kW]));
+  const __m256 on = _mm256_and_ps(_mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ), _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
+  const __m256 lambda = _mm256_and_ps(on, _mm256_div_ps(_mm256_sub_ps(zero, c), denom));
+  alignas(32) float l8[8];
+  _mm256_store_ps(l8, lambda);
+  const int near = nearWall8(a, ri);
+  if (near) {  // the scalar finish needs every accumulator of those lanes
+    alignas(32) float s[5][8];
+    _mm256_store_ps(s[0], rho), _mm256_store_ps(s[1], gx), _mm256_store_ps(s[2], gy);
+    _mm256_store_ps(s[3], gz), _mm256_store_ps(s[4], den);
+    for (int l = 0; l < 8; ++l)
+      if (near >> l & 1) finishLambda(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l], s[3][l], s[4][l]});
+  }
+  for (int l = 0; l < 8; ++l) {
+    const std::size_t i = b * kLanes + std::size_t(l);
+    if (!(near >> l & 1) && i < a.n) a.rec[i * kRecord + kLambda] = l8[l];
+  }
+}
+
+// finishCorrection for the lanes away from the walls, the same way (the clamp to the box
+// still applies; max_ps(lo, p) and min_ps(hi, p) return p on ties, as std::max(p, lo) and
+// std::min(p, hi) do, so even signed zeros agree).
+PHYSKETCH_AVX2 void finishCorrection8(const PairArgs& a, std::size_t b, const __m256 ri[8], __m256 ax, __m256 ay,
+                                      __m256 az) {
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 s = _mm256_mul_ps(_mm256_sub_ps(zero, _mm256_set1_ps(a.cs)), ri[kW]);
+  const __m256 fluid = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+  const __m256 acc[3] = {ax, ay, az};
+  __m256 d[3];
+  for (int k = 0; k < 3; ++k) {
+    const __m256 v = _mm256_mul_ps(s, acc[k]);
+    const __m256 p = _mm256_add_ps(ri[k], v);
+    const __m256 c = _mm256_sub_ps(
+        _mm256_min_ps(_mm256_set1_ps(a.wallHi[k]), _mm256_max_ps(_mm256_set1_ps(a.wallLo[k]), p)), ri[k]);
+    d[k] = _mm256_blendv_ps(v, c, fluid);
+  }
+  const int near = nearWall8(a, ri);
+  const std::size_t i0 = b * kLanes;
+  if (!near) {  // dx_ .. dz_ are padded to whole blocks
+    _mm256_storeu_ps(a.dx + i0, d[0]), _mm256_storeu_ps(a.dy + i0, d[1]), _mm256_storeu_ps(a.dz + i0, d[2]);
+    return;
+  }
+  alignas(32) float v[3][8], acc8[3][8];
+  for (int k = 0; k < 3; ++k) _mm256_store_ps(v[k], d[k]), _mm256_store_ps(acc8[k], acc[k]);
+  for (int l = 0; l < 8; ++l) {
+    const std::size_t i = i0 + std::size_t(l);
+    if (i >= a.n) continue;
+    if (near >> l & 1) finishCorrection(a, i, {acc8[0][l], acc8[1][l], acc8[2][l]});
+    else a.dx[i] = v[0][l], a.dy[i] = v[1][l], a.dz[i] = v[2][l];
+  }
 }
 
 }  // namespace
@@ -216,10 +295,7 @@ __attribute__((target("avx2"))) void lambdaBlocksAvx2(const PairArgs& a, std::si
       gz = _mm256_add_ps(gz, _mm256_mul_ps(gn, p.dz));
       den = _mm256_add_ps(den, _mm256_mul_ps(rj[kW], _mm256_mul_ps(_mm256_mul_ps(gn, gn), p.r2)));
     }
-    alignas(32) float s[5][8];
-    _mm256_store_ps(s[0], rho), _mm256_store_ps(s[1], gx), _mm256_store_ps(s[2], gy);
-    _mm256_store_ps(s[3], gz), _mm256_store_ps(s[4], den);
-    for (int l = 0; l < 8; ++l) finishLambda(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l], s[3][l], s[4][l]});
+    finishLambda8(a, b, ri, rho, gx, gy, gz, den);
   }
 }
 
@@ -249,9 +325,7 @@ __attribute__((target("avx2"))) void correctionBlocksAvx2(const PairArgs& a, std
       ay = _mm256_add_ps(ay, _mm256_mul_ps(cg, p.dy));
       az = _mm256_add_ps(az, _mm256_mul_ps(cg, p.dz));
     }
-    alignas(32) float s[3][8];
-    _mm256_store_ps(s[0], ax), _mm256_store_ps(s[1], ay), _mm256_store_ps(s[2], az);
-    for (int l = 0; l < 8; ++l) finishCorrection(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l]});
+    finishCorrection8(a, b, ri, ax, ay, az);
   }
 }
 

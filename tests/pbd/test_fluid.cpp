@@ -206,7 +206,8 @@ TEST(FluidKernel, CorrectionsConserveMomentum) {
 
 TEST(FluidKernel, ScalarAndSimdKernelsAreBitIdentical) {
   if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "no AVX2";
-  const FluidParams p = smallParams();
+  FluidParams p = smallParams();
+  p.wallLo[1] = 0.03f, p.wallHi[0] = 0.15f;  // walls cut through the set: both finishes run
   const RandomSet set = randomSet(p, 1000, 11);
   std::vector<float> out[2];
   int k = 0;
