@@ -328,8 +328,18 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
   std::vector<float> v[3];
   for (auto& a : v) a.resize(n_);
   grid_.gather(vx, v[0].data()), grid_.gather(vy, v[1].data()), grid_.gather(vz, v[2].data());
-  if (params_.xsph > 0.0f) xsphPass(v[0].data(), v[1].data(), v[2].data());
-  if (params_.vorticity > 0.0f) vorticityPass(v[0].data(), v[1].data(), v[2].data(), h);
+  if (params_.xsph > 0.0f || params_.vorticity > 0.0f) {
+    std::vector<float> w[3], omega, omegaNorm;
+    for (auto& a : w) a.resize(n_);
+    const bool vort = params_.vorticity > 0.0f;
+    if (vort) omega.resize(3 * n_), omegaNorm.resize(n_);
+    const float* in[3] = {v[0].data(), v[1].data(), v[2].data()};
+    float* out[3] = {w[0].data(), w[1].data(), w[2].data()};
+    smoothingPass(in, out, vort ? omega.data() : nullptr, vort ? omegaNorm.data() : nullptr);
+    for (int a = 0; a < 3; ++a) v[a].swap(w[a]);
+    float* vv[3] = {v[0].data(), v[1].data(), v[2].data()};
+    if (vort) confinementPass(omega.data(), omegaNorm.data(), vv, h);
+  }
   if (params_.cohesion > 0.0f) cohesionPass(v[0].data(), v[1].data(), v[2].data(), h);
   const std::int32_t* order = grid_.order().data();
   for (std::size_t r = 0; r < n_; ++r)
@@ -339,84 +349,72 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
     }
 }
 
-// XSPH (Eq. 17), SPH-normalised: v_i += c sum_j nu_j (v_j - v_i) W_ij over fluid j (Jacobi).
-void FluidSolver::xsphPass(float* vx, float* vy, float* vz) const {
-  const float h = params_.kernelRadius, h2 = h * h, cp = 315.0f / (64.0f * kPi * std::pow(h, 9.0f));
+// One loop over the neighbours for both velocity terms that read v_j - v_i (Alg. 1
+// line 22 applies both to the same updated velocities; Jacobi: v is read, not written):
+//   XSPH (Eq. 17), SPH-normalised: dv_i = c sum_j nu_j (v_j - v_i) W_ij
+//   vorticity (Eq. 15): omega_i = sum_j nu_j (v_j - v_i) x gradW_ij
+// over fluid neighbours j. Writes v + dv to out and omega, |omega| when asked.
+void FluidSolver::smoothingPass(const float* const v[3], float* const out[3], float* omega, float* omegaNorm) const {
+  const float kh = params_.kernelRadius, h2 = kh * kh;
+  const float cp = 315.0f / (64.0f * kPi * std::pow(kh, 9.0f)), cs = 45.0f / (kPi * std::pow(kh, 6.0f));
   const float c = params_.xsph * cp;
   const int width = lists_.width;
-  std::vector<float> out[3];
-  for (auto& a : out) a.resize(n_);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const float* ri = &rec_[i * kRecord];
-      float sx = 0, sy = 0, sz = 0;
+      float sum[3] = {0, 0, 0}, w[3] = {0, 0, 0};
       if (ri[kFluid] != 0.0f)
         for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
           const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
           const float* rj = &rec_[j * kRecord];
-          if (rj[kFluid] == 0.0f) continue;
-          const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
-          const float s = h2 - ((dx * dx + dy * dy) + dz * dz);
-          if (s <= 0.0f) continue;
-          const float wgt = rj[kNu] * ((s * s) * s);
-          sx += wgt * (vx[j] - vx[i]), sy += wgt * (vy[j] - vy[i]), sz += wgt * (vz[j] - vz[i]);
+          const float d[3] = {ri[kX] - rj[kX], ri[kY] - rj[kY], ri[kZ] - rj[kZ]};
+          const float r2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
+          if (rj[kFluid] == 0.0f || !(r2 < h2)) continue;
+          const float u[3] = {v[0][j] - v[0][i], v[1][j] - v[1][i], v[2][j] - v[2][i]};
+          const float s = h2 - r2, nw = rj[kNu] * ((s * s) * s);
+          for (int a = 0; a < 3; ++a) sum[a] += nw * u[a];
+          if (!omega) continue;
+          const float r = std::sqrt(r2);
+          const float g = -cs * rj[kNu] * (kh - r) * (kh - r) / std::max(r, kMinDistance);  // nu gradW / d
+          w[0] += g * (u[1] * d[2] - u[2] * d[1]), w[1] += g * (u[2] * d[0] - u[0] * d[2]);
+          w[2] += g * (u[0] * d[1] - u[1] * d[0]);
         }
-      out[0][i] = vx[i] + c * sx, out[1][i] = vy[i] + c * sy, out[2][i] = vz[i] + c * sz;
+      for (int a = 0; a < 3; ++a) out[a][i] = v[a][i] + c * sum[a];
+      if (!omega) continue;
+      for (int a = 0; a < 3; ++a) omega[3 * i + std::size_t(a)] = w[a];
+      omegaNorm[i] = std::sqrt((w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]);
     }
   });
-  std::copy(out[0].begin(), out[0].end(), vx);
-  std::copy(out[1].begin(), out[1].end(), vy);
-  std::copy(out[2].begin(), out[2].end(), vz);
 }
 
-// Vorticity confinement (Eq. 15-16): omega_i = sum_j nu_j (v_j - v_i) x gradW_ij, then
-// eta = sum_j nu_j |omega_j| gradW_ij (the gradient of |omega|), N = eta / |eta| and
-// v_i += h eps (N x omega_i). Fluid neighbours only.
-void FluidSolver::vorticityPass(float* vx, float* vy, float* vz, float h) const {
-  const float kh = params_.kernelRadius, cs = 45.0f / (kPi * std::pow(kh, 6.0f));
-  const int width = lists_.width;
-  std::vector<float> om(3 * n_, 0.0f), mag(n_, 0.0f);
-  // Calls f(j, gradW_ij) for the fluid neighbours j of fluid particle i.
-  const auto forGrad = [&](std::size_t i, auto&& f) {
-    const float* ri = &rec_[i * kRecord];
-    for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
-      const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
-      const float* rj = &rec_[j * kRecord];
-      if (rj[kFluid] == 0.0f) continue;
-      const float d[3] = {ri[kX] - rj[kX], ri[kY] - rj[kY], ri[kZ] - rj[kZ]};
-      const float r = std::sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]);
-      if (r >= kh || r <= kMinDistance) continue;
-      const float g = -cs * (kh - r) * (kh - r) / r;
-      f(j, rj[kNu], g * d[0], g * d[1], g * d[2]);
-    }
-  };
-  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      if (rec_[i * kRecord + kFluid] == 0.0f) continue;
-      float w[3] = {0, 0, 0};
-      forGrad(i, [&](std::size_t j, float nu, float gx, float gy, float gz) {
-        const float u[3] = {vx[j] - vx[i], vy[j] - vy[i], vz[j] - vz[i]};
-        w[0] += nu * (u[1] * gz - u[2] * gy), w[1] += nu * (u[2] * gx - u[0] * gz), w[2] += nu * (u[0] * gy - u[1] * gx);
-      });
-      om[3 * i] = w[0], om[3 * i + 1] = w[1], om[3 * i + 2] = w[2];
-      mag[i] = std::sqrt((w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]);
-    }
-  });
+// Vorticity confinement (Eq. 16): eta = sum_j nu_j |omega_j| gradW_ij (the gradient of
+// |omega|), N = eta / |eta|, v_i += h eps (N x omega_i). Fluid neighbours only.
+void FluidSolver::confinementPass(const float* omega, const float* omegaNorm, float* const v[3], float h) const {
+  const float kh = params_.kernelRadius, h2 = kh * kh, cs = 45.0f / (kPi * std::pow(kh, 6.0f));
   const float eps = params_.vorticity;
+  const int width = lists_.width;
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
-      if (rec_[i * kRecord + kFluid] == 0.0f) continue;
+      const float* ri = &rec_[i * kRecord];
+      if (ri[kFluid] == 0.0f) continue;
       float eta[3] = {0, 0, 0};
-      forGrad(i, [&](std::size_t j, float nu, float gx, float gy, float gz) {
-        eta[0] += nu * mag[j] * gx, eta[1] += nu * mag[j] * gy, eta[2] += nu * mag[j] * gz;
-      });
+      for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
+        const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
+        const float* rj = &rec_[j * kRecord];
+        const float d[3] = {ri[kX] - rj[kX], ri[kY] - rj[kY], ri[kZ] - rj[kZ]};
+        const float r2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
+        if (rj[kFluid] == 0.0f || !(r2 < h2)) continue;
+        const float r = std::sqrt(r2);
+        const float g = -cs * rj[kNu] * omegaNorm[j] * (kh - r) * (kh - r) / std::max(r, kMinDistance);
+        for (int a = 0; a < 3; ++a) eta[a] += g * d[a];
+      }
       const float len = std::sqrt((eta[0] * eta[0] + eta[1] * eta[1]) + eta[2] * eta[2]);
       if (!(len > 1e-12f)) continue;
       const float nn[3] = {eta[0] / len, eta[1] / len, eta[2] / len};
-      const float* w = &om[3 * i];
-      vx[i] += h * eps * (nn[1] * w[2] - nn[2] * w[1]);
-      vy[i] += h * eps * (nn[2] * w[0] - nn[0] * w[2]);
-      vz[i] += h * eps * (nn[0] * w[1] - nn[1] * w[0]);
+      const float* w = &omega[3 * i];
+      v[0][i] += h * eps * (nn[1] * w[2] - nn[2] * w[1]);
+      v[1][i] += h * eps * (nn[2] * w[0] - nn[0] * w[2]);
+      v[2][i] += h * eps * (nn[0] * w[1] - nn[1] * w[0]);
     }
   });
 }

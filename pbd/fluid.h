@@ -141,8 +141,8 @@ class FluidSolver {
   void buildBlockedLists();
   void computeSolidVolumes();
   void buildWallTable();
-  void xsphPass(float* vx, float* vy, float* vz) const;
-  void vorticityPass(float* vx, float* vy, float* vz, float h) const;
+  void smoothingPass(const float* const v[3], float* const out[3], float* omega, float* omegaNorm) const;
+  void confinementPass(const float* omega, const float* omegaNorm, float* const v[3], float h) const;
   void cohesionPass(float* vx, float* vy, float* vz, float h) const;
 
   FluidParams params_;
