@@ -6,6 +6,7 @@
 #pragma once
 
 #include <chrono>
+#include <ctime>
 #include <cstdint>
 #include <vector>
 
@@ -14,9 +15,14 @@
 namespace physketch::pbd::testing {
 
 struct FluidSim {
-  // Wall time per part of the substep, summed over steps (ms), for the benchmark only.
+  // Time per part of the substep, summed over steps (ms), for the benchmark only: wall
+  // time, and the process's CPU time (all threads), which on a loaded machine excludes
+  // the waits for a core.
+  enum Part { kPredict, kNeighbors, kLambda, kCorrection, kUpdate, kVelocity, kParts };
+  static constexpr const char* kPartNames[kParts] = {"predict", "neighbors", "lambda", "correction", "update", "velocity"};
   struct Timing {
-    double predict = 0, neighbors = 0, lambda = 0, correction = 0, update = 0, velocity = 0;
+    double wall[kParts] = {};
+    double cpu[kParts] = {};
   };
 
   FluidParams params;
@@ -55,32 +61,32 @@ struct FluidSim {
     px_.resize(n), py_.resize(n), pz_.resize(n);
     solver_.setKernel(kernel);
     for (int s = 0; s < substeps; ++s) {
-      auto t = Clock::now();
+      Stamp t = now();
       for (std::size_t i = 0; i < n; ++i) {  // predict (Alg. 1 lines 1-3)
         vy[i] += h * gravity;
         px_[i] = x[i] + h * vx[i], py_[i] = y[i] + h * vy[i], pz_[i] = z[i] + h * vz[i];
       }
-      lap(t, timing.predict);
+      lap(t, kPredict);
       FluidInput in;
       in.count = n, in.x = px_.data(), in.y = py_.data(), in.z = pz_.data();
       in.invMass = w.data(), in.fluid = fluid.data(), in.restDensity = rho0.data();
       solver_.begin(in);
-      lap(t, timing.neighbors);
+      lap(t, kNeighbors);
       for (int it = 0; it < iterations; ++it) {
         solver_.lambdaPass();
-        lap(t, timing.lambda);
+        lap(t, kLambda);
         solver_.correctionPass();
         solver_.applyCorrections();
-        lap(t, timing.correction);
+        lap(t, kCorrection);
       }
       solver_.positions(px_.data(), py_.data(), pz_.data());
       for (std::size_t i = 0; i < n; ++i) {  // v = (p - x) / h (Alg. 1 line 21)
         vx[i] = (px_[i] - x[i]) / h, vy[i] = (py_[i] - y[i]) / h, vz[i] = (pz_[i] - z[i]) / h;
       }
-      lap(t, timing.update);
+      lap(t, kUpdate);
       solver_.velocityPasses(vx.data(), vy.data(), vz.data(), h);
       x.swap(px_), y.swap(py_), z.swap(pz_);  // x = p (line 23)
-      lap(t, timing.velocity);
+      lap(t, kVelocity);
     }
   }
 
@@ -88,11 +94,20 @@ struct FluidSim {
   FluidSolver& solver() { return solver_; }
 
  private:
-  using Clock = std::chrono::steady_clock;
-  static void lap(Clock::time_point& t, double& into) {
-    const auto now = Clock::now();
-    into += std::chrono::duration<double, std::milli>(now - t).count();
-    t = now;
+  struct Stamp {
+    std::chrono::steady_clock::time_point wall;
+    double cpu;  // s
+  };
+  static Stamp now() {
+    timespec c{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c);
+    return {std::chrono::steady_clock::now(), double(c.tv_sec) + 1e-9 * double(c.tv_nsec)};
+  }
+  void lap(Stamp& t, Part part) {
+    const Stamp s = now();
+    timing.wall[part] += std::chrono::duration<double, std::milli>(s.wall - t.wall).count();
+    timing.cpu[part] += 1e3 * (s.cpu - t.cpu);
+    t = s;
   }
   FluidSolver solver_;
   std::vector<float> px_, py_, pz_;
