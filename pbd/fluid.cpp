@@ -260,7 +260,7 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
 
 void FluidSolver::lambdaPass() {
   const PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
-  const bool simd = kernel_ == Kernel::kAvx2 || (kernel_ == Kernel::kAuto && __builtin_cpu_supports("avx2"));
+  const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? lambdaBlocksAvx2(a, b0, b1) : lambdaBlocksScalar(a, b0, b1);
   });
@@ -268,7 +268,7 @@ void FluidSolver::lambdaPass() {
 
 void FluidSolver::correctionPass() {
   const PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
-  const bool simd = kernel_ == Kernel::kAvx2 || (kernel_ == Kernel::kAuto && __builtin_cpu_supports("avx2"));
+  const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? correctionBlocksAvx2(a, b0, b1) : correctionBlocksScalar(a, b0, b1);
   });
@@ -322,100 +322,56 @@ void FluidSolver::setPositions(const float* x, const float* y, const float* z) {
 
 // ---- velocity passes (once per substep; scalar, over the row lists) -----------------
 
+bool FluidSolver::useSimd() const {
+  return kernel_ == Kernel::kAvx2 || (kernel_ == Kernel::kAuto && __builtin_cpu_supports("avx2"));
+}
+
+// Alg. 1 line 22 over the blocked lists: one loop for XSPH (Eq. 17, SPH-normalised) and the
+// vorticity omega (Eq. 15), both from the same velocities (Jacobi), then one for the
+// confinement (Eq. 16), then cohesion. Solids take no part and keep their velocities.
 void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
   if (!n_ || (params_.xsph <= 0.0f && params_.vorticity <= 0.0f && params_.cohesion <= 0.0f)) return;
   require(std::isfinite(h) && h > 0.0f, "velocityPasses: substep h must be positive");
-  std::vector<float> v[3];
-  for (auto& a : v) a.resize(n_);
-  grid_.gather(vx, v[0].data()), grid_.gather(vy, v[1].data()), grid_.gather(vz, v[2].data());
-  if (params_.xsph > 0.0f || params_.vorticity > 0.0f) {
-    std::vector<float> w[3], omega, omegaNorm;
-    for (auto& a : w) a.resize(n_);
-    const bool vort = params_.vorticity > 0.0f;
-    if (vort) omega.resize(3 * n_), omegaNorm.resize(n_);
-    const float* in[3] = {v[0].data(), v[1].data(), v[2].data()};
-    float* out[3] = {w[0].data(), w[1].data(), w[2].data()};
-    smoothingPass(in, out, vort ? omega.data() : nullptr, vort ? omegaNorm.data() : nullptr);
-    for (int a = 0; a < 3; ++a) v[a].swap(w[a]);
-    float* vv[3] = {v[0].data(), v[1].data(), v[2].data()};
-    if (vort) confinementPass(omega.data(), omegaNorm.data(), vv, h);
-  }
-  if (params_.cohesion > 0.0f) cohesionPass(v[0].data(), v[1].data(), v[2].data(), h);
+  const std::size_t nPad = std::size_t(ghost_);
   const std::int32_t* order = grid_.order().data();
-  for (std::size_t r = 0; r < n_; ++r)
-    if (rec_[r * kRecord + kFluid] != 0.0f) {
+  vrec_.assign((nPad + 1) * kRecord, 0.0f);
+  for (int k = 0; k < 3; ++k) v_[k].resize(nPad), omega_[k].resize(nPad);
+  forChunks(nPad + 1, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      const float* p = &rec_[r * kRecord];
+      float* q = &vrec_[r * kRecord];
+      q[kX] = p[kX], q[kY] = p[kY], q[kZ] = p[kZ];
+      q[kNu] = p[kFluid] != 0.0f ? p[kNu] : 0.0f;
+      if (r >= n_) continue;
       const std::size_t id = std::size_t(order[r]);
-      vx[id] = v[0][r], vy[id] = v[1][r], vz[id] = v[2][r];
-    }
-}
-
-// One loop over the neighbours for both velocity terms that read v_j - v_i (Alg. 1
-// line 22 applies both to the same updated velocities; Jacobi: v is read, not written):
-//   XSPH (Eq. 17), SPH-normalised: dv_i = c sum_j nu_j (v_j - v_i) W_ij
-//   vorticity (Eq. 15): omega_i = sum_j nu_j (v_j - v_i) x gradW_ij
-// over fluid neighbours j. Writes v + dv to out and omega, |omega| when asked.
-void FluidSolver::smoothingPass(const float* const v[3], float* const out[3], float* omega, float* omegaNorm) const {
-  const float kh = params_.kernelRadius, h2 = kh * kh;
-  const float cp = 315.0f / (64.0f * kPi * std::pow(kh, 9.0f)), cs = 45.0f / (kPi * std::pow(kh, 6.0f));
-  const float c = params_.xsph * cp;
-  const int width = lists_.width;
-  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      const float* ri = &rec_[i * kRecord];
-      float sum[3] = {0, 0, 0}, w[3] = {0, 0, 0};
-      if (ri[kFluid] != 0.0f)
-        for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
-          const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
-          const float* rj = &rec_[j * kRecord];
-          const float d[3] = {ri[kX] - rj[kX], ri[kY] - rj[kY], ri[kZ] - rj[kZ]};
-          const float r2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
-          if (rj[kFluid] == 0.0f || !(r2 < h2)) continue;
-          const float u[3] = {v[0][j] - v[0][i], v[1][j] - v[1][i], v[2][j] - v[2][i]};
-          const float s = h2 - r2, nw = rj[kNu] * ((s * s) * s);
-          for (int a = 0; a < 3; ++a) sum[a] += nw * u[a];
-          if (!omega) continue;
-          const float r = std::sqrt(r2);
-          const float g = -cs * rj[kNu] * (kh - r) * (kh - r) / std::max(r, kMinDistance);  // nu gradW / d
-          w[0] += g * (u[1] * d[2] - u[2] * d[1]), w[1] += g * (u[2] * d[0] - u[0] * d[2]);
-          w[2] += g * (u[0] * d[1] - u[1] * d[0]);
-        }
-      for (int a = 0; a < 3; ++a) out[a][i] = v[a][i] + c * sum[a];
-      if (!omega) continue;
-      for (int a = 0; a < 3; ++a) omega[3 * i + std::size_t(a)] = w[a];
-      omegaNorm[i] = std::sqrt((w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]);
+      q[kVX] = v_[0][r] = vx[id], q[kVY] = v_[1][r] = vy[id], q[kVZ] = v_[2][r] = vz[id];
     }
   });
-}
-
-// Vorticity confinement (Eq. 16): eta = sum_j nu_j |omega_j| gradW_ij (the gradient of
-// |omega|), N = eta / |eta|, v_i += h eps (N x omega_i). Fluid neighbours only.
-void FluidSolver::confinementPass(const float* omega, const float* omegaNorm, float* const v[3], float h) const {
-  const float kh = params_.kernelRadius, h2 = kh * kh, cs = 45.0f / (kPi * std::pow(kh, 6.0f));
-  const float eps = params_.vorticity;
-  const int width = lists_.width;
+  if (params_.xsph > 0.0f || params_.vorticity > 0.0f) {
+    VelocityArgs a;
+    a.vrec = vrec_.data(), a.bidx = bidx_.data(), a.boff = boff_.data(), a.bk = bk_.data(), a.n = n_;
+    const float kh = params_.kernelRadius;
+    a.h = kh, a.h2 = kh * kh;
+    a.cs = 45.0f / (kPi * std::pow(kh, 6.0f));
+    a.xsph = params_.xsph * (315.0f / (64.0f * kPi * std::pow(kh, 9.0f)));
+    a.vortStep = params_.vorticity * h;
+    for (int k = 0; k < 3; ++k) a.out[k] = v_[k].data(), a.omega[k] = params_.vorticity > 0.0f ? omega_[k].data() : nullptr;
+    const bool simd = useSimd();
+    forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+      simd ? smoothingBlocksAvx2(a, b0, b1) : smoothingBlocksScalar(a, b0, b1);
+    });
+    if (a.omega[0])
+      forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+        simd ? confinementBlocksAvx2(a, b0, b1) : confinementBlocksScalar(a, b0, b1);
+      });
+  }
+  if (params_.cohesion > 0.0f) cohesionPass(v_[0].data(), v_[1].data(), v_[2].data(), h);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
-    for (std::size_t i = b; i < e; ++i) {
-      const float* ri = &rec_[i * kRecord];
-      if (ri[kFluid] == 0.0f) continue;
-      float eta[3] = {0, 0, 0};
-      for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
-        const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
-        const float* rj = &rec_[j * kRecord];
-        const float d[3] = {ri[kX] - rj[kX], ri[kY] - rj[kY], ri[kZ] - rj[kZ]};
-        const float r2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
-        if (rj[kFluid] == 0.0f || !(r2 < h2)) continue;
-        const float r = std::sqrt(r2);
-        const float g = -cs * rj[kNu] * omegaNorm[j] * (kh - r) * (kh - r) / std::max(r, kMinDistance);
-        for (int a = 0; a < 3; ++a) eta[a] += g * d[a];
+    for (std::size_t r = b; r < e; ++r)
+      if (rec_[r * kRecord + kFluid] != 0.0f) {
+        const std::size_t id = std::size_t(order[r]);
+        vx[id] = v_[0][r], vy[id] = v_[1][r], vz[id] = v_[2][r];
       }
-      const float len = std::sqrt((eta[0] * eta[0] + eta[1] * eta[1]) + eta[2] * eta[2]);
-      if (!(len > 1e-12f)) continue;
-      const float nn[3] = {eta[0] / len, eta[1] / len, eta[2] / len};
-      const float* w = &omega[3 * i];
-      v[0][i] += h * eps * (nn[1] * w[2] - nn[2] * w[1]);
-      v[1][i] += h * eps * (nn[2] * w[0] - nn[0] * w[2]);
-      v[2][i] += h * eps * (nn[0] * w[1] - nn[1] * w[0]);
-    }
   });
 }
 

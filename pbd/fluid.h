@@ -141,8 +141,7 @@ class FluidSolver {
   void buildBlockedLists();
   void computeSolidVolumes();
   void buildWallTable();
-  void smoothingPass(const float* const v[3], float* const out[3], float* omega, float* omegaNorm) const;
-  void confinementPass(const float* omega, const float* omegaNorm, float* const v[3], float h) const;
+  bool useSimd() const;
   void cohesionPass(float* vx, float* vy, float* vz, float h) const;
 
   FluidParams params_;
@@ -169,6 +168,9 @@ class FluidSolver {
   // shorter row points to the ghost.
   std::vector<std::int32_t> bidx_, boff_, bk_;
   std::int32_t ghost_ = 0;
+  // Velocity passes (rank order): records x y z nu(fluid) vx vy vz |omega|, the smoothed
+  // velocities and the vorticity.
+  std::vector<float> vrec_, v_[3], omega_[3];
 };
 
 }  // namespace physketch::pbd

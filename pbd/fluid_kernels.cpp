@@ -74,7 +74,8 @@ namespace {
 struct Pair {
   float dx, dy, dz, r2, g, w;  // d = p_i - p_j; g = (h - r)^2 / r; w = (h^2 - r^2)^3 (0 outside h)
 };
-inline Pair pairTerms(const PairArgs& a, float xi, float yi, float zi, const float* rj) {
+template <class Args>
+inline Pair pairTerms(const Args& a, float xi, float yi, float zi, const float* rj) {
   Pair p;
   p.dx = xi - rj[kX], p.dy = yi - rj[kY], p.dz = zi - rj[kZ];
   p.r2 = (p.dx * p.dx + p.dy * p.dy) + p.dz * p.dz;
@@ -135,6 +136,76 @@ void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
         acc.z = acc.z + cg * p.dz;
       }
       finishCorrection(a, i, acc);
+    }
+  }
+}
+
+// ---- velocity passes, scalar --------------------------------------------------------
+
+namespace {
+
+// Shared per-particle finishes of the velocity passes (both kernels call them).
+void finishSmoothing(const VelocityArgs& a, std::size_t i, const float sum[3], const float w[3]) {
+  if (i >= a.n) return;
+  float* vi = a.vrec + i * kRecord;
+  if (!(vi[kNu] > 0.0f)) return;  // solids keep their velocity
+  for (int k = 0; k < 3; ++k) a.out[k][i] = vi[kVX + k] + a.xsph * sum[k];
+  if (!a.omega[0]) return;
+  const float o[3] = {-a.cs * w[0], -a.cs * w[1], -a.cs * w[2]};
+  for (int k = 0; k < 3; ++k) a.omega[k][i] = o[k];
+  vi[kOmegaNorm] = std::sqrt((o[0] * o[0] + o[1] * o[1]) + o[2] * o[2]);
+}
+
+void finishConfinement(const VelocityArgs& a, std::size_t i, const float acc[3]) {
+  if (i >= a.n || !(a.vrec[i * kRecord + kNu] > 0.0f)) return;
+  const float eta[3] = {-a.cs * acc[0], -a.cs * acc[1], -a.cs * acc[2]};
+  const float len = std::sqrt((eta[0] * eta[0] + eta[1] * eta[1]) + eta[2] * eta[2]);
+  if (!(len > 1e-12f)) return;
+  const float nn[3] = {eta[0] / len, eta[1] / len, eta[2] / len};
+  const float w[3] = {a.omega[0][i], a.omega[1][i], a.omega[2][i]};
+  a.out[0][i] += a.vortStep * (nn[1] * w[2] - nn[2] * w[1]);
+  a.out[1][i] += a.vortStep * (nn[2] * w[0] - nn[0] * w[2]);
+  a.out[2][i] += a.vortStep * (nn[0] * w[1] - nn[1] * w[0]);
+}
+
+}  // namespace
+
+void smoothingBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* vi = a.vrec + i * kRecord;
+      float sum[3] = {0, 0, 0}, w[3] = {0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* vj = a.vrec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, vi[kX], vi[kY], vi[kZ], vj);
+        const float ux = vj[kVX] - vi[kVX], uy = vj[kVY] - vi[kVY], uz = vj[kVZ] - vi[kVZ];
+        const float nw = vj[kNu] * p.w, gn = vj[kNu] * p.g;
+        sum[0] = sum[0] + nw * ux, sum[1] = sum[1] + nw * uy, sum[2] = sum[2] + nw * uz;
+        w[0] = w[0] + gn * (uy * p.dz - uz * p.dy);
+        w[1] = w[1] + gn * (uz * p.dx - ux * p.dz);
+        w[2] = w[2] + gn * (ux * p.dy - uy * p.dx);
+      }
+      finishSmoothing(a, i, sum, w);
+    }
+  }
+}
+
+void confinementBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* vi = a.vrec + i * kRecord;
+      float acc[3] = {0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* vj = a.vrec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, vi[kX], vi[kY], vi[kZ], vj);
+        const float e = (vj[kNu] * vj[kOmegaNorm]) * p.g;
+        acc[0] = acc[0] + e * p.dx, acc[1] = acc[1] + e * p.dy, acc[2] = acc[2] + e * p.dz;
+      }
+      finishConfinement(a, i, acc);
     }
   }
 }
@@ -326,6 +397,66 @@ __attribute__((target("avx2"))) void correctionBlocksAvx2(const PairArgs& a, std
       az = _mm256_add_ps(az, _mm256_mul_ps(cg, p.dz));
     }
     finishCorrection8(a, b, ri, ax, ay, az);
+  }
+}
+
+__attribute__((target("avx2"))) void smoothingBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 vi[8];
+    loadTransposed(a.vrec, self, vi);
+    __m256 s0 = _mm256_setzero_ps(), s1 = s0, s2 = s0, w0 = s0, w1 = s0, w2 = s0;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 vj[8];
+      loadTransposed(a.vrec, ids + k * kLanes, vj);
+      const Pair8 p = pairTerms8(c, vi, vj);
+      const __m256 ux = _mm256_sub_ps(vj[kVX], vi[kVX]), uy = _mm256_sub_ps(vj[kVY], vi[kVY]);
+      const __m256 uz = _mm256_sub_ps(vj[kVZ], vi[kVZ]);
+      const __m256 nw = _mm256_mul_ps(vj[kNu], p.w), gn = _mm256_mul_ps(vj[kNu], p.g);
+      s0 = _mm256_add_ps(s0, _mm256_mul_ps(nw, ux));
+      s1 = _mm256_add_ps(s1, _mm256_mul_ps(nw, uy));
+      s2 = _mm256_add_ps(s2, _mm256_mul_ps(nw, uz));
+      w0 = _mm256_add_ps(w0, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(uy, p.dz), _mm256_mul_ps(uz, p.dy))));
+      w1 = _mm256_add_ps(w1, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(uz, p.dx), _mm256_mul_ps(ux, p.dz))));
+      w2 = _mm256_add_ps(w2, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(ux, p.dy), _mm256_mul_ps(uy, p.dx))));
+    }
+    alignas(32) float s[6][8];
+    _mm256_store_ps(s[0], s0), _mm256_store_ps(s[1], s1), _mm256_store_ps(s[2], s2);
+    _mm256_store_ps(s[3], w0), _mm256_store_ps(s[4], w1), _mm256_store_ps(s[5], w2);
+    for (int l = 0; l < 8; ++l) {
+      const float sum[3] = {s[0][l], s[1][l], s[2][l]}, w[3] = {s[3][l], s[4][l], s[5][l]};
+      finishSmoothing(a, b * kLanes + std::size_t(l), sum, w);
+    }
+  }
+}
+
+__attribute__((target("avx2"))) void confinementBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 vi[8];
+    loadTransposed(a.vrec, self, vi);
+    __m256 e0 = _mm256_setzero_ps(), e1 = e0, e2 = e0;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 vj[8];
+      loadTransposed(a.vrec, ids + k * kLanes, vj);
+      const Pair8 p = pairTerms8(c, vi, vj);
+      const __m256 e = _mm256_mul_ps(_mm256_mul_ps(vj[kNu], vj[kOmegaNorm]), p.g);
+      e0 = _mm256_add_ps(e0, _mm256_mul_ps(e, p.dx));
+      e1 = _mm256_add_ps(e1, _mm256_mul_ps(e, p.dy));
+      e2 = _mm256_add_ps(e2, _mm256_mul_ps(e, p.dz));
+    }
+    alignas(32) float s[3][8];
+    _mm256_store_ps(s[0], e0), _mm256_store_ps(s[1], e1), _mm256_store_ps(s[2], e2);
+    for (int l = 0; l < 8; ++l) {
+      const float acc[3] = {s[0][l], s[1][l], s[2][l]};
+      finishConfinement(a, b * kLanes + std::size_t(l), acc);
+    }
   }
 }
 

@@ -52,6 +52,28 @@ struct CorrectionAcc {
   float x, y, z;
 };
 
+// The velocity passes (Alg. 1 line 22) over the same blocked lists, on records of their own:
+//   x, y, z (m), nu (m^3; 0 for solids: they take no part), vx, vy, vz (m/s), |omega| (1/s)
+enum VelocityField { kVX = 4, kVY, kVZ, kOmegaNorm };
+struct VelocityArgs {
+  float* vrec = nullptr;               // the smoothing pass writes |omega| (field 7) only
+  const std::int32_t* bidx = nullptr;
+  const std::int32_t* boff = nullptr;
+  const std::int32_t* bk = nullptr;
+  std::size_t n = 0;
+  float h = 0, h2 = 0, cs = 0;
+  float xsph = 0;                      // c * cp (XSPH, Eq. 17)
+  float vortStep = 0;                  // eps * substep h (vorticity confinement, Eq. 16)
+  float* out[3] = {nullptr, nullptr, nullptr};    // smoothed velocities by rank
+  float* omega[3] = {nullptr, nullptr, nullptr};  // vorticity by rank; null: confinement off
+};
+// v_i + c sum_j nu_j (v_j - v_i) W_ij, and omega_i = sum_j nu_j (v_j - v_i) x gradW_ij.
+void smoothingBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+void smoothingBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+// out_i += h eps (N x omega_i), N = eta / |eta|, eta = sum_j nu_j |omega_j| gradW_ij.
+void confinementBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+void confinementBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+
 void lambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1);
 void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1);
 void lambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1);

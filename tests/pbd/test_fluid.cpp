@@ -208,7 +208,9 @@ TEST(FluidKernel, ScalarAndSimdKernelsAreBitIdentical) {
   if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "no AVX2";
   FluidParams p = smallParams();
   p.wallLo[1] = 0.03f, p.wallHi[0] = 0.15f;  // walls cut through the set: both finishes run
+  p.xsph = 0.1f, p.vorticity = 0.05f;
   const RandomSet set = randomSet(p, 1000, 11);
+  const std::size_t n = set.x.size();
   std::vector<float> out[2];
   int k = 0;
   for (auto kernel : {FluidSolver::Kernel::kScalar, FluidSolver::Kernel::kAvx2}) {
@@ -217,9 +219,13 @@ TEST(FluidKernel, ScalarAndSimdKernelsAreBitIdentical) {
     solver.begin(set.input());
     for (int it = 0; it < 3; ++it) solver.densityIteration(), solver.applyCorrections(true);
     std::vector<float>& o = out[k++];
-    o.resize(4 * set.x.size());
-    solver.positions(o.data(), o.data() + set.x.size(), o.data() + 2 * set.x.size());
-    solver.lambdas(o.data() + 3 * set.x.size());
+    o.resize(7 * n);
+    solver.positions(o.data(), o.data() + n, o.data() + 2 * n);
+    solver.lambdas(o.data() + 3 * n);
+    std::mt19937 rng(2);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (std::size_t i = 4 * n; i < 7 * n; ++i) o[i] = u(rng);
+    solver.velocityPasses(o.data() + 4 * n, o.data() + 5 * n, o.data() + 6 * n, 1.0f / 240.0f);
   }
   EXPECT_EQ(0, std::memcmp(out[0].data(), out[1].data(), out[0].size() * sizeof(float)));
 }
