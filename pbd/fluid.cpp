@@ -192,12 +192,16 @@ void FluidSolver::buildBlockedLists() {
   forChunks(blocks, kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     for (std::size_t b = b0; b < b1; ++b) {
       std::int32_t* out = &bidx_[std::size_t(boff_[b]) * kLanes];
+      const std::int32_t* row[kLanes];
+      std::int32_t cnt[kLanes];
       for (int l = 0; l < kLanes; ++l) {
-        const std::size_t i = b * kLanes + std::size_t(l);
-        const std::int32_t cnt = i < n_ ? lists_.count[i] : 0;
-        const std::int32_t* row = i < n_ ? &lists_.index[i * std::size_t(width)] : nullptr;
-        for (std::int32_t k = 0; k < bk_[b]; ++k) out[k * kLanes + l] = k < cnt ? row[k] : ghost_;
+        const std::size_t i = std::min(b * kLanes + std::size_t(l), n_ - 1);  // lanes past n: no slots
+        row[l] = &lists_.index[i * std::size_t(width)];
+        cnt[l] = b * kLanes + std::size_t(l) < n_ ? lists_.count[i] : 0;
       }
+      // Slot by slot, so the writes stream (lane by lane they were 8 strided streams).
+      for (std::int32_t k = 0; k < bk_[b]; ++k, out += kLanes)
+        for (int l = 0; l < kLanes; ++l) out[l] = k < cnt[l] ? row[l][k] : ghost_;
     }
   });
 }
