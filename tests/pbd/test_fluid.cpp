@@ -246,6 +246,34 @@ TEST(FluidKernel, RejectsBadInput) {
   EXPECT_THROW(solver.begin(set.input()), RuntimeError);
 }
 
+// Cohesion (Akinci et al. 2013, Eq. 1-2) between two fluid particles at rest, no other
+// term: each one's velocity changes by h gamma V C(r) toward the other, C the cohesion
+// spline 32 / (pi h^9) {(h-r)^3 r^3 for 2r > h; 2 (h-r)^3 r^3 - h^6 / 64 otherwise}:
+// attraction beyond h/2, repulsion close in. Evaluated in double here.
+TEST(FluidKernel, CohesionMatchesAkinciSpline) {
+  FluidParams p = smallParams();
+  p.scorrK = 0.0f, p.cohesion = 2.0f;
+  const double kh = p.kernelRadius, V = std::pow(2.0 * p.particleRadius, 3), pi = 3.14159265358979323846;
+  for (double r : {0.3 * kh, 0.45 * kh, 0.6 * kh, 0.9 * kh}) {
+    std::vector<float> x{0.0f, float(r)}, y{0.0f, 0.0f}, z{0.0f, 0.0f}, w{1.0f, 1.0f}, rho{1000.0f, 1000.0f};
+    std::vector<std::uint8_t> fluid{1, 1};
+    FluidInput in;
+    in.count = 2, in.x = x.data(), in.y = y.data(), in.z = z.data();
+    in.invMass = w.data(), in.fluid = fluid.data(), in.restDensity = rho.data();
+    FluidSolver solver(p);
+    solver.begin(in);
+    std::vector<float> vx{0, 0}, vy{0, 0}, vz{0, 0};
+    const float h = 0.01f;
+    solver.velocityPasses(vx.data(), vy.data(), vz.data(), h);
+    const double a3 = std::pow(kh - r, 3) * r * r * r;
+    const double c = 32.0 / (pi * std::pow(kh, 9)) * (2 * r > kh ? a3 : 2 * a3 - std::pow(kh, 6) / 64);
+    const double dv = h * p.cohesion * V * c;  // particle 0 moves toward +x by dv
+    EXPECT_NEAR(vx[0], dv, 1e-5 * std::fabs(dv) + 1e-12) << "r/h " << r / kh;
+    EXPECT_NEAR(vx[1], -dv, 1e-5 * std::fabs(dv) + 1e-12) << "r/h " << r / kh;
+    EXPECT_EQ(vy[0], 0.0f);
+  }
+}
+
 // ---- physics: a fluid at rest, a dam break, two fluids -----------------------------------
 
 // Settings of the physics tests: r = 1 cm, h = 2.1 spacings, 4 substeps of a 1/60 s step,
