@@ -55,7 +55,9 @@ int main(int argc, char** argv) {
       const std::string k = argv[++i];
       kernel = k == "scalar" ? pbd::FluidSolver::Kernel::kScalar : pbd::FluidSolver::Kernel::kAvx2;
     } else {
-      std::fprintf(stderr, "usage: bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--relaxation E] [--kernel scalar|avx2] [--n NX NY NZ]\n");
+      std::fprintf(stderr,
+                   "usage: bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--relaxation E]\n"
+                   "                 [--kernel scalar|avx2] [--n NX NY NZ]\n");
       return 2;
     }
   }

@@ -231,7 +231,8 @@ void FluidSolver::computeSolidVolumes() {
 
 namespace {
 
-PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const std::vector<float>& wallDB, float* rec, const std::vector<std::int32_t>& bidx,
+PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const std::vector<float>& wallDB, float* rec,
+                  const std::vector<std::int32_t>& bidx,
                   const std::vector<std::int32_t>& boff, const std::vector<std::int32_t>& bk, float* dx, float* dy,
                   float* dz, std::size_t n) {
   PairArgs a;
@@ -263,7 +264,8 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
 }  // namespace
 
 void FluidSolver::lambdaPass() {
-  const PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  const PairArgs a =
+      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? lambdaBlocksAvx2(a, b0, b1) : lambdaBlocksScalar(a, b0, b1);
@@ -271,7 +273,8 @@ void FluidSolver::lambdaPass() {
 }
 
 void FluidSolver::correctionPass() {
-  const PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  const PairArgs a =
+      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? correctionBlocksAvx2(a, b0, b1) : correctionBlocksScalar(a, b0, b1);

@@ -21,9 +21,10 @@
 //   densityError()               max and mean of rho/rho0 - 1 over fluid particles
 //
 // The density constraint (multi-fluid form). A particle of a fluid with rest density rho0
-// and mass m has rest volume nu = m / rho0 (times a lattice calibration, see latticeScale_); every fluid is sampled at the same spacing, so
-// the constraint is on number density (Solenthaler & Pajarola 2008, which keeps two fluids
-// of different densities from pushing apart at their interface):
+// and mass m has rest volume nu = m / rho0 (times a lattice calibration, see latticeScale_);
+// every fluid is sampled at the same spacing, so the constraint is on number density
+// (Solenthaler & Pajarola 2008, which keeps two fluids of different densities from pushing
+// apart at their interface):
 //     C_i = sum_j nu_j W(p_i - p_j, h) - 1          (j includes i; poly6 W)
 // and a solid particle in range contributes its boundary volume nu_b = s / sum_k W_bk over
 // its solid neighbours k (Akinci et al. 2012, Eq. 4; s = FluidParams::solidScale). The
