@@ -1,0 +1,459 @@
+#include "pbd/fluid.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+#include "pbd/fluid_kernels.h"
+
+namespace physketch::pbd {
+namespace {
+
+using namespace detail;
+
+constexpr float kPi = 3.14159265358979f;
+constexpr float kGhostCoord = 1e18f;  // far from everything; its squared distance stays finite
+// Fixed work units (boundaries depend only on the sizes, never on the thread count).
+constexpr std::size_t kBlockChunk = 64;      // list blocks (x 8 ranks) per unit
+constexpr std::size_t kParticleChunk = 2048;
+
+template <class F>
+void forChunks(std::size_t n, std::size_t chunk, F&& f) {
+  const std::size_t units = (n + chunk - 1) / chunk;
+  if (units <= 1) {
+    if (n) f(std::size_t(0), n);
+    return;
+  }
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, units, 1),
+      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t u = r.begin(); u != r.end(); ++u) f(u * chunk, std::min(n, (u + 1) * chunk));
+      },
+      tbb::simple_partitioner());
+}
+
+void require(bool ok, const std::string& what) {
+  if (!ok) throw RuntimeError("FluidSolver: " + what);
+}
+
+// Akinci et al. 2013 cohesion spline C(r) (Eq. 2) without its 32 / (pi h^9) factor.
+float cohesionSpline(float r, float h) {
+  if (r >= h || r <= 0.0f) return 0.0f;
+  const float a = (h - r) * (h - r) * (h - r) * r * r * r;
+  return 2.0f * r > h ? a : 2.0f * a - h * h * h * h * h * h / 64.0f;
+}
+
+}  // namespace
+
+FluidSolver::FluidSolver(const FluidParams& p) : params_(p) {
+  const auto positive = [](float v) { return std::isfinite(v) && v > 0.0f; };
+  const auto nonNegative = [](float v) { return std::isfinite(v) && v >= 0.0f; };
+  require(positive(p.particleRadius), "particleRadius must be positive and finite");
+  require(positive(p.kernelRadius) && p.kernelRadius > 2.0f * p.particleRadius,
+          "kernelRadius must be finite and larger than the spacing 2 * particleRadius");
+  require(nonNegative(p.relaxation), "relaxation must be >= 0 and finite");
+  require(nonNegative(p.scorrK), "scorrK must be >= 0 and finite");
+  require(p.scorrN >= 1 && p.scorrN <= 8, "scorrN must be in 1..8");
+  require(std::isfinite(p.scorrDq) && p.scorrDq >= 0.0f && p.scorrDq < 1.0f, "scorrDq must be in [0, 1)");
+  require(nonNegative(p.xsph) && p.xsph <= 1.0f, "xsph must be in [0, 1]");
+  require(nonNegative(p.vorticity), "vorticity must be >= 0 and finite");
+  require(nonNegative(p.cohesion), "cohesion must be >= 0 and finite");
+  require(nonNegative(p.solidScale), "solidScale must be >= 0 and finite");
+  for (int k = 0; k < 3; ++k)
+    require(!std::isnan(p.wallLo[k]) && !std::isnan(p.wallHi[k]) &&
+                p.wallHi[k] - p.wallLo[k] > 2.0f * p.particleRadius,
+            "walls: wallHi - wallLo must exceed 2 * particleRadius on every axis");
+  // sum_j V W(x_j) over the cubic lattice of spacing d = 2r, in double.
+  const double d = 2.0 * p.particleRadius, h = p.kernelRadius, cp = 315.0 / (64.0 * 3.14159265358979323846 * std::pow(h, 9));
+  const int reach = int(std::ceil(h / d));
+  double sum = 0.0;
+  for (int i = -reach; i <= reach; ++i)
+    for (int j = -reach; j <= reach; ++j)
+      for (int k = -reach; k <= reach; ++k) {
+        const double s = h * h - d * d * double(i * i + j * j + k * k);
+        if (s > 0.0) sum += cp * s * s * s;
+      }
+  latticeScale_ = float(1.0 / (sum * d * d * d));
+  buildWallTable();
+}
+
+// A wall is the fluid's own lattice continued beyond its plane (Akinci et al. 2012's
+// boundary particles, summed once instead of stored): a fluid particle at distance y from
+// the plane sees ghost layers at y + r + k d, each a square lattice of spacing d aligned
+// with it, of volume latticeScale d^3. So a particle of a lattice fluid touching a wall
+// has exactly the density of one inside it, and the particle deficiency that makes plain
+// PBF particles crowd and slide along walls is gone. B(y) = sum nu W, dB/dy its derivative.
+void FluidSolver::buildWallTable() {
+  const double d = 2.0 * params_.particleRadius, h = params_.kernelRadius, r = params_.particleRadius;
+  const double cp = 315.0 / (64.0 * 3.14159265358979323846 * std::pow(h, 9));
+  const double nu = double(latticeScale_) * d * d * d;
+  const int reach = int(std::ceil(h / d));
+  wallB_.assign(kWallSamples, 0.0f), wallDB_.assign(kWallSamples, 0.0f);
+  for (int s = 0; s < kWallSamples; ++s) {
+    const double y = h * double(s) / double(kWallSamples - 1);
+    double b = 0, db = 0;
+    for (int k = 0;; ++k) {
+      const double z = y + r + double(k) * d;  // normal distance to ghost layer k
+      if (z >= h) break;
+      for (int i = -reach; i <= reach; ++i)
+        for (int j = -reach; j <= reach; ++j) {
+          const double q = h * h - z * z - d * d * double(i * i + j * j);
+          if (q <= 0) continue;
+          b += nu * cp * q * q * q;
+          db += nu * cp * 3.0 * q * q * (-2.0 * z);  // dz/dy = 1
+        }
+    }
+    wallB_[s] = float(b), wallDB_[s] = float(db);
+  }
+}
+
+void FluidSolver::setKernel(Kernel k) {
+  if (k == Kernel::kAvx2 && !__builtin_cpu_supports("avx2"))
+    throw RuntimeError("FluidSolver: this CPU lacks AVX2");
+  kernel_ = k;
+}
+
+void FluidSolver::checkInput(const FluidInput& in) const {
+  require(in.count < (std::size_t(1) << 30), "too many particles (" + std::to_string(in.count) + ")");
+  if (!in.count) return;
+  require(in.x && in.y && in.z && in.invMass && in.fluid && in.restDensity, "an input array is null");
+  for (std::size_t i = 0; i < in.count; ++i) {  // messages built only on failure (80k per substep)
+    const float w = in.invMass[i];
+    if (!(std::isfinite(w) && w >= 0.0f))
+      require(false, "particle " + std::to_string(i) + ": inverse mass " + std::to_string(w) + " must be finite and >= 0");
+    if (in.fluid[i] && !(w > 0.0f && std::isfinite(in.restDensity[i]) && in.restDensity[i] > 0.0f))
+      require(false, "fluid particle " + std::to_string(i) + ": needs inverse mass > 0 and rest density > 0 (got " +
+                         std::to_string(w) + ", " + std::to_string(in.restDensity[i]) + ")");
+  }
+}
+
+void FluidSolver::begin(const FluidInput& in) {
+  checkInput(in);
+  n_ = in.count;
+  if (!n_) {
+    rec_.clear(), bidx_.clear(), boff_.assign(1, 0), bk_.clear();
+    return;
+  }
+  // One neighbour structure per substep from p* (Macklin & Müller 2013, Alg. 1 line 5).
+  grid_.build(in.x, in.y, in.z, n_, params_.kernelRadius);
+  loadRecords(in);
+  for (;;) {
+    grid_.buildNeighborLists(params_.kernelRadius, listWidth_, lists_);
+    if (!lists_.overflowed) break;
+    listWidth_ = (lists_.maxCount + 7) / 8 * 8;  // a compressed region: wider lists, once
+  }
+  buildBlockedLists();
+  computeSolidVolumes();
+}
+
+void FluidSolver::loadRecords(const FluidInput& in) {
+  const std::size_t nPad = (n_ + kLanes - 1) / kLanes * kLanes;
+  ghost_ = std::int32_t(nPad);
+  rec_.assign((nPad + 1) * kRecord, 0.0f);
+  for (std::size_t r = n_; r <= nPad; ++r)
+    rec_[r * kRecord + kX] = rec_[r * kRecord + kY] = rec_[r * kRecord + kZ] = kGhostCoord;
+  dx_.assign(nPad, 0.0f), dy_.assign(nPad, 0.0f), dz_.assign(nPad, 0.0f);
+  const float* sx = grid_.sortedX();
+  const float* sy = grid_.sortedY();
+  const float* sz = grid_.sortedZ();
+  const std::int32_t* order = grid_.order().data();
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      const std::size_t id = std::size_t(order[r]);
+      float* p = &rec_[r * kRecord];
+      const float w = in.invMass[id];
+      const bool fluid = in.fluid[id] != 0;
+      p[kX] = sx[r], p[kY] = sy[r], p[kZ] = sz[r];
+      p[kW] = w;
+      p[kLambda] = 0.0f;
+      p[kFluid] = fluid ? 1.0f : 0.0f;
+      p[kMass] = fluid ? 1.0f / w : 0.0f;
+      p[kNu] = fluid ? latticeScale_ / (w * in.restDensity[id]) : 0.0f;  // solids: computeSolidVolumes
+    }
+  });
+}
+
+void FluidSolver::buildBlockedLists() {
+  const std::size_t blocks = (n_ + kLanes - 1) / kLanes;
+  const int width = lists_.width;
+  bk_.assign(blocks, 0);
+  boff_.assign(blocks + 1, 0);
+  for (std::size_t b = 0; b < blocks; ++b) {
+    std::int32_t m = 0;
+    for (std::size_t i = b * kLanes; i < std::min(n_, (b + 1) * kLanes); ++i) m = std::max(m, lists_.count[i]);
+    bk_[b] = m;
+    boff_[b + 1] = boff_[b] + m;
+  }
+  bidx_.resize(std::size_t(boff_[blocks]) * kLanes);
+  forChunks(blocks, kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      std::int32_t* out = &bidx_[std::size_t(boff_[b]) * kLanes];
+      const std::int32_t* row[kLanes];
+      std::int32_t cnt[kLanes];
+      for (int l = 0; l < kLanes; ++l) {
+        const std::size_t i = std::min(b * kLanes + std::size_t(l), n_ - 1);  // lanes past n: no slots
+        row[l] = &lists_.index[i * std::size_t(width)];
+        cnt[l] = b * kLanes + std::size_t(l) < n_ ? lists_.count[i] : 0;
+      }
+      // Slot by slot, so the writes stream (lane by lane they were 8 strided streams).
+      for (std::int32_t k = 0; k < bk_[b]; ++k, out += kLanes)
+        for (int l = 0; l < kLanes; ++l) out[l] = k < cnt[l] ? row[l][k] : ghost_;
+    }
+  });
+}
+
+// A solid particle's boundary volume nu_b = s / sum_k W_bk over the solid particles k in
+// range, itself included (Akinci et al. 2012, Eq. 4): a dense wall counts as much as a
+// full fluid neighbourhood, a sparse one proportionally more per particle.
+void FluidSolver::computeSolidVolumes() {
+  const float h = params_.kernelRadius, h2 = h * h, cp = 315.0f / (64.0f * kPi * std::pow(h, 9.0f));
+  const int width = lists_.width;
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      float* ri = &rec_[i * kRecord];
+      if (ri[kFluid] != 0.0f) continue;
+      float sum = h2 * h2 * h2;
+      for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
+        const float* rj = &rec_[std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]) * kRecord];
+        if (rj[kFluid] != 0.0f) continue;
+        const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
+        const float s = h2 - ((dx * dx + dy * dy) + dz * dz);
+        if (s > 0.0f) sum += (s * s) * s;
+      }
+      ri[kNu] = params_.solidScale / (cp * sum);
+    }
+  });
+}
+
+namespace {
+
+PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const std::vector<float>& wallDB, float* rec,
+                  const std::vector<std::int32_t>& bidx,
+                  const std::vector<std::int32_t>& boff, const std::vector<std::int32_t>& bk, float* dx, float* dy,
+                  float* dz, std::size_t n) {
+  PairArgs a;
+  a.rec = rec, a.bidx = bidx.data(), a.boff = boff.data(), a.bk = bk.data();
+  a.dx = dx, a.dy = dy, a.dz = dz, a.n = n;
+  const float h = p.kernelRadius;
+  a.h = h, a.h2 = h * h, a.h6 = a.h2 * a.h2 * a.h2;
+  a.cp = 315.0f / (64.0f * kPi * std::pow(h, 9.0f));
+  a.cs = 45.0f / (kPi * std::pow(h, 6.0f));
+  const float spacing = 2.0f * p.particleRadius;
+  const float volume = spacing * spacing * spacing;
+  const float ref = volume * a.cs * a.h2;  // |nu gradW| of one neighbour at distance 0, 1/m
+  a.epsK = p.relaxation * ref * ref;
+  const float sdq = a.h2 - (p.scorrDq * h) * (p.scorrDq * h);
+  a.invWdq = 1.0f / ((sdq * sdq) * sdq);
+  a.scorrK = p.scorrK * volume * a.h2 * 0.5f;
+  a.scorrN = p.scorrN;
+  a.wallB = wallB.data(), a.wallDB = wallDB.data();
+  a.wallSamples = int(wallB.size());
+  a.wallInvStep = float(wallB.size() - 1) / h;
+  for (int k = 0; k < 3; ++k) {
+    a.wallLo[k] = p.wallLo[k] + p.particleRadius;
+    a.wallHi[k] = p.wallHi[k] - p.particleRadius;
+    a.wallPlaneLo[k] = p.wallLo[k], a.wallPlaneHi[k] = p.wallHi[k];
+  }
+  return a;
+}
+
+}  // namespace
+
+void FluidSolver::lambdaPass() {
+  const PairArgs a =
+      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  const bool simd = useSimd();
+  forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+    simd ? lambdaBlocksAvx2(a, b0, b1) : lambdaBlocksScalar(a, b0, b1);
+  });
+}
+
+void FluidSolver::correctionPass() {
+  const PairArgs a =
+      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  const bool simd = useSimd();
+  forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+    simd ? correctionBlocksAvx2(a, b0, b1) : correctionBlocksScalar(a, b0, b1);
+  });
+}
+
+void FluidSolver::densityIteration() {
+  lambdaPass();
+  correctionPass();
+}
+
+void FluidSolver::applyCorrections(bool solidsToo) {
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      float* p = &rec_[r * kRecord];
+      if (p[kFluid] == 0.0f && !solidsToo) continue;
+      p[kX] += dx_[r], p[kY] += dy_[r], p[kZ] += dz_[r];
+    }
+  });
+}
+
+void FluidSolver::corrections(float* dx, float* dy, float* dz) const {
+  grid_.scatter(dx_.data(), dx);
+  grid_.scatter(dy_.data(), dy);
+  grid_.scatter(dz_.data(), dz);
+}
+
+void FluidSolver::lambdas(float* lambda) const {
+  const std::int32_t* order = grid_.order().data();
+  for (std::size_t r = 0; r < n_; ++r) lambda[order[r]] = rec_[r * kRecord + kLambda];
+}
+
+void FluidSolver::positions(float* x, float* y, float* z) const {
+  const std::int32_t* order = grid_.order().data();
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      const std::size_t id = std::size_t(order[r]);
+      x[id] = rec_[r * kRecord + kX], y[id] = rec_[r * kRecord + kY], z[id] = rec_[r * kRecord + kZ];
+    }
+  });
+}
+
+void FluidSolver::setPositions(const float* x, const float* y, const float* z) {
+  const std::int32_t* order = grid_.order().data();
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      const std::size_t id = std::size_t(order[r]);
+      rec_[r * kRecord + kX] = x[id], rec_[r * kRecord + kY] = y[id], rec_[r * kRecord + kZ] = z[id];
+    }
+  });
+}
+
+// ---- velocity passes (once per substep; scalar, over the row lists) -----------------
+
+bool FluidSolver::useSimd() const {
+  return kernel_ == Kernel::kAvx2 || (kernel_ == Kernel::kAuto && __builtin_cpu_supports("avx2"));
+}
+
+// Alg. 1 line 22 over the blocked lists: one loop for XSPH (Eq. 17, SPH-normalised) and the
+// vorticity omega (Eq. 15), both from the same velocities (Jacobi), then one for the
+// confinement (Eq. 16), then cohesion. Solids take no part and keep their velocities.
+void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
+  if (!n_ || (params_.xsph <= 0.0f && params_.vorticity <= 0.0f && params_.cohesion <= 0.0f)) return;
+  require(std::isfinite(h) && h > 0.0f, "velocityPasses: substep h must be positive");
+  const std::size_t nPad = std::size_t(ghost_);
+  const std::int32_t* order = grid_.order().data();
+  vrec_.assign((nPad + 1) * kRecord, 0.0f);
+  for (int k = 0; k < 3; ++k) v_[k].resize(nPad), omega_[k].resize(nPad);
+  forChunks(nPad + 1, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      const float* p = &rec_[r * kRecord];
+      float* q = &vrec_[r * kRecord];
+      q[kX] = p[kX], q[kY] = p[kY], q[kZ] = p[kZ];
+      q[kNu] = p[kFluid] != 0.0f ? p[kNu] : 0.0f;
+      if (r >= n_) continue;
+      const std::size_t id = std::size_t(order[r]);
+      q[kVX] = v_[0][r] = vx[id], q[kVY] = v_[1][r] = vy[id], q[kVZ] = v_[2][r] = vz[id];
+    }
+  });
+  if (params_.xsph > 0.0f || params_.vorticity > 0.0f) {
+    VelocityArgs a;
+    a.vrec = vrec_.data(), a.bidx = bidx_.data(), a.boff = boff_.data(), a.bk = bk_.data(), a.n = n_;
+    const float kh = params_.kernelRadius;
+    a.h = kh, a.h2 = kh * kh;
+    a.cs = 45.0f / (kPi * std::pow(kh, 6.0f));
+    a.xsph = params_.xsph * (315.0f / (64.0f * kPi * std::pow(kh, 9.0f)));
+    a.vortStep = params_.vorticity * h;
+    for (int k = 0; k < 3; ++k) a.out[k] = v_[k].data(), a.omega[k] = params_.vorticity > 0.0f ? omega_[k].data() : nullptr;
+    const bool simd = useSimd();
+    forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+      simd ? smoothingBlocksAvx2(a, b0, b1) : smoothingBlocksScalar(a, b0, b1);
+    });
+    if (a.omega[0])
+      forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+        simd ? confinementBlocksAvx2(a, b0, b1) : confinementBlocksScalar(a, b0, b1);
+      });
+  }
+  if (params_.cohesion > 0.0f) cohesionPass(v_[0].data(), v_[1].data(), v_[2].data(), h);
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r)
+      if (rec_[r * kRecord + kFluid] != 0.0f) {
+        const std::size_t id = std::size_t(order[r]);
+        vx[id] = v_[0][r], vy[id] = v_[1][r], vz[id] = v_[2][r];
+      }
+  });
+}
+
+// Cohesion (Akinci et al. 2013, Eq. 1 without the curvature term): a_i = -gamma sum_j
+// V C(r) (p_i - p_j) / r over fluid j, C the cohesion spline with 32 / (pi h^9), V = (2r)^3.
+void FluidSolver::cohesionPass(float* vx, float* vy, float* vz, float h) const {
+  const float kh = params_.kernelRadius, spacing = 2.0f * params_.particleRadius;
+  const float scale = params_.cohesion * spacing * spacing * spacing * 32.0f / (kPi * std::pow(kh, 9.0f));
+  const int width = lists_.width;
+  std::vector<float> a(3 * n_, 0.0f);
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const float* ri = &rec_[i * kRecord];
+      if (ri[kFluid] == 0.0f) continue;
+      for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
+        const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
+        const float* rj = &rec_[j * kRecord];
+        if (rj[kFluid] == 0.0f) continue;
+        const float d[3] = {ri[kX] - rj[kX], ri[kY] - rj[kY], ri[kZ] - rj[kZ]};
+        const float r = std::sqrt((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]);
+        if (r <= kMinDistance) continue;
+        const float f = -scale * cohesionSpline(r, kh) / r;
+        for (int c = 0; c < 3; ++c) a[3 * i + std::size_t(c)] += f * d[c];
+      }
+    }
+  });
+  for (std::size_t i = 0; i < n_; ++i) vx[i] += h * a[3 * i], vy[i] += h * a[3 * i + 1], vz[i] += h * a[3 * i + 2];
+}
+
+// ---- density error -------------------------------------------------------------------
+
+DensityError FluidSolver::densityError() const {
+  DensityError out;
+  if (!n_) return out;
+  const float h = params_.kernelRadius, h2 = h * h, cp = 315.0f / (64.0f * kPi * std::pow(h, 9.0f));
+  const int width = lists_.width;
+  struct Part {
+    double sumComp = 0, sumAbs = 0;
+    float maxComp = 0;
+    std::size_t count = 0;
+  };
+  const std::size_t units = (n_ + kParticleChunk - 1) / kParticleChunk;
+  std::vector<Part> parts(units);
+  const PairArgs walls = pairArgs(params_, wallB_, wallDB_, nullptr, bidx_, boff_, bk_, nullptr, nullptr, nullptr, n_);
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    Part& p = parts[b / kParticleChunk];
+    for (std::size_t i = b; i < e; ++i) {
+      const float* ri = &rec_[i * kRecord];
+      if (ri[kFluid] == 0.0f) continue;
+      // Positions moved since the lists were built: a pair may have come within h
+      // unseen. The lists' skin is zero, as in the solver itself (Macklin & Müller 2013).
+      float rho = ri[kNu] * h2 * h2 * h2;
+      for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
+        const float* rj = &rec_[std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]) * kRecord];
+        const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
+        const float s = h2 - ((dx * dx + dy * dy) + dz * dz);
+        if (s > 0.0f) rho += rj[kNu] * ((s * s) * s);
+      }
+      const float c = (cp * rho + wallTerm(walls, ri).c) - 1.0f;
+      p.sumComp += std::max(c, 0.0f), p.sumAbs += std::fabs(c);
+      p.maxComp = std::max(p.maxComp, c);
+      ++p.count;
+    }
+  });
+  double comp = 0, abs = 0;
+  for (const Part& p : parts) {
+    comp += p.sumComp, abs += p.sumAbs;
+    out.maxCompression = std::max(out.maxCompression, p.maxComp);
+    out.fluidCount += p.count;
+  }
+  if (out.fluidCount) {
+    out.meanCompression = float(comp / double(out.fluidCount));
+    out.meanAbs = float(abs / double(out.fluidCount));
+  }
+  return out;
+}
+
+}  // namespace physketch::pbd

@@ -1,0 +1,177 @@
+// Position Based Fluids (Macklin & Müller 2013, "Position Based Fluids", Alg. 1) as a
+// self-contained kernel the PBD world calls once per substep. It owns no particles: the
+// caller gives predicted positions, inverse masses and a fluid flag per particle, and
+// gets back position corrections and smoothed velocities. Data flow per substep:
+//
+//   begin(input)                 neighbour structure from the predicted positions p*
+//                                (core/neighbor_grid.h: stable counting sort by cell,
+//                                particles copied into cell order), built ONCE and reused
+//   repeat `iterations` times:
+//     densityIteration()         Jacobi: lambda_i for every fluid particle (Eq. 11), then
+//                                dp_i for every particle in range (Eq. 12 + s_corr Eq. 13),
+//                                box walls folded into the fluid particles' dp
+//     applyCorrections()         p += dp for the particles the kernel owns (fluid); or
+//     corrections(dx, dy, dz)    dp by id, for the caller to apply (solids: soft particles
+//                                take it, rigid bodies sum m dp into an impulse) and then
+//     setPositions(x, y, z)      ... hand the moved solids back before the next iteration
+//   positions(x, y, z)           p by id; the caller sets v = (p - x) / h
+//   velocityPasses(vx, vy, vz)   XSPH viscosity (Eq. 17), vorticity confinement (Eq. 15-16),
+//                                cohesion (Akinci et al. 2013), each only when its parameter
+//                                is > 0, on fluid particles only
+//   densityError()               max and mean of rho/rho0 - 1 over fluid particles
+//
+// The density constraint (multi-fluid form). A particle of a fluid with rest density rho0
+// and mass m has rest volume nu = m / rho0 (times a lattice calibration, see latticeScale_);
+// every fluid is sampled at the same spacing, so the constraint is on number density
+// (Solenthaler & Pajarola 2008, which keeps two fluids of different densities from pushing
+// apart at their interface):
+//     C_i = sum_j nu_j W(p_i - p_j, h) - 1          (j includes i; poly6 W)
+// and a solid particle in range contributes its boundary volume nu_b = s / sum_k W_bk over
+// its solid neighbours k (Akinci et al. 2012, Eq. 4; s = FluidParams::solidScale). The
+// constraint is unilateral (only C_i > 0 is corrected: free surfaces are not pulled in).
+// With inverse masses w the Jacobi step is (Macklin et al. 2014 §7.1)
+//     lambda_i = -C_i / (w_i |sum_j nu_j gradW_ij|^2 + sum_j w_j nu_j^2 |gradW_ij|^2 + eps_i)
+//     dp_i     = w_i sum_j (lambda_i nu_j + lambda_j nu_i + S_ij) gradW_ij
+// so sum_k m_k dp_k = 0: a solid receives exactly the momentum the fluid loses (buoyancy
+// and two-way coupling), and a solid with w = 0 does not move. S_ij is the artificial
+// pressure (Eq. 13) between two fluid particles, -k (W_ij / W(dq))^n (m_i + m_j) V h^2 / 2,
+// i.e. -k (W_ij / W(dq))^n V h^2 gradW_ij of displacement between equal masses (V = (2r)^3).
+//
+// Determinism: every pass writes only its own particles, reads the last pass's values
+// (Jacobi) and runs over fixed chunks, so the result is the same bits for any thread count.
+// The SIMD (AVX2) and scalar paths do the same IEEE operations per pair in the same order
+// (no FMA: -ffp-contract=off) and give identical results (tested).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "core/neighbor_grid.h"
+
+namespace physketch::pbd {
+
+struct FluidParams {
+  float particleRadius = 0.01f;  // r (m); spacing 2r, rest volume V = (2r)^3 per fluid particle
+  float kernelRadius = 0.042f;   // h (m); 2.1 spacings gives ~30 neighbours
+  // Constraint relaxation (Macklin & Müller 2013 Eq. 11's epsilon), dimensionless: eps_i =
+  // relaxation * w_i * (V cs h^2)^2, i.e. relative to one neighbour's gradient term at
+  // distance 0, cs = 45 / (pi h^6).
+  float relaxation = 0.1f;
+  // Artificial pressure s_corr = -k (W(r) / W(dq))^n (Eq. 13); dq in units of h.
+  float scorrK = 0.01f;
+  int scorrN = 4;                // 1..8
+  float scorrDq = 0.3f;
+  float xsph = 0.0f;             // XSPH c (Eq. 17), dimensionless; 0 = off
+  float vorticity = 0.0f;        // vorticity confinement epsilon (Eq. 16), m/s; 0 = off
+  float cohesion = 0.0f;         // Akinci 2013 cohesion gamma, m/s^2; 0 = off
+  float solidScale = 1.0f;       // s: scales a solid particle's boundary volume (Akinci 2012)
+  // Axis-aligned box the fluid particles stay in (their centres stay r inside), m. The
+  // ground is lo[1]; +-infinity leaves a side open.
+  float wallLo[3] = {-1e30f, 0.0f, -1e30f};
+  float wallHi[3] = {1e30f, 1e30f, 1e30f};
+};
+
+// One substep's particles, by id (the caller's order). Arrays of `count` entries; they
+// must stay valid until begin() returns (the kernel copies them).
+struct FluidInput {
+  std::size_t count = 0;
+  const float* x = nullptr;         // predicted positions p* (m)
+  const float* y = nullptr;
+  const float* z = nullptr;
+  const float* invMass = nullptr;   // w (1/kg); 0 = fixed or kinematic
+  const std::uint8_t* fluid = nullptr;  // 1: has a density constraint; 0: solid in range
+  // Rest density (kg/m^3) per fluid particle: its rest volume is m / rho0 = 1 / (w rho0).
+  // Ignored for solids. All fluid particles share the spacing 2r; rho0 differs by fluid.
+  const float* restDensity = nullptr;
+};
+
+struct DensityError {
+  float maxCompression = 0.0f;   // max over fluid particles of max(rho/rho0 - 1, 0)
+  float meanCompression = 0.0f;  // mean of the same
+  float meanAbs = 0.0f;          // mean of |rho/rho0 - 1| (includes the free surface's deficit)
+  std::size_t fluidCount = 0;
+};
+
+class FluidSolver {
+ public:
+  // Which pair kernel densityIteration runs; kAuto takes AVX2 where the CPU has it. All
+  // give identical bits (tested).
+  enum class Kernel { kAuto, kScalar, kAvx2 };
+
+  // Throws RuntimeError for a non-finite or out-of-range parameter (naming it).
+  explicit FluidSolver(const FluidParams& params);
+  const FluidParams& params() const { return params_; }
+  void setKernel(Kernel k);
+
+  // Builds the neighbour structure from the predicted positions and copies the particles
+  // into cell order. Throws RuntimeError for a non-finite position, a fluid particle with a
+  // non-positive inverse mass or rest density, or a particle with a negative inverse mass.
+  void begin(const FluidInput& in);
+
+  // One Jacobi density iteration (lambda pass, then dp pass); corrections stay inside until
+  // applied or read. Walls are folded into fluid particles' dp.
+  void densityIteration();
+  void lambdaPass();       // the two halves, for benchmarks and tests
+  void correctionPass();
+  // p += dp for fluid particles (the ones the kernel owns); solids too when asked.
+  void applyCorrections(bool solidsToo = false);
+
+  // By id (arrays of count()): the last dp, the lambdas, the current positions.
+  void corrections(float* dx, float* dy, float* dz) const;
+  void lambdas(float* lambda) const;
+  void positions(float* x, float* y, float* z) const;
+  // Replaces the positions (by id) of every particle, e.g. after the caller moved solids.
+  void setPositions(const float* x, const float* y, const float* z);
+
+  // XSPH, vorticity confinement and cohesion on the fluid particles' velocities (m/s, by
+  // id, read and written; solids' entries untouched), with the substep h (s). Uses the
+  // current positions and the neighbour structure of begin().
+  void velocityPasses(float* vx, float* vy, float* vz, float h);
+
+  // rho / rho0 - 1 over fluid particles at the current positions.
+  DensityError densityError() const;
+
+  std::size_t count() const { return n_; }
+  const NeighborGrid& grid() const { return grid_; }
+  const NeighborLists& lists() const { return lists_; }
+
+ private:
+  void checkInput(const FluidInput& in) const;
+  void loadRecords(const FluidInput& in);
+  void buildBlockedLists();
+  void computeSolidVolumes();
+  void buildWallTable();
+  bool useSimd() const;
+  void cohesionPass(float* vx, float* vy, float* vz, float h) const;
+
+  FluidParams params_;
+  Kernel kernel_ = Kernel::kAuto;
+  std::size_t n_ = 0;
+  NeighborGrid grid_;
+  NeighborLists lists_;
+  int listWidth_ = 48;
+  // nu = latticeScale m / rho0: the cubic lattice of spacing 2r (how the sketch and the
+  // tests place fluid particles) is exactly at rest, C = 0, so a sketched volume keeps its
+  // size (SPH's sum of V W over a lattice is 1 only in the continuum limit).
+  float latticeScale_ = 1.0f;
+  static constexpr int kWallSamples = 256;
+  std::vector<float> wallB_, wallDB_;  // the walls' density term, see buildWallTable()
+  // Per particle, in rank (cell) order, one 32-byte record so that a neighbour's data is
+  // one load (the SIMD kernel transposes 8 records into 8 lanes, no gathers):
+  //   x, y, z (m), nu (m^3, rest volume), w (1/kg), lambda, fluid (0/1), m (kg; 0 for solids)
+  // plus padding records up to a multiple of 8 and one ghost far away that padded list
+  // slots point to.
+  std::vector<float> rec_;
+  std::vector<float> dx_, dy_, dz_;   // dp by rank (m)
+  // Neighbour lists in blocks of 8 ranks, slot-major: the k-th neighbour of rank 8b + l is
+  // bidx_[(boff_[b] + k) * 8 + l], k < bk_[b] = the block's largest count; the rest of a
+  // shorter row points to the ghost.
+  std::vector<std::int32_t> bidx_, boff_, bk_;
+  std::int32_t ghost_ = 0;
+  // Velocity passes (rank order): records x y z nu(fluid) vx vy vz |omega|, the smoothed
+  // velocities and the vorticity.
+  std::vector<float> vrec_, v_[3], omega_[3];
+};
+
+}  // namespace physketch::pbd

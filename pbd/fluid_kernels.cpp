@@ -1,0 +1,465 @@
+#include "pbd/fluid_kernels.h"
+
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace physketch::pbd::detail {
+
+// ---- shared per-particle finish ----------------------------------------------------
+
+WallTerm wallTerm(const PairArgs& a, const float* p) {
+  WallTerm t;
+  bool near = false;  // most particles are further than h from every wall
+  for (int k = 0; k < 3; ++k) near |= (p[k] - a.wallPlaneLo[k] < a.h) | (a.wallPlaneHi[k] - p[k] < a.h);
+  if (!near) return t;
+  for (int k = 0; k < 3; ++k)
+    for (int side = 0; side < 2; ++side) {
+      const float y = side ? a.wallPlaneHi[k] - p[k] : p[k] - a.wallPlaneLo[k];  // distance to the plane
+      if (!(y < a.h)) continue;
+      const float u = std::max(y, 0.0f) * a.wallInvStep;
+      const int s = std::min(int(u), a.wallSamples - 2);
+      const float f = u - float(s);
+      t.c += a.wallB[s] + f * (a.wallB[s + 1] - a.wallB[s]);
+      const float db = a.wallDB[s] + f * (a.wallDB[s + 1] - a.wallDB[s]);
+      t.g[k] += side ? -db : db;  // d/dp of B(y(p))
+    }
+  return t;
+}
+
+void finishLambda(const PairArgs& a, std::size_t i, const LambdaAcc& acc) {
+  if (i >= a.n) return;
+  float* ri = a.rec + i * kRecord;
+  float lambda = 0.0f;
+  if (ri[kFluid] != 0.0f) {
+    // C_i = sum_j nu_j W_ij + walls - 1 with the particle's own W(0) = cp h^6.
+    const WallTerm wall = wallTerm(a, ri);
+    const float c = (a.cp * (acc.rho + ri[kNu] * a.h6) + wall.c) - 1.0f;
+    if (c > 0.0f) {
+      // grad_i C_i = -cs sum_j nu_j g_ij d_ij + the walls' gradient
+      const float gx = wall.g[0] - a.cs * acc.gx, gy = wall.g[1] - a.cs * acc.gy, gz = wall.g[2] - a.cs * acc.gz;
+      const float grad2 = (gx * gx + gy * gy) + gz * gz;
+      const float denom = (ri[kW] * grad2 + (a.cs * a.cs) * acc.den) + a.epsK * ri[kW];
+      lambda = -c / denom;
+    }
+  }
+  ri[kLambda] = lambda;
+}
+
+void finishCorrection(const PairArgs& a, std::size_t i, const CorrectionAcc& acc) {
+  if (i >= a.n) return;
+  const float* ri = a.rec + i * kRecord;
+  // dp_i = w_i sum_j coef_ij gradW_ij with gradW_ij = -cs g_ij d_ij.
+  const float s = -a.cs * ri[kW];
+  float d[3] = {s * acc.x, s * acc.y, s * acc.z};
+  if (ri[kFluid] != 0.0f && ri[kLambda] != 0.0f) {  // the walls' share of lambda_i's correction
+    const WallTerm wall = wallTerm(a, ri);
+    const float wl = ri[kW] * ri[kLambda];
+    for (int k = 0; k < 3; ++k) d[k] = d[k] + wl * wall.g[k];
+  }
+  if (ri[kFluid] != 0.0f)
+    for (int k = 0; k < 3; ++k) {  // walls: the corrected centre stays r inside the box
+      const float p = ri[k] + d[k];
+      d[k] = std::min(std::max(p, a.wallLo[k]), a.wallHi[k]) - ri[k];
+    }
+  a.dx[i] = d[0], a.dy[i] = d[1], a.dz[i] = d[2];
+}
+
+// ---- scalar kernels: the reference -------------------------------------------------
+
+namespace {
+
+// The operations of one pair, written once; the AVX2 kernel below repeats them lane-wise.
+struct Pair {
+  float dx, dy, dz, r2, g, w;  // d = p_i - p_j; g = (h - r)^2 / r; w = (h^2 - r^2)^3 (0 outside h)
+};
+template <class Args>
+inline Pair pairTerms(const Args& a, float xi, float yi, float zi, const float* rj) {
+  Pair p;
+  p.dx = xi - rj[kX], p.dy = yi - rj[kY], p.dz = zi - rj[kZ];
+  p.r2 = (p.dx * p.dx + p.dy * p.dy) + p.dz * p.dz;
+  const bool in = p.r2 < a.h2;
+  const float r = std::sqrt(p.r2);
+  const float t = a.h - r, s = a.h2 - p.r2;
+  const float g = (t * t) / std::max(r, kMinDistance);
+  const float w = (s * s) * s;
+  p.g = in ? g : 0.0f;
+  p.w = in ? w : 0.0f;
+  return p;
+}
+
+}  // namespace
+
+void lambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* ri = a.rec + i * kRecord;
+      LambdaAcc acc{0, 0, 0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* rj = a.rec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, ri[kX], ri[kY], ri[kZ], rj);
+        const float nu = rj[kNu], w = rj[kW];
+        const float gn = nu * p.g;
+        acc.rho = acc.rho + nu * p.w;
+        acc.gx = acc.gx + gn * p.dx;
+        acc.gy = acc.gy + gn * p.dy;
+        acc.gz = acc.gz + gn * p.dz;
+        acc.den = acc.den + w * ((gn * gn) * p.r2);
+      }
+      finishLambda(a, i, acc);
+    }
+  }
+}
+
+void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* ri = a.rec + i * kRecord;
+      CorrectionAcc acc{0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* rj = a.rec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, ri[kX], ri[kY], ri[kZ], rj);
+        // s_corr (Eq. 13) between fluid particles: (W / W(dq))^n, mass-symmetric.
+        const float q = p.w * a.invWdq;
+        float qn = q;
+        for (int m = 1; m < a.scorrN; ++m) qn = qn * q;
+        const float sm = (ri[kMass] + rj[kMass]) * (ri[kFluid] * rj[kFluid]);
+        const float coef = (ri[kLambda] * rj[kNu] + rj[kLambda] * ri[kNu]) - (a.scorrK * qn) * sm;
+        const float cg = coef * p.g;
+        acc.x = acc.x + cg * p.dx;
+        acc.y = acc.y + cg * p.dy;
+        acc.z = acc.z + cg * p.dz;
+      }
+      finishCorrection(a, i, acc);
+    }
+  }
+}
+
+// ---- velocity passes, scalar --------------------------------------------------------
+
+namespace {
+
+// Shared per-particle finishes of the velocity passes (both kernels call them).
+void finishSmoothing(const VelocityArgs& a, std::size_t i, const float sum[3], const float w[3]) {
+  if (i >= a.n) return;
+  float* vi = a.vrec + i * kRecord;
+  if (!(vi[kNu] > 0.0f)) return;  // solids keep their velocity
+  for (int k = 0; k < 3; ++k) a.out[k][i] = vi[kVX + k] + a.xsph * sum[k];
+  if (!a.omega[0]) return;
+  const float o[3] = {-a.cs * w[0], -a.cs * w[1], -a.cs * w[2]};
+  for (int k = 0; k < 3; ++k) a.omega[k][i] = o[k];
+  vi[kOmegaNorm] = std::sqrt((o[0] * o[0] + o[1] * o[1]) + o[2] * o[2]);
+}
+
+void finishConfinement(const VelocityArgs& a, std::size_t i, const float acc[3]) {
+  if (i >= a.n || !(a.vrec[i * kRecord + kNu] > 0.0f)) return;
+  const float eta[3] = {-a.cs * acc[0], -a.cs * acc[1], -a.cs * acc[2]};
+  const float len = std::sqrt((eta[0] * eta[0] + eta[1] * eta[1]) + eta[2] * eta[2]);
+  if (!(len > 1e-12f)) return;
+  const float nn[3] = {eta[0] / len, eta[1] / len, eta[2] / len};
+  const float w[3] = {a.omega[0][i], a.omega[1][i], a.omega[2][i]};
+  a.out[0][i] += a.vortStep * (nn[1] * w[2] - nn[2] * w[1]);
+  a.out[1][i] += a.vortStep * (nn[2] * w[0] - nn[0] * w[2]);
+  a.out[2][i] += a.vortStep * (nn[0] * w[1] - nn[1] * w[0]);
+}
+
+}  // namespace
+
+void smoothingBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* vi = a.vrec + i * kRecord;
+      float sum[3] = {0, 0, 0}, w[3] = {0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* vj = a.vrec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, vi[kX], vi[kY], vi[kZ], vj);
+        const float ux = vj[kVX] - vi[kVX], uy = vj[kVY] - vi[kVY], uz = vj[kVZ] - vi[kVZ];
+        const float nw = vj[kNu] * p.w, gn = vj[kNu] * p.g;
+        sum[0] = sum[0] + nw * ux, sum[1] = sum[1] + nw * uy, sum[2] = sum[2] + nw * uz;
+        w[0] = w[0] + gn * (uy * p.dz - uz * p.dy);
+        w[1] = w[1] + gn * (uz * p.dx - ux * p.dz);
+        w[2] = w[2] + gn * (ux * p.dy - uy * p.dx);
+      }
+      finishSmoothing(a, i, sum, w);
+    }
+  }
+}
+
+void confinementBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      const float* vi = a.vrec + i * kRecord;
+      float acc[3] = {0, 0, 0};
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* vj = a.vrec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const Pair p = pairTerms(a, vi[kX], vi[kY], vi[kZ], vj);
+        const float e = (vj[kNu] * vj[kOmegaNorm]) * p.g;
+        acc[0] = acc[0] + e * p.dx, acc[1] = acc[1] + e * p.dy, acc[2] = acc[2] + e * p.dz;
+      }
+      finishConfinement(a, i, acc);
+    }
+  }
+}
+
+// ---- AVX2: 8 lanes = the 8 ranks of a block; a neighbour slot is 8 record loads and an
+// 8x8 transpose (no gathers) -----------------------------------------------------------
+
+#define PHYSKETCH_AVX2 __attribute__((target("avx2"), always_inline)) inline
+
+namespace {
+
+// Loads the records of the 8 given ranks and transposes them: out[f] holds field f of
+// each lane. Pure data movement: no rounding, so lanes see the scalar kernel's values.
+PHYSKETCH_AVX2 void loadTransposed(const float* rec, const std::int32_t* ids, __m256 out[8]) {
+  __m256 r[8];
+  for (int l = 0; l < 8; ++l) r[l] = _mm256_loadu_ps(rec + std::size_t(ids[l]) * kRecord);
+  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+  const __m256 u0 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u1 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u2 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u3 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u4 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u5 = _mm256_shuffle_ps(t4, t6, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 u6 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256 u7 = _mm256_shuffle_ps(t5, t7, _MM_SHUFFLE(3, 2, 3, 2));
+  out[0] = _mm256_permute2f128_ps(u0, u4, 0x20);
+  out[1] = _mm256_permute2f128_ps(u1, u5, 0x20);
+  out[2] = _mm256_permute2f128_ps(u2, u6, 0x20);
+  out[3] = _mm256_permute2f128_ps(u3, u7, 0x20);
+  out[4] = _mm256_permute2f128_ps(u0, u4, 0x31);
+  out[5] = _mm256_permute2f128_ps(u1, u5, 0x31);
+  out[6] = _mm256_permute2f128_ps(u2, u6, 0x31);
+  out[7] = _mm256_permute2f128_ps(u3, u7, 0x31);
+}
+
+struct Pair8 {
+  __m256 dx, dy, dz, r2, g, w;
+};
+struct Consts8 {
+  __m256 h, h2, rmin;
+};
+PHYSKETCH_AVX2 Pair8 pairTerms8(const Consts8& c, const __m256 i[3], const __m256 j[8]) {
+  Pair8 p;
+  p.dx = _mm256_sub_ps(i[0], j[kX]), p.dy = _mm256_sub_ps(i[1], j[kY]), p.dz = _mm256_sub_ps(i[2], j[kZ]);
+  p.r2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(p.dx, p.dx), _mm256_mul_ps(p.dy, p.dy)), _mm256_mul_ps(p.dz, p.dz));
+  const __m256 in = _mm256_cmp_ps(p.r2, c.h2, _CMP_LT_OQ);
+  const __m256 r = _mm256_sqrt_ps(p.r2);
+  const __m256 t = _mm256_sub_ps(c.h, r), s = _mm256_sub_ps(c.h2, p.r2);
+  const __m256 g = _mm256_div_ps(_mm256_mul_ps(t, t), _mm256_max_ps(c.rmin, r));
+  const __m256 w = _mm256_mul_ps(_mm256_mul_ps(s, s), s);
+  p.g = _mm256_and_ps(in, g);
+  p.w = _mm256_and_ps(in, w);
+  return p;
+}
+
+PHYSKETCH_AVX2 Consts8 consts8(const PairArgs& a) {
+  return {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+}
+
+// Lanes within h of a wall (bit l set): those take the scalar finish, which adds the walls.
+PHYSKETCH_AVX2 int nearWall8(const PairArgs& a, const __m256 ri[8]) {
+  const __m256 h = _mm256_set1_ps(a.h);
+  __m256 m = _mm256_setzero_ps();
+  for (int k = 0; k < 3; ++k) {
+    m = _mm256_or_ps(m, _mm256_cmp_ps(_mm256_sub_ps(ri[k], _mm256_set1_ps(a.wallPlaneLo[k])), h, _CMP_LT_OQ));
+    m = _mm256_or_ps(m, _mm256_cmp_ps(_mm256_sub_ps(_mm256_set1_ps(a.wallPlaneHi[k]), ri[k]), h, _CMP_LT_OQ));
+  }
+  return _mm256_movemask_ps(m);
+}
+
+// finishLambda for the 8 lanes of block b away from the walls, operation for operation
+// (a wall term of +0 adds nothing: x + 0 = x, 0 - y = -y), so the bits are the same.
+PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256 ri[8], __m256 rho, __m256 gx,
+                                  __m256 gy, __m256 gz, __m256 den) {
+  const __m256 zero = _mm256_setzero_ps(), cs = _mm256_set1_ps(a.cs);
+  const __m256 c = _mm256_sub_ps(
+      _mm256_mul_ps(_mm256_set1_ps(a.cp), _mm256_add_ps(rho, _mm256_mul_ps(ri[kNu], _mm256_set1_ps(a.h6)))),
+      _mm256_set1_ps(1.0f));
+  const __m256 x = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gx));
+  const __m256 y = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gy));
+  const __m256 z = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gz));
+  const __m256 grad2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z));
+  const __m256 denom = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ri[kW], grad2), _mm256_mul_ps(_mm256_mul_ps(cs, cs), den)),
+                                     _mm256_mul_ps(_mm256_set1_ps(a.epsK), ri[kW]));
+  const __m256 on = _mm256_and_ps(_mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ), _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
+  const __m256 lambda = _mm256_and_ps(on, _mm256_div_ps(_mm256_sub_ps(zero, c), denom));
+  alignas(32) float l8[8];
+  _mm256_store_ps(l8, lambda);
+  const int near = nearWall8(a, ri);
+  if (near) {  // the scalar finish needs every accumulator of those lanes
+    alignas(32) float s[5][8];
+    _mm256_store_ps(s[0], rho), _mm256_store_ps(s[1], gx), _mm256_store_ps(s[2], gy);
+    _mm256_store_ps(s[3], gz), _mm256_store_ps(s[4], den);
+    for (int l = 0; l < 8; ++l)
+      if (near >> l & 1) finishLambda(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l], s[3][l], s[4][l]});
+  }
+  for (int l = 0; l < 8; ++l) {
+    const std::size_t i = b * kLanes + std::size_t(l);
+    if (!(near >> l & 1) && i < a.n) a.rec[i * kRecord + kLambda] = l8[l];
+  }
+}
+
+// finishCorrection for the lanes away from the walls, the same way (the clamp to the box
+// still applies; max_ps(lo, p) and min_ps(hi, p) return p on ties, as std::max(p, lo) and
+// std::min(p, hi) do, so even signed zeros agree).
+PHYSKETCH_AVX2 void finishCorrection8(const PairArgs& a, std::size_t b, const __m256 ri[8], __m256 ax, __m256 ay,
+                                      __m256 az) {
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 s = _mm256_mul_ps(_mm256_sub_ps(zero, _mm256_set1_ps(a.cs)), ri[kW]);
+  const __m256 fluid = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+  const __m256 acc[3] = {ax, ay, az};
+  __m256 d[3];
+  for (int k = 0; k < 3; ++k) {
+    const __m256 v = _mm256_mul_ps(s, acc[k]);
+    const __m256 p = _mm256_add_ps(ri[k], v);
+    const __m256 c = _mm256_sub_ps(
+        _mm256_min_ps(_mm256_set1_ps(a.wallHi[k]), _mm256_max_ps(_mm256_set1_ps(a.wallLo[k]), p)), ri[k]);
+    d[k] = _mm256_blendv_ps(v, c, fluid);
+  }
+  const int near = nearWall8(a, ri);
+  const std::size_t i0 = b * kLanes;
+  if (!near) {  // dx_ .. dz_ are padded to whole blocks
+    _mm256_storeu_ps(a.dx + i0, d[0]), _mm256_storeu_ps(a.dy + i0, d[1]), _mm256_storeu_ps(a.dz + i0, d[2]);
+    return;
+  }
+  alignas(32) float v[3][8], acc8[3][8];
+  for (int k = 0; k < 3; ++k) _mm256_store_ps(v[k], d[k]), _mm256_store_ps(acc8[k], acc[k]);
+  for (int l = 0; l < 8; ++l) {
+    const std::size_t i = i0 + std::size_t(l);
+    if (i >= a.n) continue;
+    if (near >> l & 1) finishCorrection(a, i, {acc8[0][l], acc8[1][l], acc8[2][l]});
+    else a.dx[i] = v[0][l], a.dy[i] = v[1][l], a.dz[i] = v[2][l];
+  }
+}
+
+}  // namespace
+
+__attribute__((target("avx2"))) void lambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = consts8(a);
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 ri[8];
+    loadTransposed(a.rec, self, ri);
+    __m256 rho = _mm256_setzero_ps(), gx = rho, gy = rho, gz = rho, den = rho;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 rj[8];
+      loadTransposed(a.rec, ids + k * kLanes, rj);
+      const Pair8 p = pairTerms8(c, ri, rj);
+      const __m256 gn = _mm256_mul_ps(rj[kNu], p.g);
+      rho = _mm256_add_ps(rho, _mm256_mul_ps(rj[kNu], p.w));
+      gx = _mm256_add_ps(gx, _mm256_mul_ps(gn, p.dx));
+      gy = _mm256_add_ps(gy, _mm256_mul_ps(gn, p.dy));
+      gz = _mm256_add_ps(gz, _mm256_mul_ps(gn, p.dz));
+      den = _mm256_add_ps(den, _mm256_mul_ps(rj[kW], _mm256_mul_ps(_mm256_mul_ps(gn, gn), p.r2)));
+    }
+    finishLambda8(a, b, ri, rho, gx, gy, gz, den);
+  }
+}
+
+__attribute__((target("avx2"))) void correctionBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = consts8(a);
+  const __m256 invWdq = _mm256_set1_ps(a.invWdq), scorrK = _mm256_set1_ps(a.scorrK);
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 ri[8];
+    loadTransposed(a.rec, self, ri);
+    __m256 ax = _mm256_setzero_ps(), ay = ax, az = ax;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 rj[8];
+      loadTransposed(a.rec, ids + k * kLanes, rj);
+      const Pair8 p = pairTerms8(c, ri, rj);
+      const __m256 q = _mm256_mul_ps(p.w, invWdq);
+      __m256 qn = q;
+      for (int m = 1; m < a.scorrN; ++m) qn = _mm256_mul_ps(qn, q);
+      const __m256 sm = _mm256_mul_ps(_mm256_add_ps(ri[kMass], rj[kMass]), _mm256_mul_ps(ri[kFluid], rj[kFluid]));
+      const __m256 coef = _mm256_sub_ps(
+          _mm256_add_ps(_mm256_mul_ps(ri[kLambda], rj[kNu]), _mm256_mul_ps(rj[kLambda], ri[kNu])),
+          _mm256_mul_ps(_mm256_mul_ps(scorrK, qn), sm));
+      const __m256 cg = _mm256_mul_ps(coef, p.g);
+      ax = _mm256_add_ps(ax, _mm256_mul_ps(cg, p.dx));
+      ay = _mm256_add_ps(ay, _mm256_mul_ps(cg, p.dy));
+      az = _mm256_add_ps(az, _mm256_mul_ps(cg, p.dz));
+    }
+    finishCorrection8(a, b, ri, ax, ay, az);
+  }
+}
+
+__attribute__((target("avx2"))) void smoothingBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 vi[8];
+    loadTransposed(a.vrec, self, vi);
+    __m256 s0 = _mm256_setzero_ps(), s1 = s0, s2 = s0, w0 = s0, w1 = s0, w2 = s0;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 vj[8];
+      loadTransposed(a.vrec, ids + k * kLanes, vj);
+      const Pair8 p = pairTerms8(c, vi, vj);
+      const __m256 ux = _mm256_sub_ps(vj[kVX], vi[kVX]), uy = _mm256_sub_ps(vj[kVY], vi[kVY]);
+      const __m256 uz = _mm256_sub_ps(vj[kVZ], vi[kVZ]);
+      const __m256 nw = _mm256_mul_ps(vj[kNu], p.w), gn = _mm256_mul_ps(vj[kNu], p.g);
+      s0 = _mm256_add_ps(s0, _mm256_mul_ps(nw, ux));
+      s1 = _mm256_add_ps(s1, _mm256_mul_ps(nw, uy));
+      s2 = _mm256_add_ps(s2, _mm256_mul_ps(nw, uz));
+      w0 = _mm256_add_ps(w0, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(uy, p.dz), _mm256_mul_ps(uz, p.dy))));
+      w1 = _mm256_add_ps(w1, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(uz, p.dx), _mm256_mul_ps(ux, p.dz))));
+      w2 = _mm256_add_ps(w2, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(ux, p.dy), _mm256_mul_ps(uy, p.dx))));
+    }
+    alignas(32) float s[6][8];
+    _mm256_store_ps(s[0], s0), _mm256_store_ps(s[1], s1), _mm256_store_ps(s[2], s2);
+    _mm256_store_ps(s[3], w0), _mm256_store_ps(s[4], w1), _mm256_store_ps(s[5], w2);
+    for (int l = 0; l < 8; ++l) {
+      const float sum[3] = {s[0][l], s[1][l], s[2][l]}, w[3] = {s[3][l], s[4][l], s[5][l]};
+      finishSmoothing(a, b * kLanes + std::size_t(l), sum, w);
+    }
+  }
+}
+
+__attribute__((target("avx2"))) void confinementBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1) {
+  const Consts8 c = {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 vi[8];
+    loadTransposed(a.vrec, self, vi);
+    __m256 e0 = _mm256_setzero_ps(), e1 = e0, e2 = e0;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 vj[8];
+      loadTransposed(a.vrec, ids + k * kLanes, vj);
+      const Pair8 p = pairTerms8(c, vi, vj);
+      const __m256 e = _mm256_mul_ps(_mm256_mul_ps(vj[kNu], vj[kOmegaNorm]), p.g);
+      e0 = _mm256_add_ps(e0, _mm256_mul_ps(e, p.dx));
+      e1 = _mm256_add_ps(e1, _mm256_mul_ps(e, p.dy));
+      e2 = _mm256_add_ps(e2, _mm256_mul_ps(e, p.dz));
+    }
+    alignas(32) float s[3][8];
+    _mm256_store_ps(s[0], e0), _mm256_store_ps(s[1], e1), _mm256_store_ps(s[2], e2);
+    for (int l = 0; l < 8; ++l) {
+      const float acc[3] = {s[0][l], s[1][l], s[2][l]};
+      finishConfinement(a, b * kLanes + std::size_t(l), acc);
+    }
+  }
+}
+
+#undef PHYSKETCH_AVX2
+
+}  // namespace physketch::pbd::detail

@@ -1,0 +1,94 @@
+// The per-pair loops of the PBF density iteration (pbd/fluid.h), internal to pbd/.
+// Each kernel runs blocks [b0, b1) of 8 consecutive ranks against their blocked lists and
+// writes only those ranks. The scalar and AVX2 forms do the same IEEE operations per pair
+// in the same order, and share the per-particle finishing code, so they give equal bits.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace physketch::pbd::detail {
+
+constexpr int kRecord = 8;  // floats per particle record
+enum RecordField { kX = 0, kY, kZ, kNu, kW, kLambda, kFluid, kMass };
+constexpr int kLanes = 8;   // ranks per list block
+// Distances are clamped to this before dividing (coincident particles: no direction, the
+// gradient term is 0 there because d = 0).
+constexpr float kMinDistance = 1e-20f;
+
+struct PairArgs {
+  float* rec = nullptr;                // records, rank order (kernels write lambda only)
+  const std::int32_t* bidx = nullptr;  // blocked lists
+  const std::int32_t* boff = nullptr;
+  const std::int32_t* bk = nullptr;
+  float* dx = nullptr;                 // dp by rank (correction pass output)
+  float* dy = nullptr;
+  float* dz = nullptr;
+  std::size_t n = 0;                   // real particles (lanes >= n are not written)
+  float h = 0, h2 = 0, h6 = 0;         // kernel radius (m) and its powers
+  float cp = 0;                        // poly6 constant 315 / (64 pi h^9)
+  float cs = 0;                        // spiky gradient constant 45 / (pi h^6)
+  float epsK = 0;                      // eps_i = epsK * w_i
+  float invWdq = 0;                    // 1 / (h^2 - (dq h)^2)^3: W / W(dq) without cp
+  float scorrK = 0;                    // k V h^2 / 2 (kg-free: times m_i + m_j)
+  int scorrN = 4;
+  float wallLo[3] = {0, 0, 0};         // box for fluid centres (walls already moved in by r)
+  float wallHi[3] = {0, 0, 0};
+  float wallPlaneLo[3] = {0, 0, 0};    // the walls themselves (m)
+  float wallPlaneHi[3] = {0, 0, 0};
+  // A wall's density term B(y) and dB/dy at distances y = k / wallInvStep from the plane,
+  // k < wallSamples (FluidSolver::wallTable_); 0 beyond h.
+  const float* wallB = nullptr;
+  const float* wallDB = nullptr;
+  int wallSamples = 0;
+  float wallInvStep = 0;
+};
+
+// Accumulators of one lane, finished per particle by the shared scalar code.
+struct LambdaAcc {
+  float rho, gx, gy, gz, den;
+};
+struct CorrectionAcc {
+  float x, y, z;
+};
+
+// The velocity passes (Alg. 1 line 22) over the same blocked lists, on records of their own:
+//   x, y, z (m), nu (m^3; 0 for solids: they take no part), vx, vy, vz (m/s), |omega| (1/s)
+enum VelocityField { kVX = 4, kVY, kVZ, kOmegaNorm };
+struct VelocityArgs {
+  float* vrec = nullptr;               // the smoothing pass writes |omega| (field 7) only
+  const std::int32_t* bidx = nullptr;
+  const std::int32_t* boff = nullptr;
+  const std::int32_t* bk = nullptr;
+  std::size_t n = 0;
+  float h = 0, h2 = 0, cs = 0;
+  float xsph = 0;                      // c * cp (XSPH, Eq. 17)
+  float vortStep = 0;                  // eps * substep h (vorticity confinement, Eq. 16)
+  float* out[3] = {nullptr, nullptr, nullptr};    // smoothed velocities by rank
+  float* omega[3] = {nullptr, nullptr, nullptr};  // vorticity by rank; null: confinement off
+};
+// v_i + c sum_j nu_j (v_j - v_i) W_ij, and omega_i = sum_j nu_j (v_j - v_i) x gradW_ij.
+void smoothingBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+void smoothingBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+// out_i += h eps (N x omega_i), N = eta / |eta|, eta = sum_j nu_j |omega_j| gradW_ij.
+void confinementBlocksScalar(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+void confinementBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1);
+
+void lambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1);
+void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1);
+void lambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1);
+void correctionBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1);
+
+// The walls' density term at a fluid particle: sum of B over the walls within h, and its
+// gradient (1/m).
+struct WallTerm {
+  float c = 0, g[3] = {0, 0, 0};
+};
+WallTerm wallTerm(const PairArgs& a, const float* p);
+
+// Shared per-particle finish: lambda from the sums (Macklin & Müller 2013 Eq. 11, multi-fluid
+// form of pbd/fluid.h), and dp with the walls.
+void finishLambda(const PairArgs& a, std::size_t rank, const LambdaAcc& acc);
+void finishCorrection(const PairArgs& a, std::size_t rank, const CorrectionAcc& acc);
+
+}  // namespace physketch::pbd::detail
