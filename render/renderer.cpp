@@ -1004,7 +1004,7 @@ Image OffscreenRenderer::endFrame() {
   glBindTexture(GL_TEXTURE_2D, shadows ? r.shadowTex : 0);
   glUniform1i(r.uShadowMap, 0);
   // A constant bias of 1/(2 mapSize) of the map's depth range (the caster's depth extent: for a
-  // 1 m scene and a 2048 map, 0.25 mm) against rounding; the shadow pass's slope-scaled polygon
+  // 1 m scene and a 1024 map, 0.5 mm) against rounding; the shadow pass's slope-scaled polygon
   // offset does the rest.
   glUniform1f(r.uShadowBias, 0.5f / static_cast<float>(r.looks.shadowMapSize));
   for (const DrawCall& c : r.calls) {
