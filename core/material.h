@@ -54,6 +54,7 @@ struct Material {
   double dynamicFriction = 0.5;  // kinetic coefficient, [0, staticFriction]
   double restitution = 0.0;                       // [0, 1], normal speed kept after a contact
   std::array<float, 3> color{0.7f, 0.7f, 0.7f};  // linear RGB in [0, 1]
+  double roughness = 0.5;  // rendering only, [0, 1]: 0 a sharp highlight, 1 a broad faint one (render/renderer.h)
 
   // Young's modulus and friends: soft (E only), elastic, sand, snow, plasticine.
   struct Elastic {

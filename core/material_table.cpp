@@ -38,6 +38,7 @@ std::vector<ParamSpec> buildTable() {
   t.push_back(dyn);
   t.push_back(number("all", "restitution", "-", 0, closed(0, 1), P, PHYSKETCH_FIELD(restitution)));
   t.push_back({"all", "color", ParamType::kColor, "-", 0.7, nullptr, closed(0, 1), nullptr, B, nullptr});
+  t.push_back(number("all", "roughness", "-", 0.5, closed(0, 1), B, PHYSKETCH_FIELD(roughness)));
   // soft (pbd: clustered shape matching; mpm runs it as elastic).
   t.push_back(number("soft", "E", "Pa", 5e5, openLo(0, 1e12), B, PHYSKETCH_FIELD(elastic.youngs)));
   t.push_back(choice("soft", "preset", "soft|medium|hard", false, B));
@@ -314,6 +315,7 @@ Material asRunBy(const Material& m, SolverKind solver) {
   out.dynamicFriction = m.dynamicFriction;
   out.restitution = m.restitution;
   out.color = m.color;
+  out.roughness = m.roughness;
   out.given = m.given;
   if (m.kind == MaterialKind::kRigid) {
     out.elastic.preset = StiffnessPreset::kHard;  // rigid under mpm: a stiff elastic

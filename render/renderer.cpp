@@ -194,26 +194,52 @@ uniform mat4 uModel;
 uniform mat3 uNormalMatrix;              // inverse transpose of uModel's 3x3 block
 uniform mat4 uView;
 uniform mat4 uProj;
+uniform mat4 uLightViewProj;             // world -> the shadow map's clip space
 out vec3 vWorldPos;
 out vec3 vNormal;
+out vec4 vLightPos;
 void main() {
   vec4 world = uModel * vec4(aPosition, 1.0);
   vWorldPos = world.xyz;
   vNormal = uNormalMatrix * aNormal;
+  vLightPos = uLightViewProj * world;
   gl_Position = uProj * (uView * world);
 }
 )";
 
-// Blinn-Phong, one directional light plus ambient, in linear RGB; gamma-encoded on output.
+// Normalised Blinn-Phong (see kDefaultRoughness in renderer.h), one directional light plus
+// ambient, in linear RGB; the light's share is scaled by the shadow map's visibility; the
+// result is gamma-encoded on output.
 const char* const kFragmentShader = R"(#version 330 core
 in vec3 vWorldPos;
 in vec3 vNormal;
+in vec4 vLightPos;
 uniform vec3 uColor;          // linear RGB
+uniform float uRoughness;     // [0, 1]
 uniform vec3 uEye;            // camera position (m)
 uniform vec3 uLightDir;       // unit, pointing from the surface towards the light
 uniform float uCheckerCell;   // > 0: checkerboard in x/z with this cell size (m)
 uniform float uInvGamma;
+uniform int uShadows;         // 1: look up uShadowMap
+uniform sampler2DShadow uShadowMap;
+uniform float uShadowBias;    // in the shadow map's [0, 1] depth
 out vec4 fragColor;
+
+// Share of the light that reaches this fragment: 3 x 3 comparisons, each filtered bilinearly
+// (percentage-closer filtering), so shadow edges are soft over about 2 texels. Outside the map
+// nothing casts a shadow; behind its far plane (below every caster) the depth is clamped to it.
+float visibility() {
+  if (uShadows == 0) return 1.0;
+  vec3 p = vLightPos.xyz / vLightPos.w * 0.5 + 0.5;
+  if (p.x < 0.0 || p.x > 1.0 || p.y < 0.0 || p.y > 1.0) return 1.0;
+  float z = clamp(p.z, 0.0, 1.0) - uShadowBias;
+  vec2 texel = 1.0 / vec2(textureSize(uShadowMap, 0));
+  float lit = 0.0;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) lit += texture(uShadowMap, vec3(p.xy + vec2(dx, dy) * texel, z));
+  return lit / 9.0;
+}
+
 void main() {
   vec3 n = normalize(vNormal);
   // Back faces (visible only through open meshes or from under the ground) are lit as the
@@ -227,8 +253,43 @@ void main() {
   vec3 v = normalize(uEye - vWorldPos);
   float diffuse = max(dot(n, uLightDir), 0.0);
   vec3 h = normalize(uLightDir + v);
-  float specular = diffuse > 0.0 ? pow(max(dot(n, h), 0.0), 32.0) : 0.0;
-  vec3 linear = base * (0.25 + 0.75 * diffuse) + vec3(0.15 * specular);
+  float a = max(uRoughness, 0.1);
+  a = a * a;
+  float shininess = 2.0 / (a * a) - 2.0;
+  // F0 = 0.04: the reflectance of a dielectric at normal incidence (index of refraction 1.5).
+  float specular = diffuse > 0.0 ? 0.04 * (shininess + 8.0) / 8.0 * pow(max(dot(n, h), 0.0), shininess) * diffuse : 0.0;
+  float light = visibility();
+  vec3 linear = base * (0.25 + 0.75 * diffuse * light) + vec3(specular * light);
+  fragColor = vec4(pow(clamp(linear, 0.0, 1.0), vec3(uInvGamma)), 1.0);
+}
+)";
+
+// Depth only, from the light.
+const char* const kShadowVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 aPosition;
+uniform mat4 uLightMvp;
+void main() { gl_Position = uLightMvp * vec4(aPosition, 1.0); }
+)";
+const char* const kShadowFragmentShader = R"(#version 330 core
+void main() {}
+)";
+
+// One triangle over the whole viewport (no vertex buffer: positions from gl_VertexID), coloured
+// by the height of the pixel centre in the viewport.
+const char* const kBackgroundVertexShader = R"(#version 330 core
+void main() {
+  vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+  gl_Position = vec4(p, 1.0, 1.0);
+}
+)";
+const char* const kBackgroundFragmentShader = R"(#version 330 core
+uniform vec3 uTop;       // linear RGB at the top edge
+uniform vec3 uBottom;    // linear RGB at the bottom edge
+uniform float uHeight;   // viewport height (pixels)
+uniform float uInvGamma;
+out vec4 fragColor;
+void main() {
+  vec3 linear = mix(uBottom, uTop, gl_FragCoord.y / uHeight);
   fragColor = vec4(pow(clamp(linear, 0.0, 1.0), vec3(uInvGamma)), 1.0);
 }
 )";
@@ -253,7 +314,80 @@ struct GpuMesh {
   GLuint vao = 0, vbo = 0, ebo = 0;
   GLsizei indexCount = 0;
   bool live = false;  // false once freed (names are then 0)
+  Eigen::AlignedBox3f bounds;  // of the positions, model space: fits the shadow map to what casts
 };
+
+// Compiles and links a program; throws with the GL info log.
+GLuint linkProgram(const char* vertexSource, const char* fragmentSource) {
+  const GLuint vs = compileShader(GL_VERTEX_SHADER, vertexSource);
+  GLuint fs = 0;
+  try {
+    fs = compileShader(GL_FRAGMENT_SHADER, fragmentSource);
+  } catch (...) {
+    glDeleteShader(vs);
+    throw;
+  }
+  const GLuint program = glCreateProgram();
+  glAttachShader(program, vs);
+  glAttachShader(program, fs);
+  glLinkProgram(program);
+  glDeleteShader(vs);  // flagged; freed with the program
+  glDeleteShader(fs);
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char info[2048] = {0};
+    glGetProgramInfoLog(program, sizeof(info), nullptr, info);
+    glDeleteProgram(program);
+    throw RuntimeError(std::string("GL: shader program failed to link: ") + info);
+  }
+  return program;
+}
+
+// One recorded draw call of the current frame (run in endFrame).
+struct DrawCall {
+  int handle;           // -1: the ground quad
+  Mat4f model;
+  Color color;
+  float roughness;
+  float checkerCell;    // > 0: the ground's checkerboard
+  bool isMesh;          // counted in meshSamples, casts a shadow
+};
+
+// Light view-projection fitted around `box` (world): an orthographic box along -light, a
+// little larger than the casters (2% plus the 1-texel reach of the 3 x 3 filter) so their
+// silhouettes never touch the map's edge. Depth covers the casters only: receivers beyond
+// them are clamped to the far plane in the shader (in shadow where a caster covers them).
+Eigen::Matrix4d lightViewProjection(const Eigen::AlignedBox3d& box, int mapSize) {
+  const Vec3 l = lightDirection();
+  const Vec3 up = std::abs(l.y()) > 0.99 ? Vec3::UnitZ() : Vec3::UnitY();
+  const Vec3 f = -l;  // the light looks along -l
+  const Vec3 s = f.cross(up).normalized();
+  const Vec3 u = s.cross(f);
+  Eigen::Matrix4d view = Eigen::Matrix4d::Identity();
+  view.block<1, 3>(0, 0) = s.transpose();
+  view.block<1, 3>(1, 0) = u.transpose();
+  view.block<1, 3>(2, 0) = -f.transpose();
+  Eigen::AlignedBox3d lightBox;
+  for (int c = 0; c < 8; ++c)
+    lightBox.extend((view * box.corner(static_cast<Eigen::AlignedBox3d::CornerType>(c)).homogeneous()).head<3>());
+  const Vec3 size = lightBox.sizes();
+  const double pad = 0.02 * std::max(size.x(), size.y()) + 1e-6;
+  Vec3 lo = lightBox.min() - Vec3(pad, pad, pad), hi = lightBox.max() + Vec3(pad, pad, pad);
+  const double texel = std::max(hi.x() - lo.x(), hi.y() - lo.y()) / mapSize;
+  lo.head<2>() -= Eigen::Vector2d::Constant(2.0 * texel);
+  hi.head<2>() += Eigen::Vector2d::Constant(2.0 * texel);
+  // glOrtho(l, r, b, t, n, f) with eye-space z in [-far, -near]: near = -hi.z, far = -lo.z.
+  const double n = -hi.z(), fr = -lo.z();
+  Eigen::Matrix4d ortho = Eigen::Matrix4d::Identity();
+  ortho(0, 0) = 2.0 / (hi.x() - lo.x());
+  ortho(1, 1) = 2.0 / (hi.y() - lo.y());
+  ortho(2, 2) = -2.0 / (fr - n);
+  ortho(0, 3) = -(hi.x() + lo.x()) / (hi.x() - lo.x());
+  ortho(1, 3) = -(hi.y() + lo.y()) / (hi.y() - lo.y());
+  ortho(2, 3) = -(fr + n) / (fr - n);
+  return ortho * view;
+}
 
 // Mesh checks shared by upload and update: throws before any GL object is touched.
 void validateMesh(const TriangleMesh& mesh, const char* who) {
@@ -332,11 +466,19 @@ ClipRange clipRangeFor(const Camera& camera, const Eigen::AlignedBox3d& drawable
 
 struct OffscreenRenderer::Impl {
   int width = 0, height = 0;
+  Looks looks;
   EGLDisplay display = EGL_NO_DISPLAY;
   EGLContext context = EGL_NO_CONTEXT;
-  GLuint fbo = 0, colorRb = 0, depthRb = 0, program = 0;
-  GLint uModel = -1, uNormalMatrix = -1, uView = -1, uProj = -1, uColor = -1, uEye = -1, uLightDir = -1,
-        uCheckerCell = -1, uInvGamma = -1;
+  // fbo: where the frame is drawn (multisampled when looks.samples > 1); resolveFbo: one
+  // sample per pixel, read back (0 when fbo itself has one sample).
+  GLuint fbo = 0, colorRb = 0, depthRb = 0, resolveFbo = 0, resolveRb = 0;
+  GLuint shadowFbo = 0, shadowTex = 0;
+  GLuint program = 0, shadowProgram = 0, backgroundProgram = 0, emptyVao = 0;
+  GLint uModel = -1, uNormalMatrix = -1, uView = -1, uProj = -1, uColor = -1, uRoughness = -1, uEye = -1,
+        uLightDir = -1, uCheckerCell = -1, uInvGamma = -1, uLightViewProj = -1, uShadows = -1, uShadowMap = -1,
+        uShadowBias = -1;
+  GLint uLightMvp = -1;
+  GLint uTop = -1, uBottom = -1, uHeight = -1, uBgInvGamma = -1;
   std::vector<GpuMesh> meshes;  // indexed by handle; freed slots stay (handles are never reused)
   GpuMesh ground;  // unit square [-1, 1]^2 in x/z at y = 0, normal +y
   // One GL_SAMPLES_PASSED query per drawMesh call of the current frame, read in endFrame
@@ -345,18 +487,27 @@ struct OffscreenRenderer::Impl {
   std::size_t queriesUsed = 0;
   std::string description;  // deviceDescription()
   bool inFrame = false;
+  // The frame being recorded.
+  Mat4f view = Mat4f::Identity(), proj = Mat4f::Identity();
+  Vec3f eye = Vec3f::Zero();
+  Background background;
+  std::vector<DrawCall> calls;
 
-  Impl(int w, int h) : width(w), height(h) {}
+  Impl(int w, int h, const Looks& l) : width(w), height(h), looks(l) {}
   ~Impl() { destroy(); }
 
   void createContext();
   void createFramebuffer();
+  void createShadowMap();
   void createProgram();
   void makeCurrent() const;
   GpuMesh upload(const TriangleMesh& mesh) const;
   void fill(GpuMesh& g, const TriangleMesh& mesh) const;
   GpuMesh& liveMesh(int handle, const char* who);
-  void draw(const GpuMesh& m, const Mat4f& model, const Color& color, float checkerCell, bool countSamples);
+  const GpuMesh& meshOf(const DrawCall& c) { return c.handle < 0 ? ground : liveMesh(c.handle, "endFrame"); }
+  bool renderShadowMap(Eigen::Matrix4d& lightViewProj);
+  void drawBackground();
+  void draw(const GpuMesh& m, const DrawCall& c, bool countSamples);
   std::uint64_t collectMeshSamples() const;
   void destroy();
   void checkGl(const char* where) const {
@@ -418,60 +569,101 @@ void OffscreenRenderer::Impl::makeCurrent() const {
 }
 
 void OffscreenRenderer::Impl::createFramebuffer() {
-  GLint maxSize = 0;
+  GLint maxSize = 0, maxSamples = 0;
   glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &maxSize);
+  glGetIntegerv(GL_MAX_SAMPLES, &maxSamples);
   if (width > maxSize || height > maxSize) {
     throw RuntimeError("GL: image " + std::to_string(width) + "x" + std::to_string(height) +
                        " exceeds the renderbuffer limit " + std::to_string(maxSize));
   }
-  glGenFramebuffers(1, &fbo);
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
-  glGenRenderbuffers(1, &colorRb);
-  glBindRenderbuffer(GL_RENDERBUFFER, colorRb);
-  glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
-  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colorRb);
-  glGenRenderbuffers(1, &depthRb);
-  glBindRenderbuffer(GL_RENDERBUFFER, depthRb);
-  glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width, height);
-  glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depthRb);
-  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
-  if (status != GL_FRAMEBUFFER_COMPLETE) {
-    throw RuntimeError("GL: framebuffer incomplete (status " + hex(static_cast<EGLint>(status)) + ")");
+  const int samples = looks.samples;
+  if (samples < 1 || (samples & (samples - 1)) != 0 || samples > std::max(maxSamples, 1)) {
+    throw RuntimeError("GL: " + std::to_string(samples) + " samples per pixel: need 1 or a power of two up to " +
+                       std::to_string(maxSamples) + " (GL_MAX_SAMPLES)");
   }
+  auto makeFbo = [this](GLuint& fb, GLuint& color, GLuint* depth, int n) {
+    glGenFramebuffers(1, &fb);
+    glBindFramebuffer(GL_FRAMEBUFFER, fb);
+    glGenRenderbuffers(1, &color);
+    glBindRenderbuffer(GL_RENDERBUFFER, color);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, n > 1 ? n : 0, GL_RGBA8, width, height);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, color);
+    if (depth) {
+      glGenRenderbuffers(1, depth);
+      glBindRenderbuffer(GL_RENDERBUFFER, *depth);
+      glRenderbufferStorageMultisample(GL_RENDERBUFFER, n > 1 ? n : 0, GL_DEPTH_COMPONENT24, width, height);
+      glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, *depth);
+    }
+    const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+    if (status != GL_FRAMEBUFFER_COMPLETE) {
+      throw RuntimeError("GL: framebuffer incomplete (status " + hex(static_cast<EGLint>(status)) + ")");
+    }
+  };
+  makeFbo(fbo, colorRb, &depthRb, samples);
+  if (samples > 1) makeFbo(resolveFbo, resolveRb, nullptr, 1);
   checkGl("framebuffer setup");
 }
 
+void OffscreenRenderer::Impl::createShadowMap() {
+  if (!looks.shadows) return;
+  GLint maxTexture = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxTexture);
+  if (looks.shadowMapSize < 16 || looks.shadowMapSize > maxTexture) {
+    throw RuntimeError("GL: shadow map size " + std::to_string(looks.shadowMapSize) + " must be in [16, " +
+                       std::to_string(maxTexture) + "]");
+  }
+  glGenTextures(1, &shadowTex);
+  glBindTexture(GL_TEXTURE_2D, shadowTex);
+  glTexImage2D(GL_TEXTURE_2D, 0, GL_DEPTH_COMPONENT24, looks.shadowMapSize, looks.shadowMapSize, 0,
+               GL_DEPTH_COMPONENT, GL_UNSIGNED_INT, nullptr);
+  // Linear + compare: each lookup is a bilinear blend of four depth comparisons.
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_COMPARE_MODE, GL_COMPARE_REF_TO_TEXTURE);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_COMPARE_FUNC, GL_LEQUAL);
+  glBindTexture(GL_TEXTURE_2D, 0);
+  glGenFramebuffers(1, &shadowFbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, shadowFbo);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, shadowTex, 0);
+  glDrawBuffer(GL_NONE);
+  glReadBuffer(GL_NONE);
+  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  if (status != GL_FRAMEBUFFER_COMPLETE) {
+    throw RuntimeError("GL: shadow framebuffer incomplete (status " + hex(static_cast<EGLint>(status)) + ")");
+  }
+  checkGl("shadow map setup");
+}
+
 void OffscreenRenderer::Impl::createProgram() {
-  const GLuint vs = compileShader(GL_VERTEX_SHADER, kVertexShader);
-  GLuint fs = 0;
-  try {
-    fs = compileShader(GL_FRAGMENT_SHADER, kFragmentShader);
-  } catch (...) {
-    glDeleteShader(vs);
-    throw;
-  }
-  program = glCreateProgram();
-  glAttachShader(program, vs);
-  glAttachShader(program, fs);
-  glLinkProgram(program);
-  glDeleteShader(vs);  // flagged; freed with the program
-  glDeleteShader(fs);
-  GLint ok = GL_FALSE;
-  glGetProgramiv(program, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    char info[2048] = {0};
-    glGetProgramInfoLog(program, sizeof(info), nullptr, info);
-    throw RuntimeError(std::string("GL: shader program failed to link: ") + info);
-  }
+  program = linkProgram(kVertexShader, kFragmentShader);
   uModel = glGetUniformLocation(program, "uModel");
   uNormalMatrix = glGetUniformLocation(program, "uNormalMatrix");
   uView = glGetUniformLocation(program, "uView");
   uProj = glGetUniformLocation(program, "uProj");
   uColor = glGetUniformLocation(program, "uColor");
+  uRoughness = glGetUniformLocation(program, "uRoughness");
   uEye = glGetUniformLocation(program, "uEye");
   uLightDir = glGetUniformLocation(program, "uLightDir");
   uCheckerCell = glGetUniformLocation(program, "uCheckerCell");
   uInvGamma = glGetUniformLocation(program, "uInvGamma");
+  uLightViewProj = glGetUniformLocation(program, "uLightViewProj");
+  uShadows = glGetUniformLocation(program, "uShadows");
+  uShadowMap = glGetUniformLocation(program, "uShadowMap");
+  uShadowBias = glGetUniformLocation(program, "uShadowBias");
+  shadowProgram = linkProgram(kShadowVertexShader, kShadowFragmentShader);
+  uLightMvp = glGetUniformLocation(shadowProgram, "uLightMvp");
+  backgroundProgram = linkProgram(kBackgroundVertexShader, kBackgroundFragmentShader);
+  uTop = glGetUniformLocation(backgroundProgram, "uTop");
+  uBottom = glGetUniformLocation(backgroundProgram, "uBottom");
+  uHeight = glGetUniformLocation(backgroundProgram, "uHeight");
+  uBgInvGamma = glGetUniformLocation(backgroundProgram, "uInvGamma");
+  // Core profile: a draw needs a vertex array, even with no attributes. Bound once here so the
+  // object exists from the start (GL creates a vertex array at its first bind).
+  glGenVertexArrays(1, &emptyVao);
+  glBindVertexArray(emptyVao);
+  glBindVertexArray(0);
   checkGl("shader program setup");
 }
 
@@ -514,6 +706,8 @@ void OffscreenRenderer::Impl::fill(GpuMesh& g, const TriangleMesh& mesh) const {
                mesh.indices.data(), GL_STATIC_DRAW);
   glBindVertexArray(0);
   g.indexCount = static_cast<GLsizei>(mesh.indices.size());
+  g.bounds.setEmpty();
+  for (const Vec3f& p : mesh.positions) g.bounds.extend(p);
   checkGl("mesh upload");
 }
 
@@ -526,16 +720,72 @@ GpuMesh& OffscreenRenderer::Impl::liveMesh(int handle, const char* who) {
   return m;
 }
 
-void OffscreenRenderer::Impl::draw(const GpuMesh& m, const Mat4f& model, const Color& color, float checkerCell,
-                                   bool countSamples) {
-  if (!model.allFinite()) throw RuntimeError("draw: model matrix is not finite");
-  const Eigen::Matrix3f linear = model.topLeftCorner<3, 3>();
-  if (!(std::abs(linear.determinant()) > 0.0f)) throw RuntimeError("draw: model matrix is singular");
+// Renders the depth of every recorded mesh as the light sees it into the shadow map. Returns
+// false (nothing drawn) when shadows are off or no mesh with triangles was recorded.
+bool OffscreenRenderer::Impl::renderShadowMap(Eigen::Matrix4d& lightViewProj) {
+  if (!looks.shadows) return false;
+  Eigen::AlignedBox3d casters;
+  for (const DrawCall& c : calls) {
+    if (!c.isMesh) continue;
+    const GpuMesh& m = meshOf(c);
+    if (m.indexCount == 0 || m.bounds.isEmpty()) continue;
+    for (int k = 0; k < 8; ++k) {
+      const Eigen::Vector3f corner = m.bounds.corner(static_cast<Eigen::AlignedBox3f::CornerType>(k));
+      casters.extend((c.model * corner.homogeneous()).head<3>().cast<double>());
+    }
+  }
+  if (casters.isEmpty() || !casters.min().allFinite() || !casters.max().allFinite()) return false;
+  lightViewProj = lightViewProjection(casters, looks.shadowMapSize);
+  glBindFramebuffer(GL_FRAMEBUFFER, shadowFbo);
+  glViewport(0, 0, looks.shadowMapSize, looks.shadowMapSize);
+  glClearDepth(1.0);
+  glClear(GL_DEPTH_BUFFER_BIT);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  // Slope-scaled offset: a lit surface must not shadow itself ("acne") where its depth in the
+  // map, sampled at texel centres, is a little nearer than the surface at the pixel.
+  glEnable(GL_POLYGON_OFFSET_FILL);
+  glPolygonOffset(2.0f, 4.0f);
+  glUseProgram(shadowProgram);
+  const Mat4f lvp = lightViewProj.cast<float>();
+  for (const DrawCall& c : calls) {
+    if (!c.isMesh) continue;
+    const GpuMesh& m = meshOf(c);
+    if (m.indexCount == 0) continue;
+    const Mat4f mvp = lvp * c.model;
+    glUniformMatrix4fv(uLightMvp, 1, GL_FALSE, mvp.data());
+    glBindVertexArray(m.vao);
+    glDrawElements(GL_TRIANGLES, m.indexCount, GL_UNSIGNED_INT, nullptr);
+  }
+  glBindVertexArray(0);
+  glDisable(GL_POLYGON_OFFSET_FILL);
+  checkGl("shadow pass");
+  return true;
+}
+
+void OffscreenRenderer::Impl::drawBackground() {
+  glDisable(GL_DEPTH_TEST);
+  glDepthMask(GL_FALSE);
+  glUseProgram(backgroundProgram);
+  glUniform3f(uTop, background.top[0], background.top[1], background.top[2]);
+  glUniform3f(uBottom, background.bottom[0], background.bottom[1], background.bottom[2]);
+  glUniform1f(uHeight, static_cast<float>(height));
+  glUniform1f(uBgInvGamma, 1.0f / kGamma);
+  glBindVertexArray(emptyVao);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glBindVertexArray(0);
+  glDepthMask(GL_TRUE);
+  glEnable(GL_DEPTH_TEST);
+}
+
+void OffscreenRenderer::Impl::draw(const GpuMesh& m, const DrawCall& c, bool countSamples) {
+  const Eigen::Matrix3f linear = c.model.topLeftCorner<3, 3>();
   const Eigen::Matrix3f normalMatrix = linear.inverse().transpose();
-  glUniformMatrix4fv(uModel, 1, GL_FALSE, model.data());  // Eigen is column-major, like GL
+  glUniformMatrix4fv(uModel, 1, GL_FALSE, c.model.data());  // Eigen is column-major, like GL
   glUniformMatrix3fv(uNormalMatrix, 1, GL_FALSE, normalMatrix.data());
-  glUniform3f(uColor, color[0], color[1], color[2]);
-  glUniform1f(uCheckerCell, checkerCell);
+  glUniform3f(uColor, c.color[0], c.color[1], c.color[2]);
+  glUniform1f(uRoughness, c.roughness);
+  glUniform1f(uCheckerCell, c.checkerCell);
   if (m.indexCount == 0) return;
   if (countSamples) {
     if (queriesUsed == queries.size()) {
@@ -558,7 +808,9 @@ std::uint64_t OffscreenRenderer::Impl::collectMeshSamples() const {
     total += samples;
   }
   checkGl("endFrame (occlusion queries)");
-  return total;
+  // Samples -> pixels: every covered pixel counts at least 1.
+  const auto perPixel = static_cast<std::uint64_t>(looks.samples);
+  return (total + perPixel - 1) / perPixel;
 }
 
 void OffscreenRenderer::Impl::destroy() {
@@ -575,9 +827,16 @@ void OffscreenRenderer::Impl::destroy() {
       freeMesh(ground);
       if (!queries.empty()) glDeleteQueries(static_cast<GLsizei>(queries.size()), queries.data());
       glDeleteProgram(program);
+      glDeleteProgram(shadowProgram);
+      glDeleteProgram(backgroundProgram);
+      glDeleteVertexArrays(1, &emptyVao);
       glDeleteRenderbuffers(1, &colorRb);
       glDeleteRenderbuffers(1, &depthRb);
       glDeleteFramebuffers(1, &fbo);
+      glDeleteRenderbuffers(1, &resolveRb);
+      glDeleteFramebuffers(1, &resolveFbo);
+      glDeleteTextures(1, &shadowTex);
+      glDeleteFramebuffers(1, &shadowFbo);
       eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
     }
     eglDestroyContext(display, context);
@@ -586,15 +845,16 @@ void OffscreenRenderer::Impl::destroy() {
   display = EGL_NO_DISPLAY;  // never terminated: see "EGL display lifetime" above
 }
 
-OffscreenRenderer::OffscreenRenderer(int width, int height) {
+OffscreenRenderer::OffscreenRenderer(int width, int height, const Looks& looks) {
   if (width <= 0 || height <= 0) {
     throw RuntimeError("renderer: image size " + std::to_string(width) + "x" + std::to_string(height) +
                        " must be positive");
   }
   // Built step by step inside impl_, so a throw part-way frees what was already created.
-  impl_ = std::make_unique<Impl>(width, height);
+  impl_ = std::make_unique<Impl>(width, height, looks);
   impl_->createContext();
   impl_->createFramebuffer();
+  impl_->createShadowMap();
   impl_->createProgram();
 
   TriangleMesh quad;
@@ -608,6 +868,7 @@ OffscreenRenderer::~OffscreenRenderer() = default;
 
 int OffscreenRenderer::width() const { return impl_->width; }
 int OffscreenRenderer::height() const { return impl_->height; }
+const Looks& OffscreenRenderer::looks() const { return impl_->looks; }
 
 const std::string& OffscreenRenderer::deviceDescription() const { return impl_->description; }
 
@@ -663,33 +924,19 @@ MeshStats OffscreenRenderer::meshStats() const {
 }
 
 void OffscreenRenderer::beginFrame(const Camera& camera, const Color& background, const ClipRange& clip) {
+  beginFrame(camera, Background{background, background}, clip);
+}
+
+void OffscreenRenderer::beginFrame(const Camera& camera, const Background& background, const ClipRange& clip) {
   Impl& r = *impl_;
-  r.makeCurrent();
-  const Mat4f view = viewMatrix(camera);
-  const Mat4f proj = projectionMatrix(camera, double(r.width) / double(r.height), clip.zNear, clip.zFar);
-  glBindFramebuffer(GL_FRAMEBUFFER, r.fbo);
-  glViewport(0, 0, r.width, r.height);
-  // The background is linear like every other colour: encode it as the shader encodes fragments.
-  glClearColor(std::pow(background[0], 1.0f / kGamma), std::pow(background[1], 1.0f / kGamma),
-               std::pow(background[2], 1.0f / kGamma), 1.0f);
-  glClearDepth(1.0);
-  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_LESS);
-  // No culling: meshes are closed so hidden faces fail the depth test anyway, and an open or
-  // inside-out mesh still shows up instead of vanishing.
-  glDisable(GL_CULL_FACE);
-  glDisable(GL_BLEND);
-  glUseProgram(r.program);
-  glUniformMatrix4fv(r.uView, 1, GL_FALSE, view.data());
-  glUniformMatrix4fv(r.uProj, 1, GL_FALSE, proj.data());
-  const Vec3f eye = camera.eye.cast<float>();
-  glUniform3f(r.uEye, eye.x(), eye.y(), eye.z());
-  // Fixed world-space sun: from above, a little towards +x/+z (the side the default camera is on).
-  const Vec3f light = Vec3f(0.35f, 1.0f, 0.6f).normalized();
-  glUniform3f(r.uLightDir, light.x(), light.y(), light.z());
-  glUniform1f(r.uInvGamma, 1.0f / kGamma);
-  r.checkGl("beginFrame");
+  for (const Color* c : {&background.top, &background.bottom})
+    for (float v : *c)
+      if (!(v >= 0.0f && v <= 1.0f)) throw RuntimeError("beginFrame: background colours must be in [0, 1]");
+  r.view = viewMatrix(camera);  // both throw on a degenerate camera or clip range
+  r.proj = projectionMatrix(camera, double(r.width) / double(r.height), clip.zNear, clip.zFar);
+  r.eye = camera.eye.cast<float>();
+  r.background = background;
+  r.calls.clear();
   r.queriesUsed = 0;
   r.inFrame = true;
 }
@@ -701,27 +948,26 @@ void OffscreenRenderer::drawGround(double y, double cx, double cz, double halfEx
       !std::isfinite(cz)) {
     throw RuntimeError("drawGround: position must be finite and halfExtent > 0 m");
   }
-  r.makeCurrent();
   Mat4f model = Mat4f::Identity();
   model(0, 0) = static_cast<float>(halfExtent);
   model(2, 2) = static_cast<float>(halfExtent);
   model(0, 3) = static_cast<float>(cx);
   model(1, 3) = static_cast<float>(y);
   model(2, 3) = static_cast<float>(cz);
-  // Push the ground back in depth so faces of bodies resting on it (same height) win the depth
-  // test instead of z-fighting.
-  glEnable(GL_POLYGON_OFFSET_FILL);
-  glPolygonOffset(1.0f, 1.0f);
-  r.draw(r.ground, model, color, static_cast<float>(halfExtent / 8.0), false);  // 16 x 16 checker cells
-  glDisable(GL_POLYGON_OFFSET_FILL);
+  // Matte: a rough surface has a faint, wide highlight. 16 x 16 checker cells.
+  r.calls.push_back({-1, model, color, 0.9f, static_cast<float>(halfExtent / 8.0), false});
 }
 
-void OffscreenRenderer::drawMesh(int handle, const Mat4f& model, const Color& color) {
+void OffscreenRenderer::drawMesh(int handle, const Mat4f& model, const Color& color, float roughness) {
   Impl& r = *impl_;
   if (!r.inFrame) throw RuntimeError("drawMesh called outside beginFrame/endFrame");
-  const GpuMesh& m = r.liveMesh(handle, "drawMesh");
-  r.makeCurrent();
-  r.draw(m, model, color, 0.0f, true);
+  r.liveMesh(handle, "drawMesh");
+  if (!model.allFinite()) throw RuntimeError("drawMesh: model matrix is not finite");
+  if (!(std::abs(model.topLeftCorner<3, 3>().determinant()) > 0.0f)) {
+    throw RuntimeError("drawMesh: model matrix is singular");
+  }
+  if (!(roughness >= 0.0f && roughness <= 1.0f)) throw RuntimeError("drawMesh: roughness must be in [0, 1]");
+  r.calls.push_back({handle, model, color, roughness, 0.0f, true});
 }
 
 Image OffscreenRenderer::endFrame() {
@@ -729,6 +975,58 @@ Image OffscreenRenderer::endFrame() {
   if (!r.inFrame) throw RuntimeError("endFrame called without beginFrame");
   r.makeCurrent();
   r.inFrame = false;
+
+  Eigen::Matrix4d lightViewProj = Eigen::Matrix4d::Identity();
+  const bool shadows = r.renderShadowMap(lightViewProj);
+
+  glBindFramebuffer(GL_FRAMEBUFFER, r.fbo);
+  glViewport(0, 0, r.width, r.height);
+  glClearDepth(1.0);
+  glClear(GL_DEPTH_BUFFER_BIT);  // the background covers every pixel
+  r.drawBackground();
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  // No culling: meshes are closed so hidden faces fail the depth test anyway, and an open or
+  // inside-out mesh still shows up instead of vanishing.
+  glDisable(GL_CULL_FACE);
+  glDisable(GL_BLEND);
+  glUseProgram(r.program);
+  glUniformMatrix4fv(r.uView, 1, GL_FALSE, r.view.data());
+  glUniformMatrix4fv(r.uProj, 1, GL_FALSE, r.proj.data());
+  glUniform3f(r.uEye, r.eye.x(), r.eye.y(), r.eye.z());
+  const Vec3f light = lightDirection().cast<float>();
+  glUniform3f(r.uLightDir, light.x(), light.y(), light.z());
+  glUniform1f(r.uInvGamma, 1.0f / kGamma);
+  const Mat4f lvp = lightViewProj.cast<float>();
+  glUniformMatrix4fv(r.uLightViewProj, 1, GL_FALSE, lvp.data());
+  glUniform1i(r.uShadows, shadows ? 1 : 0);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, shadows ? r.shadowTex : 0);
+  glUniform1i(r.uShadowMap, 0);
+  // A constant bias of 1/(2 mapSize) of the map's depth range (the caster's depth extent: for a
+  // 1 m scene and a 1024 map, 0.5 mm) against rounding; the shadow pass's slope-scaled polygon
+  // offset does the rest.
+  glUniform1f(r.uShadowBias, 0.5f / static_cast<float>(r.looks.shadowMapSize));
+  for (const DrawCall& c : r.calls) {
+    // Push the ground back in depth so faces of bodies resting on it (same height) win the depth
+    // test instead of z-fighting.
+    if (!c.isMesh) {
+      glEnable(GL_POLYGON_OFFSET_FILL);
+      glPolygonOffset(1.0f, 1.0f);
+    }
+    r.draw(r.meshOf(c), c, c.isMesh);
+    if (!c.isMesh) glDisable(GL_POLYGON_OFFSET_FILL);
+  }
+  r.checkGl("endFrame (draw)");
+  r.calls.clear();
+
+  GLuint readFbo = r.fbo;
+  if (r.resolveFbo) {  // average the samples of each pixel
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, r.fbo);
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, r.resolveFbo);
+    glBlitFramebuffer(0, 0, r.width, r.height, 0, 0, r.width, r.height, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    readFbo = r.resolveFbo;
+  }
   glFinish();
   Image image;
   image.width = r.width;
@@ -736,7 +1034,7 @@ Image OffscreenRenderer::endFrame() {
   image.meshSamples = r.collectMeshSamples();
   const std::size_t stride = static_cast<std::size_t>(r.width) * 4;
   std::vector<std::uint8_t> bottomUp(stride * static_cast<std::size_t>(r.height));
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, r.fbo);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, readFbo);
   glReadBuffer(GL_COLOR_ATTACHMENT0);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, r.width, r.height, GL_RGBA, GL_UNSIGNED_BYTE, bottomUp.data());

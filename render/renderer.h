@@ -1,6 +1,7 @@
 // Off-screen OpenGL renderer on EGL (no window system): which EGL display is used is
-// described at OffscreenRenderer below. GL 3.3 core, an FBO with RGBA8 colour and 24-bit depth,
-// Blinn-Phong lighting.
+// described at OffscreenRenderer below. GL 3.3 core, an FBO with RGBA8 colour and 24-bit depth
+// (multisampled, then resolved), normalised Blinn-Phong lighting with a per-material roughness,
+// a shadow map for the one directional light, and a vertical background gradient.
 #pragma once
 
 #include <array>
@@ -18,12 +19,45 @@ namespace physketch::render {
 
 using Color = std::array<float, 3>;  // linear RGB in [0, 1]
 
+// The sun: a fixed world-space direction from the surfaces towards the light (unit), from above
+// and a little towards +x/+z, the side the default camera is on. Shadows fall along -kLightDir.
+inline Vec3 lightDirection() { return Vec3(0.35, 1.0, 0.6).normalized(); }
+
+// Roughness of a surface in [0, 1] (a material's `roughness=`): the Blinn-Phong exponent is
+// n = 2 / a^2 - 2 with a = roughness^2 (the Beckmann-to-Phong match of Walter et al. 2007,
+// Eq. 30), and the highlight is normalised by (n + 8) / 8 so rough surfaces spread the same
+// reflected energy over a wider lobe. Values below kMinRoughness are drawn as kMinRoughness.
+constexpr float kDefaultRoughness = 0.5f;
+constexpr float kMinRoughness = 0.1f;
+
+// How frames look; the defaults are what `physketch run` draws.
+struct Looks {
+  // Samples per pixel (MSAA), resolved to one colour per pixel in endFrame. 1 turns MSAA off.
+  // Must be 1 or a power of two up to the driver's GL_MAX_SAMPLES (llvmpipe: 4 and 8 work).
+  int samples = 4;
+  // Shadows of the meshes (not of the ground) from the directional light, on the ground and on
+  // each other, through a shadow map of shadowMapSize^2 depth texels fitted to the meshes drawn.
+  bool shadows = true;
+  int shadowMapSize = 1024;  // 2048 costs about 8 ms more per frame on llvmpipe (docs/benchmarks.md)
+};
+
+// A vertical gradient behind everything: `top` at the top edge of the image, `bottom` at the
+// bottom edge, interpolated linearly in linear RGB over the image height (screen space, so it
+// does not move with the camera). top == bottom is a plain background.
+// (A constructor rather than an aggregate, so beginFrame(camera, {r, g, b}) still means one colour.)
+struct Background {
+  Background() = default;
+  Background(const Color& topColor, const Color& bottomColor) : top(topColor), bottom(bottomColor) {}
+  Color top{0.0f, 0.0f, 0.0f};
+  Color bottom{0.0f, 0.0f, 0.0f};
+};
+
 struct Image {
   int width = 0, height = 0;
   std::vector<std::uint8_t> rgba;  // width*height*4 bytes, row 0 is the TOP row
   // Fragments of this frame's drawMesh calls that passed the depth test (an occlusion query,
-  // GL_SAMPLES_PASSED; no multisampling, so one sample per pixel per draw, overdraw counted;
-  // drawGround is not counted). 0 means no mesh pixel landed in the image: every mesh was
+  // GL_SAMPLES_PASSED, divided by the samples per pixel and rounded up, so about one per pixel
+  // per draw; overdraw counted; drawGround is not counted). 0 means no mesh pixel landed in the image: every mesh was
   // outside the view, clipped by the near/far planes, or hidden behind what was drawn before
   // it (e.g. under the ground). It is not the number of visible pixels: a mesh hidden only by
   // something drawn after it still counts.
@@ -92,8 +126,9 @@ struct MeshStats {
 // on every call. Use a renderer from one thread at a time.
 class OffscreenRenderer {
  public:
-  // Creates the EGL display/context and the framebuffer. Throws RuntimeError with the EGL/GL error.
-  OffscreenRenderer(int width, int height);
+  // Creates the EGL display/context and the framebuffers. Throws RuntimeError with the EGL/GL
+  // error, or for a sample count or shadow map size the driver does not offer.
+  explicit OffscreenRenderer(int width, int height, const Looks& looks = Looks{});
   ~OffscreenRenderer();
   OffscreenRenderer(const OffscreenRenderer&) = delete;
   OffscreenRenderer& operator=(const OffscreenRenderer&) = delete;
@@ -116,7 +151,11 @@ class OffscreenRenderer {
   // report.json and --help.
   const std::string& deviceDescription() const;
 
-  // Clears colour and depth and sets the camera. `clip`: see ClipRange and clipRangeFor.
+  // Starts a frame with a camera and a background. `clip`: see ClipRange and clipRangeFor.
+  // The draw calls until endFrame are recorded and run in endFrame (the shadow map needs every
+  // mesh before anything is lit), so a mesh is drawn as its handle holds it at endFrame.
+  void beginFrame(const Camera& camera, const Background& background, const ClipRange& clip = ClipRange{});
+  // A plain background of one colour.
   void beginFrame(const Camera& camera, const Color& background, const ClipRange& clip = ClipRange{});
   // A square ground plane at height y, centred under (cx, cz), half extent in metres, normal +y;
   // a 16 x 16 checkerboard whose dark cells are 80% of `color`. Drawn with a small depth
@@ -125,10 +164,13 @@ class OffscreenRenderer {
   // Draws an uploaded mesh with a model matrix (rest frame -> world). Normals are transformed
   // by the inverse transpose of its 3x3 block. For a rigid body whose mesh was built around its
   // rest-pose centre of mass c0, with current rotation R and centre c: model = [R | c - R*c0].
-  // Lighting: one directional light from above plus ambient, Blinn-Phong, gamma 2.2.
-  void drawMesh(int handle, const Mat4f& model, const Color& color);
-  // Finishes the frame and reads it back (top row first), with Image::meshSamples.
+  // Lighting: one directional light (lightDirection()) plus ambient, normalised Blinn-Phong with
+  // `roughness` (see kDefaultRoughness), shadows from Looks, gamma 2.2.
+  void drawMesh(int handle, const Mat4f& model, const Color& color, float roughness = kDefaultRoughness);
+  // Draws the frame (shadow map, background, ground, meshes), resolves the samples and reads it
+  // back (top row first), with Image::meshSamples.
   Image endFrame();
+  const Looks& looks() const;
 
   int width() const;
   int height() const;

@@ -1,14 +1,20 @@
-// meshVoxels and meshParticles: the one translation unit that includes OpenVDB (its headers cost ~3 s to parse;
-// stack.md §7). It uses only tools that libopenvdb instantiates explicitly (topologyToLevelSet,
-// volumeToMesh), so this TU compiles in seconds and runs at full speed even in Debug builds.
+// meshVoxels, meshParticles and writeLevelSetsVdb: the one translation unit that includes OpenVDB
+// (its headers cost ~3 s to parse; stack.md §7). It uses only tools that libopenvdb instantiates
+// explicitly (topologyToLevelSet, volumeToMesh, LevelSetFilter, LevelSetMeasure), so this TU
+// compiles in seconds and runs at full speed even in Debug builds.
+#include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetFilter.h>
+#include <openvdb/tools/LevelSetMeasure.h>
 #include <openvdb/tools/TopologyToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <cmath>
 #include <mutex>
+#include <set>
 #include <string>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "render/voxel_mesh.h"
 
@@ -89,11 +95,34 @@ TriangleMesh assemble(const std::vector<openvdb::Vec3s>& points, const std::vect
   return mesh;
 }
 
-// The shared pipeline: cells (i,j,k) with centres origin + h*(i,j,k) -> closed mesh.
-// Options are checked by the caller.
-TriangleMesh meshCells(const std::vector<openvdb::Coord>& cells, double voxelSize, const Vec3& origin,
-                       const VoxelMeshOptions& options) {
-  if (cells.empty()) return {};
+// Mean-curvature flow on the level set, then a dilation by the lost volume over the area
+// (dV = A dn for a small normal offset dn), applied twice so the second corrects the first's
+// change of area. Serial per grid in a fixed order of operations; LevelSetFilter's parallel
+// loops write disjoint voxels, so the result does not depend on the thread count.
+void smoothLevelSet(openvdb::FloatGrid& sdf, int iterations, SmoothingReport* report) {
+  if (iterations <= 0) return;
+  const double before = openvdb::tools::levelSetVolume(sdf);
+  openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(sdf);
+  for (int i = 0; i < iterations; ++i) filter.meanCurvature();
+  for (int pass = 0; pass < 2; ++pass) {
+    const double volume = openvdb::tools::levelSetVolume(sdf);
+    const double area = openvdb::tools::levelSetArea(sdf);
+    if (!(area > 0.0)) break;
+    // offset(d) adds d to every distance: a negative d moves the surface outwards.
+    filter.offset(static_cast<float>(-(before - volume) / area));
+  }
+  if (report) {
+    report->volumeBefore = before;
+    report->volumeAfter = openvdb::tools::levelSetVolume(sdf);
+  }
+}
+
+// Cells (i,j,k) with centres origin + h*(i,j,k) -> narrow-band signed distance field in world
+// units (nullptr for no cells). Options are checked by the caller.
+openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells, double voxelSize,
+                                        const Vec3& origin, const VoxelMeshOptions& options, int smoothIterations,
+                                        SmoothingReport* report) {
+  if (cells.empty()) return nullptr;
   initializeOpenVdbOnce();
 
   // Index space = the lattice: OpenVDB puts voxel (i,j,k)'s centre at index (i,j,k),
@@ -112,12 +141,24 @@ TriangleMesh meshCells(const std::vector<openvdb::Coord>& cells, double voxelSiz
   // i.e. on the cube faces of the voxel union (before smoothing).
   openvdb::FloatGrid::Ptr sdf = openvdb::tools::topologyToLevelSet(
       *grid, options.halfWidth, options.closingSteps, /*dilation=*/0, options.smoothingSteps);
+  smoothLevelSet(*sdf, smoothIterations, report);
+  return sdf;
+}
 
+TriangleMesh meshLevelSet(const openvdb::FloatGrid* sdf, double adaptivity) {
+  if (!sdf) return {};
   std::vector<openvdb::Vec3s> points;
   std::vector<openvdb::Vec3I> triangles;
   std::vector<openvdb::Vec4I> quads;
-  openvdb::tools::volumeToMesh(*sdf, points, triangles, quads, /*isovalue=*/0.0, options.adaptivity);
+  openvdb::tools::volumeToMesh(*sdf, points, triangles, quads, /*isovalue=*/0.0, adaptivity);
   return assemble(points, triangles, quads);
+}
+
+std::vector<openvdb::Coord> toCoords(const std::vector<Vec3i>& voxels) {
+  std::vector<openvdb::Coord> cells;
+  cells.reserve(voxels.size());
+  for (const Vec3i& v : voxels) cells.emplace_back(v.x(), v.y(), v.z());
+  return cells;
 }
 
 }  // namespace
@@ -125,32 +166,91 @@ TriangleMesh meshCells(const std::vector<openvdb::Coord>& cells, double voxelSiz
 TriangleMesh meshVoxels(const std::vector<Vec3i>& voxels, double voxelSize, const Vec3& origin,
                         const VoxelMeshOptions& options) {
   checkOptions("meshVoxels", voxelSize, origin, options);
-  std::vector<openvdb::Coord> cells;
-  cells.reserve(voxels.size());
-  for (const Vec3i& v : voxels) cells.emplace_back(v.x(), v.y(), v.z());
-  return meshCells(cells, voxelSize, origin, options);
+  const openvdb::FloatGrid::Ptr sdf = levelSetOfCells(toCoords(voxels), voxelSize, origin, options, 0, nullptr);
+  return meshLevelSet(sdf.get(), options.adaptivity);
 }
 
-TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
-                           const ParticleMeshOptions& options) {
-  checkOptions("meshParticles", particleSpacing, options.latticeOrigin, options.surface);
+std::vector<Vec3i> particleCells(const std::vector<Vec3>& positions, double particleSpacing, const Vec3& latticeOrigin) {
+  if (!(particleSpacing > 0.0) || !std::isfinite(particleSpacing)) {
+    throw RuntimeError("meshParticles: particle spacing must be finite and > 0 m");
+  }
+  if (!latticeOrigin.allFinite()) throw RuntimeError("meshParticles: lattice origin must be finite");
   // |index| <= 2^30 leaves OpenVDB's int32 coordinates room for the narrow band and closing.
   constexpr double kMaxIndex = 1073741824.0;
-  std::vector<openvdb::Coord> cells;
+  std::vector<Vec3i> cells;
   cells.reserve(positions.size());
   for (std::size_t i = 0; i < positions.size(); ++i) {
     const Vec3& p = positions[i];
     if (!p.allFinite()) throw RuntimeError("meshParticles: particle " + std::to_string(i) + " position is not finite");
     // Nearest cell centre: round((p - origin) / h), ties upward (floor(x + 0.5)), so the
     // cell is a pure function of the position.
-    const Vec3 index = ((p - options.latticeOrigin) / particleSpacing).array() + 0.5;
+    const Vec3 index = ((p - latticeOrigin) / particleSpacing).array() + 0.5;
     const Vec3 cell = index.array().floor();
     if (cell.cwiseAbs().maxCoeff() > kMaxIndex) {
       throw RuntimeError("meshParticles: particle " + std::to_string(i) + " is more than 2^30 spacings from the lattice origin");
     }
     cells.emplace_back(static_cast<int>(cell.x()), static_cast<int>(cell.y()), static_cast<int>(cell.z()));
   }
-  return meshCells(cells, particleSpacing, options.latticeOrigin, options.surface);
+  return cells;
+}
+
+TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
+                           const ParticleMeshOptions& options, SmoothingReport* report) {
+  checkOptions("meshParticles", particleSpacing, options.latticeOrigin, options.surface);
+  if (options.smoothIterations < 0) throw RuntimeError("meshParticles: smoothIterations must be >= 0");
+  if (report) *report = SmoothingReport{};
+  const std::vector<Vec3i> cells = particleCells(positions, particleSpacing, options.latticeOrigin);
+  const openvdb::FloatGrid::Ptr sdf = levelSetOfCells(toCoords(cells), particleSpacing, options.latticeOrigin,
+                                                      options.surface, options.smoothIterations, report);
+  return meshLevelSet(sdf.get(), options.surface.adaptivity);
+}
+
+std::vector<std::uint64_t> writeLevelSetsVdb(const std::string& path, const std::vector<LevelSetGrid>& grids,
+                                             double voxelSize, const Vec3& origin) {
+  initializeOpenVdbOnce();
+  openvdb::GridPtrVec out;
+  std::vector<std::uint64_t> active;
+  std::set<std::string> names;
+  for (const LevelSetGrid& g : grids) {
+    const std::string who = "writeLevelSetsVdb: grid '" + g.name + "'";
+    checkOptions(who.c_str(), voxelSize, origin, g.surface);
+    if (g.smoothIterations < 0) throw RuntimeError(who + ": smoothIterations must be >= 0");
+    if (!names.insert(g.name).second) throw RuntimeError(who + ": name used twice");
+    if (!g.model.allFinite() || g.model.row(3) != Eigen::RowVector4d(0, 0, 0, 1) ||
+        !(std::abs(g.model.topLeftCorner<3, 3>().determinant()) > 0.0)) {
+      throw RuntimeError(who + ": model must be a finite, invertible affine matrix");
+    }
+    openvdb::FloatGrid::Ptr sdf =
+        levelSetOfCells(toCoords(g.cells), voxelSize, origin, g.surface, g.smoothIterations, nullptr);
+    if (!sdf) sdf = openvdb::createLevelSet<openvdb::FloatGrid>(voxelSize, double(g.surface.halfWidth));
+    // index -> world: lattice scale and offset, then the body's pose. OpenVDB matrices act on
+    // row vectors (p' = p M), the transpose of Eigen's column convention.
+    Eigen::Matrix4d lattice = Eigen::Matrix4d::Identity();
+    lattice.topLeftCorner<3, 3>() *= voxelSize;
+    lattice.topRightCorner<3, 1>() = origin;
+    const Eigen::Matrix4d world = g.model * lattice;
+    openvdb::math::Mat4d m;
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) m(c, r) = world(r, c);
+    sdf->setTransform(openvdb::math::Transform::createLinearTransform(m));
+    sdf->setName(g.name);
+    sdf->setGridClass(openvdb::GRID_LEVEL_SET);
+    sdf->insertMeta("material", openvdb::StringMetadata(g.material));
+    active.push_back(sdf->activeVoxelCount());
+    out.push_back(sdf);
+  }
+  // io::File writes by name: write under the AtomicFile's temporary name, then commit renames
+  // it (the FILE* it holds has had nothing written through it, so closing it changes nothing).
+  AtomicFile file(path);
+  try {
+    openvdb::io::File vdb(file.tmpPath());
+    vdb.write(out);
+    vdb.close();
+  } catch (const std::exception& e) {
+    file.fail(std::string("OpenVDB write failed: ") + e.what());
+  }
+  file.commit();
+  return active;
 }
 
 }  // namespace physketch::render

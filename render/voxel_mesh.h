@@ -3,6 +3,8 @@
 // Implemented in vdb_bridge.cpp, the only translation unit that includes OpenVDB.
 #pragma once
 
+#include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/math.h"
@@ -33,6 +35,22 @@ struct ParticleMeshOptions {
   // A lattice point (m). Pass the centre of the sketch grid's cell (0,0,0) so particles still
   // at their sketched positions land exactly on cell centres, one particle per cell.
   Vec3 latticeOrigin = Vec3::Zero();
+  // The smoothing knob (physketch run --smooth N): N iterations of mean-curvature flow on the
+  // level set (OpenVDB LevelSetFilter::meanCurvature), which flattens the voxel staircase, then
+  // a dilation that gives back the volume the flow took (below). 0: no filter.
+  int smoothIterations = 0;
+};
+
+// The volume (m^3) enclosed by a level set before and after smoothIterations, measured on the
+// level set (OpenVDB levelSetVolume). Mean-curvature flow moves a convex surface inwards, so
+// the filter shrinks the solid; the dilation afterwards offsets the surface outwards by
+// (before - after) / area, twice (the second pass corrects the first to second order), so
+// `after` is the volume of what is meshed. Both 0 when smoothIterations is 0.
+struct SmoothingReport {
+  double volumeBefore = 0.0;
+  double volumeAfter = 0.0;
+  // (after - before) / before, 0 when nothing was smoothed.
+  double relativeChange() const { return volumeBefore > 0.0 ? (volumeAfter - volumeBefore) / volumeBefore : 0.0; }
 };
 
 // A closed surface around particles that no longer sit on the voxel lattice (soft bodies,
@@ -44,8 +62,34 @@ struct ParticleMeshOptions {
 // which options.surface.closingSteps closes up to that many cells wide. The result depends
 // only on the set of marked cells: the same for any particle order and thread count.
 // Throws RuntimeError on a non-finite position or spacing, or a position beyond +-2^30 cells.
+// `report`, when given, receives the volume change of the smoothing.
 TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
-                           const ParticleMeshOptions& options = {});
+                           const ParticleMeshOptions& options = {}, SmoothingReport* report = nullptr);
+
+// The lattice cells meshParticles marks for these particles (nearest cell centre, ties upward).
+// Throws RuntimeError as meshParticles does.
+std::vector<Vec3i> particleCells(const std::vector<Vec3>& positions, double particleSpacing, const Vec3& latticeOrigin);
+
+// One level set of a .vdb file: the union of `cells` (centres at origin + h * cell) turned into a
+// signed distance field exactly as meshVoxels / meshParticles do before meshing, placed in the
+// world by `model` (a rigid body's pose, rest -> world; identity for a deforming surface, whose
+// cells are already where the particles are).
+struct LevelSetGrid {
+  std::string name;      // the grid's name in the file (unique within it)
+  std::string material;  // stored as the grid's string metadata "material"
+  std::vector<Vec3i> cells;
+  Eigen::Matrix4d model = Eigen::Matrix4d::Identity();  // rigid: rotation + translation only
+  VoxelMeshOptions surface;
+  int smoothIterations = 0;  // as ParticleMeshOptions::smoothIterations
+};
+
+// Writes the level sets as one OpenVDB file (FloatGrids of class level set, float32, world units:
+// each grid's transform is the affine map model * (translate(origin) * scale(h)), so Blender and
+// Houdini place them where the frame shows them), atomically (temporary file, then rename).
+// Returns each grid's active voxel count, in order. An empty cell list gives an empty grid.
+// Throws RuntimeError naming the path (I/O) or the grid (bad arguments).
+std::vector<std::uint64_t> writeLevelSetsVdb(const std::string& path, const std::vector<LevelSetGrid>& grids,
+                                             double voxelSize, const Vec3& origin);
 
 // How a particle group's surface is made; the app tags each group with one.
 enum class SurfaceKind {

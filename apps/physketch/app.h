@@ -18,6 +18,12 @@ struct RunOptions {
   int threads = 0;     // 0: all cores
   bool quiet = false;
   bool validate = false;  // check the solver's state after every pass, not once per step
+  // --export mesh,particles,vdb (docs/formats.md, "Exports"), each written per frame.
+  bool exportMesh = false;       // DIR/meshes/frame_NNNN/BODY.obj and .ply
+  bool exportParticles = false;  // DIR/particles/frame_NNNN.ply
+  bool exportVdb = false;        // DIR/vdb/frame_NNNN.vdb
+  bool video = false;            // DIR/video.mp4 through ffmpeg, when it is on PATH
+  int smooth = 0;                // smoothing iterations of deforming surfaces (ParticleMeshOptions)
 };
 
 int runScene(const RunOptions& options);

@@ -1,24 +1,69 @@
 #include "apps/physketch/frames.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
+#include "core/error.h"
 #include "render/voxel_mesh.h"
 
 namespace physketch::app {
+namespace {
 
-std::string frameName(int index) {
+// The particles of body b grouped by material (ascending ids within each).
+std::map<std::int16_t, std::vector<std::int32_t>> byMaterial(const Solver& solver, int b) {
+  const ParticleArrays& p = solver.particles();
+  std::map<std::int16_t, std::vector<std::int32_t>> groups;
+  for (std::int32_t i : solver.bodyParticles(b)) groups[p.material[static_cast<std::size_t>(i)]].push_back(i);
+  return groups;
+}
+
+std::vector<Vec3> positionsOf(const ParticleArrays& p, const std::vector<std::int32_t>& ids) {
+  std::vector<Vec3> pos;
+  pos.reserve(ids.size());
+  for (std::int32_t i : ids) {
+    const auto k = static_cast<std::size_t>(i);
+    pos.emplace_back(p.x[k], p.y[k], p.z[k]);
+  }
+  return pos;
+}
+
+}  // namespace
+
+std::string frameName(int index) { return frameStem(index) + ".png"; }
+
+std::string frameStem(int index) {
   char buf[32];
-  std::snprintf(buf, sizeof buf, "frame_%04d.png", index);
+  std::snprintf(buf, sizeof buf, "frame_%04d", index);
   return buf;
 }
 
-FrameWriter::FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapping)
-    : scene_(scene), mapping_(mapping), renderer_(scene.width, scene.height) {
+std::string bodyFileStem(int body, const std::string& name) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%04d_", body);
+  return buf + render::fileSafeName(name);
+}
+
+std::vector<render::ExportMaterial> exportMaterials(const SceneDesc& scene) {
+  std::vector<render::ExportMaterial> out;
+  for (const Material& m : scene.materials) out.push_back({m.name, m.color, m.roughness});
+  return out;
+}
+
+FrameWriter::FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapping, const FrameOptions& options)
+    : scene_(scene), mapping_(mapping), options_(options) {
+  if (options.draw) renderer_ = std::make_unique<render::OffscreenRenderer>(scene.width, scene.height);
   passMesh_ = profile_.add("mesh");
   passDraw_ = profile_.add("draw");
   passPng_ = profile_.add("png");
 }
+
+const std::string& FrameWriter::device() const {
+  static const std::string none;
+  return renderer_ ? renderer_->deviceDescription() : none;
+}
+
+render::MeshStats FrameWriter::gpuMeshes() const { return renderer_ ? renderer_->meshStats() : render::MeshStats{}; }
 
 void FrameWriter::markReshaped(const std::vector<int>& bodies) { dirty_.insert(dirty_.end(), bodies.begin(), bodies.end()); }
 
@@ -42,13 +87,11 @@ render::SurfaceKind surfaceOf(MaterialKind kind, SolverKind solver) {
 void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restCells, int b) {
   ScopedPass t(profile_, passMesh_);
   const ParticleArrays& p = solver.particles();
-  std::map<std::int16_t, std::vector<std::int32_t>> byMaterial;
-  for (std::int32_t i : solver.bodyParticles(b)) byMaterial[p.material[static_cast<std::size_t>(i)]].push_back(i);
   std::vector<MeshPart> old = std::move(meshes_[b]);
   meshes_[b].clear();
   bool deforming = false;
   const Vec3 origin = mapping_.toWorld(Vec3i(0, 0, 0));
-  for (const auto& [material, ids] : byMaterial) {
+  for (const auto& [material, ids] : byMaterial(solver, b)) {
     const render::SurfaceKind surface = surfaceOf(scene_.materials[static_cast<std::size_t>(material)].kind, scene_.solver);
     render::TriangleMesh mesh;
     if (surface == render::SurfaceKind::kRigidRestMesh) {
@@ -58,33 +101,39 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       mesh = render::meshVoxels(cells, mapping_.voxelSize(), origin);
     } else {
       deforming = true;
-      std::vector<Vec3> pos;
-      pos.reserve(ids.size());
-      for (std::int32_t i : ids) {
-        const auto k = static_cast<std::size_t>(i);
-        pos.emplace_back(p.x[k], p.y[k], p.z[k]);
-      }
       render::ParticleMeshOptions opt;
       opt.latticeOrigin = origin;
-      mesh = render::meshParticles(pos, mapping_.voxelSize(), opt);
+      opt.smoothIterations = options_.smoothIterations;
+      render::SmoothingReport report;
+      mesh = render::meshParticles(positionsOf(p, ids), mapping_.voxelSize(), opt, &report);
+      if (options_.smoothIterations > 0 && report.volumeBefore > 0.0) {
+        ++smoothing_.meshes;
+        smoothing_.maxAbsChange = std::max(smoothing_.maxAbsChange, std::abs(report.relativeChange()));
+        smoothing_.sumChange += report.relativeChange();
+      }
     }
     trianglesMeshed_ += mesh.triangleCount();
-    auto reuse = std::find_if(old.begin(), old.end(), [&](const MeshPart& m) { return m.material == material; });
-    int handle;
-    if (reuse != old.end()) {
-      handle = reuse->handle;
-      renderer_.updateMesh(handle, mesh);
-      old.erase(reuse);
-    } else {
-      handle = renderer_.uploadMesh(mesh);
+    int handle = -1;
+    if (renderer_) {
+      auto reuse = std::find_if(old.begin(), old.end(), [&](const MeshPart& m) { return m.material == material; });
+      if (reuse != old.end()) {
+        handle = reuse->handle;
+        renderer_->updateMesh(handle, mesh);
+        old.erase(reuse);
+      } else {
+        handle = renderer_->uploadMesh(mesh);
+      }
     }
-    meshes_[b].push_back({handle, material, mesh.triangleCount(), surface});
+    const std::size_t triangles = mesh.triangleCount();
+    meshes_[b].push_back({handle, material, triangles, surface,
+                          options_.keepMeshes ? std::move(mesh) : render::TriangleMesh{}});
   }
-  for (const MeshPart& m : old) renderer_.freeMesh(m.handle);
+  if (renderer_)
+    for (const MeshPart& m : old) renderer_->freeMesh(m.handle);
   if (deforming) deforming_.push_back(b);
 }
 
-void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCells, const std::string& path) {
+void FrameWriter::update(const Solver& solver, const std::vector<Vec3i>& restCells) {
   // Bodies new since the last frame, then bodies reshaped since: each meshed once per frame at most.
   for (; meshedBodies_ < solver.bodyCount(); ++meshedBodies_) dirty_.push_back(meshedBodies_);
   dirty_.insert(dirty_.end(), deforming_.begin(), deforming_.end());  // deforming bodies: every frame
@@ -93,6 +142,11 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
   dirty_.erase(std::unique(dirty_.begin(), dirty_.end()), dirty_.end());
   for (int b : dirty_) meshBody(solver, restCells, b);
   dirty_.clear();
+}
+
+void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCells, const std::string& path) {
+  if (!renderer_) throw RuntimeError("FrameWriter::write: created without drawing");
+  update(solver, restCells);
 
   render::Image img;
   {
@@ -110,25 +164,105 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
       if (!phase::has(p.phase[i], phase::kRemoved)) box.extend(Vec3(p.x[i], p.y[i], p.z[i]));
     box.extend(box.min() - Vec3::Constant(mapping_.voxelSize()));  // particles are cubes of one voxel
     box.extend(box.max() + Vec3::Constant(mapping_.voxelSize()));
-    renderer_.beginFrame(sc.camera, {0.92f, 0.94f, 0.97f}, render::clipRangeFor(sc.camera, box));
-    renderer_.drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), half, {0.55f, 0.57f, 0.55f});
+    // A pale sky: bluer at the top of the image, near white at the bottom.
+    const render::Background sky{{0.62f, 0.72f, 0.86f}, {0.94f, 0.95f, 0.97f}};
+    renderer_->beginFrame(sc.camera, sky, render::clipRangeFor(sc.camera, box));
+    renderer_->drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), half, {0.55f, 0.57f, 0.55f});
     trianglesLastFrame_ = 0;
     for (const auto& [b, parts] : meshes_) {
       if (solver.mode(b) == BodyMode::kEmpty) continue;
       const Mat4f model = solver.pose(b).model();
       for (const MeshPart& m : parts) {
+        const Material& mat = sc.materials[static_cast<std::size_t>(m.material)];
         // A deforming surface was meshed where the particles are: no pose to apply.
-        renderer_.drawMesh(m.handle, m.surface == render::SurfaceKind::kRigidRestMesh ? model : Mat4f::Identity(),
-                           sc.materials[static_cast<std::size_t>(m.material)].color);
+        renderer_->drawMesh(m.handle, m.surface == render::SurfaceKind::kRigidRestMesh ? model : Mat4f::Identity(),
+                            mat.color, static_cast<float>(mat.roughness));
         trianglesLastFrame_ += m.triangles;
       }
     }
-    img = renderer_.endFrame();
+    img = renderer_->endFrame();
   }
   ++frames_;
   if (img.meshSamples == 0 && !meshes_.empty()) framesWithNothingInView_.push_back(frames_ - 1);
   ScopedPass t(profile_, passPng_);
   render::writePng(path, img);
+}
+
+int FrameWriter::exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,
+                              const std::string& mtllib) const {
+  if (!options_.keepMeshes) throw RuntimeError("FrameWriter::exportMeshes: created without keepMeshes");
+  const std::vector<render::ExportMaterial> materials = exportMaterials(scene_);
+  int written = 0;
+  for (const auto& [b, parts] : meshes_) {
+    if (solver.mode(b) == BodyMode::kEmpty || parts.empty()) continue;
+    const Mat4f model = solver.pose(b).model();
+    const Eigen::Matrix3f rotation = model.topLeftCorner<3, 3>();
+    std::vector<render::MaterialMesh> out;
+    for (const MeshPart& m : parts) {
+      render::MaterialMesh part{m.material, m.mesh};
+      if (m.surface == render::SurfaceKind::kRigidRestMesh) {
+        // The pose is a rotation plus a translation: normals turn with the rotation.
+        for (Vec3f& v : part.mesh.positions) v = rotation * v + model.topRightCorner<3, 1>();
+        for (Vec3f& n : part.mesh.normals) n = rotation * n;
+      }
+      out.push_back(std::move(part));
+    }
+    const std::string name = b < static_cast<int>(bodyNames.size()) ? bodyNames[static_cast<std::size_t>(b)] : "";
+    const std::string stem = dir + "/" + bodyFileStem(b, name);
+    render::writeBodyObj(stem + ".obj", name, out, materials, mtllib);
+    render::writeBodyPly(stem + ".ply", name, out, materials);
+    ++written;
+  }
+  return written;
+}
+
+render::ParticleCloud particleCloud(const SceneDesc& scene, const Solver& solver) {
+  const ParticleArrays& p = solver.particles();
+  std::vector<std::int32_t> bodyOf(p.size(), -1);
+  for (int b = 0; b < solver.bodyCount(); ++b)
+    for (std::int32_t i : solver.bodyParticles(b)) bodyOf[static_cast<std::size_t>(i)] = b;
+  render::ParticleCloud cloud;
+  for (const Material& m : scene.materials) cloud.materials.push_back(m.name);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (phase::has(p.phase[i], phase::kRemoved)) continue;
+    cloud.position.emplace_back(p.x[i], p.y[i], p.z[i]);
+    cloud.velocity.emplace_back(p.vx[i], p.vy[i], p.vz[i]);
+    cloud.body.push_back(bodyOf[i]);
+    cloud.material.push_back(p.material[i]);
+    cloud.stroke.push_back(p.stroke[i]);
+  }
+  return cloud;
+}
+
+void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping, const Solver& solver,
+                     const std::vector<Vec3i>& restCells, const std::vector<std::string>& bodyNames,
+                     int smoothIterations, const std::string& path) {
+  const Vec3 origin = mapping.toWorld(Vec3i(0, 0, 0));
+  const ParticleArrays& p = solver.particles();
+  std::vector<render::LevelSetGrid> grids;
+  for (int b = 0; b < solver.bodyCount(); ++b) {
+    if (solver.mode(b) == BodyMode::kEmpty) continue;
+    const std::string name = b < static_cast<int>(bodyNames.size()) ? bodyNames[static_cast<std::size_t>(b)] : "";
+    const Mat4f model = solver.pose(b).model();
+    for (const auto& [material, ids] : byMaterial(solver, b)) {
+      const Material& mat = scene.materials[static_cast<std::size_t>(material)];
+      render::LevelSetGrid g;
+      g.name = bodyFileStem(b, name) + "/" + render::fileSafeName(mat.name);
+      g.material = mat.name;
+      if (surfaceOf(mat.kind, scene.solver) == render::SurfaceKind::kRigidRestMesh) {
+        for (std::int32_t i : ids) g.cells.push_back(restCells[static_cast<std::size_t>(i)]);
+        g.model = model.cast<double>();
+      } else {
+        // As meshParticles does it (render/voxel_mesh.h).
+        const render::ParticleMeshOptions defaults;
+        g.cells = render::particleCells(positionsOf(p, ids), mapping.voxelSize(), origin);
+        g.surface = defaults.surface;
+        g.smoothIterations = smoothIterations;
+      }
+      grids.push_back(std::move(g));
+    }
+  }
+  render::writeLevelSetsVdb(path, grids, mapping.voxelSize(), origin);
 }
 
 }  // namespace physketch::app

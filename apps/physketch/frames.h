@@ -11,21 +11,44 @@
 #include "core/profile.h"
 #include "core/scene.h"
 #include "core/solver.h"
+#include "render/export.h"
 #include "render/renderer.h"
 #include "render/voxel_mesh.h"
 #include "sketch/grid.h"
 
 namespace physketch::app {
 
+struct FrameOptions {
+  bool draw = true;         // render PNG frames (creates the EGL context)
+  bool keepMeshes = false;  // keep each body's meshes in memory for exportMeshes
+  int smoothIterations = 0; // the smoothing knob of deforming surfaces (ParticleMeshOptions)
+};
+
+// The volume change the smoothing knob made, over every deforming surface meshed in a run.
+struct SmoothingStats {
+  long meshes = 0;              // surfaces smoothed
+  double maxAbsChange = 0.0;    // largest |after - before| / before
+  double sumChange = 0.0;       // sum of (after - before) / before, for the mean
+};
+
 class FrameWriter {
  public:
-  // Creates the EGL context (throws RuntimeError on failure: call before creating outputs).
-  FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapping);
+  // With options.draw, creates the EGL context (throws RuntimeError on failure: call before
+  // creating outputs).
+  FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapping, const FrameOptions& options = {});
 
   // Marks bodies whose particles changed; they are re-meshed before the next frame.
   void markReshaped(const std::vector<int>& bodies);
-  // Draws the solver's bodies (re-meshing marked ones first) and writes DIR/frame_NNNN.png.
+  // Meshes bodies that are new, marked or deforming (each at most once per frame).
+  void update(const Solver& solver, const std::vector<Vec3i>& restCells);
+  // update(), then draws the solver's bodies and writes the PNG at `path` (needs options.draw).
   void write(const Solver& solver, const std::vector<Vec3i>& restCells, const std::string& path);
+  // Writes DIR/BODY.obj and DIR/BODY.ply for every body with a surface, as last meshed by
+  // update() (needs options.keepMeshes): rigid meshes moved by the body's pose, deforming ones
+  // as meshed. `mtllib`: the OBJ's material library line. Returns the number of bodies written.
+  int exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,
+                   const std::string& mtllib) const;
+  const SmoothingStats& smoothing() const { return smoothing_; }
 
   const Profile& profile() const { return profile_; }
   std::size_t trianglesLastFrame() const { return trianglesLastFrame_; }
@@ -33,23 +56,26 @@ class FrameWriter {
   std::size_t meshesLive() const;
   // Frames (0-based, in write order) where no body showed: the camera sees none of them.
   const std::vector<int>& framesWithNothingInView() const { return framesWithNothingInView_; }
-  const std::string& device() const { return renderer_.deviceDescription(); }
-  render::MeshStats gpuMeshes() const { return renderer_.meshStats(); }
+  const std::string& device() const;
+  render::MeshStats gpuMeshes() const;
   // Times meshBody ran (each body at most once per frame).
   long meshings() const { return profile_.entries()[std::size_t(passMesh_)].calls; }
 
  private:
   struct MeshPart {
-    int handle;
+    int handle;  // GL mesh, -1 without a renderer
     std::int16_t material;
     std::size_t triangles;
     render::SurfaceKind surface;
+    render::TriangleMesh mesh;  // kept only with options.keepMeshes
   };
   void meshBody(const Solver& solver, const std::vector<Vec3i>& restCells, int body);
 
   const SceneDesc& scene_;
   const sketch::GridMapping& mapping_;
-  render::OffscreenRenderer renderer_;
+  FrameOptions options_;
+  std::unique_ptr<render::OffscreenRenderer> renderer_;  // null without options.draw
+  SmoothingStats smoothing_;
   std::map<int, std::vector<MeshPart>> meshes_;  // body -> one mesh per material
   std::vector<int> dirty_;                       // bodies to (re)mesh before the next frame
   std::vector<int> deforming_;                   // bodies with a deforming surface: re-meshed every frame
@@ -61,7 +87,20 @@ class FrameWriter {
   std::vector<int> framesWithNothingInView_;
 };
 
-std::string frameName(int index);
+std::string frameName(int index);  // "frame_NNNN.png"
+std::string frameStem(int index);  // "frame_NNNN"
+// Body b's file name stem in exports: "NNNN_NAME" with NAME made file-safe (render::fileSafeName).
+std::string bodyFileStem(int body, const std::string& name);
+// The scene's materials as the export files name them.
+std::vector<render::ExportMaterial> exportMaterials(const SceneDesc& scene);
+// Every live particle with its velocity, body, material and stroke (--export particles).
+render::ParticleCloud particleCloud(const SceneDesc& scene, const Solver& solver);
+// The level set of every body's surface, one grid per body and material, as meshed for frames
+// (rigid: rest cells moved by the pose; deforming: the particles' cells, smoothed), written to
+// one .vdb file (--export vdb). Grids are named "NNNN_NAME/MATERIAL".
+void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping, const Solver& solver,
+                     const std::vector<Vec3i>& restCells, const std::vector<std::string>& bodyNames,
+                     int smoothIterations, const std::string& path);
 // How a material's particles become a surface under a solver: kinds it runs as rigid keep their rest mesh and move
 // with the body pose; every other kind deforms and is meshed from its particles each frame.
 render::SurfaceKind surfaceOf(MaterialKind kind, SolverKind solver = SolverKind::kPbd);

@@ -2,6 +2,8 @@
 #include <CLI/CLI.hpp>
 
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "apps/physketch/app.h"
 #include "apps/physketch/study.h"
@@ -24,6 +26,7 @@ int main(int argc, char** argv) {
       "Examples:\n"
       "  physketch run scenes/hello.scene --out out/hello      # frames in out/hello/frames, report.json\n"
       "  physketch run scenes/hello.scene --frames 10 --threads 1\n"
+      "  physketch run scenes/hello.scene --export mesh,particles,vdb --video   # for Blender, Houdini, a player\n"
       "  physketch plan scenes/hello.scene                     # the passes a step runs, and why\n"
       "  physketch run scenes/play.scene --validate            # check the state after every pass\n"
       "  physketch lint scenes/hello.scene                     # check a sketch without simulating it\n"
@@ -45,6 +48,19 @@ int main(int argc, char** argv) {
   runCmd->add_flag("--quiet,-q", run.quiet, "No progress line on stderr");
   runCmd->add_flag("--validate", run.validate,
                    "Check the solver's state after every pass (not once per step): slower, names the pass at once");
+  std::vector<std::string> exports;
+  runCmd->add_option("--export", exports,
+                     "Also write, per frame: mesh (DIR/meshes/frame_NNNN/BODY.obj and .ply), particles "
+                     "(DIR/particles/frame_NNNN.ply), vdb (DIR/vdb/frame_NNNN.vdb); a comma list or repeated")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"mesh", "particles", "vdb"}));
+  runCmd->add_flag("--video", run.video,
+                   "Also make DIR/video.mp4 from the frames with ffmpeg (libx264, else mpeg4) if ffmpeg is on PATH; "
+                   "without it, say so and go on");
+  runCmd->add_option("--smooth", run.smooth,
+                     "Smooth the surfaces of deforming bodies: N iterations of mean-curvature flow, volume kept "
+                     "(report.json: frames.smoothing); 0 = off")
+      ->check(CLI::Range(0, 100));
 
   PlanOptions plan;
   auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, how often and why");
@@ -104,6 +120,11 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     const int rc = cli.exit(e);
     return rc == 0 ? kExitOk : kExitBadInput;
+  }
+  for (const std::string& e : exports) {
+    run.exportMesh = run.exportMesh || e == "mesh";
+    run.exportParticles = run.exportParticles || e == "particles";
+    run.exportVdb = run.exportVdb || e == "vdb";
   }
   if (*runCmd) return runScene(run);
   if (*planCmd) return printPlan(plan);

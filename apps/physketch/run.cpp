@@ -19,6 +19,7 @@
 #include "apps/physketch/prepare.h"
 #include "apps/physketch/report.h"
 #include "apps/physketch/runtime.h"
+#include "apps/physketch/video.h"
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/profile.h"
@@ -44,20 +45,70 @@ int withExitCodes(F&& body) {
   }
 }
 
-// Creates DIR (and DIR/frames), removing frames an earlier, longer run left there:
-// they would look like part of this one.
-fs::path prepareOutput(const std::string& dir, bool frames) {
-  const fs::path out(dir);
-  const fs::path framesDir = out / "frames";
+// Creates `sub` under DIR, removing what an earlier, longer run left there (entries named
+// frame_* with the extension `ext`, "" for folders): they would look like part of this one.
+void prepareFolder(const fs::path& folder, const std::string& ext) {
   std::error_code ec;
-  fs::create_directories(frames ? framesDir : out, ec);
+  fs::create_directories(folder, ec);
+  if (ec) throw RuntimeError("cannot create output folder " + folder.string() + ": " + ec.message());
+  for (const auto& entry : fs::directory_iterator(folder)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("frame_", 0) != 0) continue;
+    if (ext.empty() ? entry.is_directory() : entry.path().extension() == ext) fs::remove_all(entry.path());
+  }
+}
+
+// Creates DIR and the folders of this run's outputs (DIR/frames and those of --export).
+fs::path prepareOutput(const std::string& dir, bool frames, const RunOptions& opt) {
+  const fs::path out(dir);
+  std::error_code ec;
+  fs::create_directories(out, ec);
   if (ec) throw RuntimeError("cannot create output folder " + out.string() + ": " + ec.message());
-  if (frames)
-    for (const auto& entry : fs::directory_iterator(framesDir)) {
-      const std::string name = entry.path().filename().string();
-      if (name.rfind("frame_", 0) == 0 && entry.path().extension() == ".png") fs::remove(entry.path());
-    }
+  if (frames) {
+    prepareFolder(out / "frames", ".png");
+    fs::remove(out / "video.mp4", ec);  // made from an earlier run's frames
+  }
+  if (opt.exportMesh) prepareFolder(out / "meshes", "");
+  if (opt.exportParticles) prepareFolder(out / "particles", ".ply");
+  if (opt.exportVdb) prepareFolder(out / "vdb", ".vdb");
   return out;
+}
+
+// Body names as report.json gives them, for every body the solver has now.
+std::vector<std::string> bodyNames(const sketch::Sketch& sk, const Solver& solver) {
+  std::vector<std::string> names;
+  for (int b = 0; b < solver.bodyCount(); ++b)
+    names.push_back(b < int(sk.bodyNames.size()) ? sk.bodyNames[std::size_t(b)] : "after play " + std::to_string(b));
+  return names;
+}
+
+// --export: this frame's files.
+void writeExports(const RunOptions& opt, const Prepared& p, const Solver& solver, const FrameWriter* frameWriter,
+                  const std::vector<Vec3i>& restCells, const fs::path& out, int frame) {
+  const std::string stem = frameStem(frame);
+  const std::vector<std::string> names = bodyNames(*p.sketch, solver);
+  if (opt.exportMesh) {
+    const fs::path dir = out / "meshes" / stem;
+    fs::create_directories(dir);
+    frameWriter->exportMeshes(solver, names, dir.string(), "../materials.mtl");
+  }
+  if (opt.exportParticles) render::writeParticlesPly((out / "particles" / (stem + ".ply")).string(), particleCloud(p.scene, solver));
+  if (opt.exportVdb)
+    exportLevelSets(p.scene, p.sketch->mapping, solver, restCells, names, opt.smooth, (out / "vdb" / (stem + ".vdb")).string());
+}
+
+// --video: DIR/video.mp4, or why there is none (said once on stderr; the run goes on).
+json videoStep(const RunOptions& opt, const SceneDesc& sc, const fs::path& out, int written) {
+  if (!opt.video) return nullptr;
+  const char* path = std::getenv("PATH");
+  const std::string ffmpeg = findOnPath("ffmpeg", path ? path : "");
+  if (ffmpeg.empty()) {
+    std::cerr << "physketch: --video: ffmpeg is not on PATH, so no video.mp4 was made (the frames are in "
+              << (out / "frames").string() << ")\n";
+    return {{"written", false}, {"reason", "ffmpeg is not on PATH"}};
+  }
+  const VideoResult v = makeVideo(ffmpeg, (out / "frames").string(), sc.fps, written, (out / "video.mp4").string());
+  return {{"written", true}, {"file", (out / "video.mp4").string()}, {"codec", v.codec}, {"ffmpeg", ffmpeg}};
 }
 
 // Progress on stderr: a rewritten line on a terminal, a plain line every few seconds
@@ -226,15 +277,26 @@ int runScene(const RunOptions& opt) {
     const sketch::Sketch& sk = *p.sketch;
     const int frames = opt.frames > 0 ? opt.frames : sc.frameCount();
     solver->setValidate(opt.validate);
+    if (opt.video && !sc.writeFrames) {
+      throw InputError(sc.path, 0, "output", "--video needs frames, and this scene's 'output' record leaves them out");
+    }
     // Rendering set-up before anything is written: an EGL failure leaves no output folder.
     std::unique_ptr<FrameWriter> frameWriter;
-    if (sc.writeFrames) frameWriter = std::make_unique<FrameWriter>(sc, sk.mapping);
-    const fs::path out = prepareOutput(opt.outDir, sc.writeFrames);
+    if (sc.writeFrames || opt.exportMesh) {
+      FrameOptions fo;
+      fo.draw = sc.writeFrames;
+      fo.keepMeshes = opt.exportMesh;
+      fo.smoothIterations = opt.smooth;
+      frameWriter = std::make_unique<FrameWriter>(sc, sk.mapping, fo);
+    }
+    const fs::path out = prepareOutput(opt.outDir, sc.writeFrames, opt);
+    if (opt.exportMesh) render::writeMtl((out / "meshes" / "materials.mtl").string(), exportMaterials(sc));
     RuntimeDriver runtime(sk, *solver);
 
     json poses = json::array();
     Progress progress(!opt.quiet);
     int written = 0;
+    double exportSeconds = 0.0;
     const double tSimStart = nowSeconds();
     for (int f = 0; f < frames; ++f) {
       if (f > 0) {
@@ -245,12 +307,22 @@ int runScene(const RunOptions& opt) {
         }
         if (solver->guard().tripped()) break;
       }
-      if (frameWriter) frameWriter->write(*solver, runtime.restCells(), (out / "frames" / frameName(f)).string());
+      if (frameWriter) {
+        if (sc.writeFrames) {
+          frameWriter->write(*solver, runtime.restCells(), (out / "frames" / frameName(f)).string());
+        } else {
+          frameWriter->update(*solver, runtime.restCells());
+        }
+      }
+      const double tExport = nowSeconds();
+      writeExports(opt, p, *solver, frameWriter.get(), runtime.restCells(), out, f);
+      exportSeconds += nowSeconds() - tExport;
       poses.push_back({{"frame", f}, {"t", solver->time()}, {"bodies", posesJson(*solver)}});
       ++written;
       progress.frame(f, frames, solver->time());
     }
     progress.done();
+    const json video = solver->guard().tripped() ? json(nullptr) : videoStep(opt, sc, out, written);
     const double tEnd = nowSeconds();
 
     json rep;
@@ -280,6 +352,21 @@ int runScene(const RunOptions& opt) {
                      {"triangles_meshed", frameWriter ? frameWriter->trianglesMeshed() : 0},
                      {"folder", sc.writeFrames ? (out / "frames").string() : ""},
                      {"device", frameWriter ? frameWriter->device() : ""}};
+    if (opt.smooth > 0) {
+      const SmoothingStats& st = frameWriter ? frameWriter->smoothing() : SmoothingStats{};
+      rep["frames"]["smoothing"] = {{"iterations", opt.smooth},
+                                    {"surfaces", st.meshes},
+                                    {"max_volume_change_percent", 100.0 * st.maxAbsChange},
+                                    {"mean_volume_change_percent", st.meshes ? 100.0 * st.sumChange / double(st.meshes) : 0.0}};
+    }
+    if (!video.is_null()) rep["frames"]["video"] = video;
+    if (opt.exportMesh || opt.exportParticles || opt.exportVdb) {
+      json kinds = json::array();
+      if (opt.exportMesh) kinds.push_back("mesh");
+      if (opt.exportParticles) kinds.push_back("particles");
+      if (opt.exportVdb) kinds.push_back("vdb");
+      rep["exports"] = {{"kinds", kinds}, {"seconds", exportSeconds}};
+    }
     json warnings = json::array();
     if (frameWriter && !frameWriter->framesWithNothingInView().empty()) {
       const auto& empty = frameWriter->framesWithNothingInView();

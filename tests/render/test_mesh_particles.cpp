@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <utility>
 #include <numeric>
 #include <random>
 #include <string>
@@ -161,6 +163,98 @@ TEST(MeshParticles, EmptyInputGivesEmptyMeshAndBadInputThrows) {
   bad = ParticleMeshOptions{};
   bad.surface.closingSteps = -1;
   EXPECT_THROW(meshParticles(one, 0.01, bad), RuntimeError);
+}
+
+// ---- the smoothing knob
+
+// Mean angle (rad) between the normals of faces that share an edge: 0 on a plane, about
+// edge length / radius on a finely meshed sphere; the voxel staircase gives right angles.
+double meanDihedralTurn(const TriangleMesh& m) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> firstFace;
+  double sum = 0.0;
+  long pairs = 0;
+  auto faceNormal = [&](std::size_t t) {
+    const Vec3 a = m.positions[m.indices[3 * t]].cast<double>();
+    const Vec3 b = m.positions[m.indices[3 * t + 1]].cast<double>();
+    const Vec3 c = m.positions[m.indices[3 * t + 2]].cast<double>();
+    return Vec3((b - a).cross(c - a).normalized());
+  };
+  for (std::size_t t = 0; t < m.triangleCount(); ++t)
+    for (int e = 0; e < 3; ++e) {
+      std::uint32_t a = m.indices[3 * t + e], b = m.indices[3 * t + (e + 1) % 3];
+      if (a > b) std::swap(a, b);
+      const auto [it, inserted] = firstFace.insert({{a, b}, t});
+      if (inserted) continue;
+      sum += std::acos(std::clamp(faceNormal(it->second).dot(faceNormal(t)), -1.0, 1.0));
+      ++pairs;
+    }
+  return pairs ? sum / pairs : 0.0;
+}
+
+// Mean angle (rad) between each face's normal and the sphere's radial direction at the face's
+// centroid: 0 for a perfect sphere, large for a voxel staircase (its faces are axis-aligned).
+double meanRadialDeviation(const TriangleMesh& m, const Vec3& centre) {
+  double sum = 0.0;
+  for (std::size_t t = 0; t < m.triangleCount(); ++t) {
+    const Vec3 a = m.positions[m.indices[3 * t]].cast<double>();
+    const Vec3 b = m.positions[m.indices[3 * t + 1]].cast<double>();
+    const Vec3 c = m.positions[m.indices[3 * t + 2]].cast<double>();
+    const Vec3 n = (b - a).cross(c - a).normalized();
+    const Vec3 radial = ((a + b + c) / 3.0 - centre).normalized();
+    sum += std::acos(std::clamp(n.dot(radial), -1.0, 1.0));
+  }
+  return m.triangleCount() ? sum / double(m.triangleCount()) : 0.0;
+}
+
+// A rotated lattice ball of r = 12 h (particles off the lattice, the case deforming bodies
+// are in) meshed with and without the knob. Volume: the bound, within 2 % of the
+// unsmoothed mesh (measured +1.2 %); the knob's own measure (the level set's volume,
+// SmoothingReport) keeps it within 2 % too. Surface: the oracle is the sphere, whose normals are
+// radial; the mean angle between face normals and the radial direction falls by a quarter or
+// more (measured 0.093 -> 0.057 rad with 4 iterations, 0.040 with 16), and the mean turn between
+// adjacent faces falls too (0.085 -> 0.072 rad; a fine sphere mesh has about 0.06 here).
+TEST(MeshParticles, SmoothingKeepsTheVolumeAndFlattensTheStaircase) {
+  const double h = 0.01, r = 12 * h;
+  const Vec3 centre(0.05, 0.4, -0.1);
+  const Eigen::Matrix3d rot = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  const std::vector<Vec3> p = ballParticles(centre, r, h, rot);
+  ParticleMeshOptions opt;
+  opt.latticeOrigin = centre;
+  SmoothingReport none;
+  const TriangleMesh plain = meshParticles(p, h, opt, &none);
+  EXPECT_EQ(none.volumeBefore, 0.0);  // nothing smoothed, nothing measured
+  opt.smoothIterations = 4;
+  SmoothingReport report;
+  const TriangleMesh smooth = meshParticles(p, h, opt, &report);
+  ASSERT_FALSE(smooth.empty());
+  EXPECT_EQ(closedManifoldViolation(smooth), "");
+  EXPECT_EQ(components(smooth), 1);
+
+  const double v0 = signedVolume(plain), v1 = signedVolume(smooth);
+  const double turn0 = meanDihedralTurn(plain), turn1 = meanDihedralTurn(smooth);
+  const double radial0 = meanRadialDeviation(plain, centre), radial1 = meanRadialDeviation(smooth, centre);
+  std::printf("smoothing x4: mesh volume %+.3f %%, level set volume %+.3f %%; off the radial direction %.3f -> %.3f "
+              "rad; between adjacent faces %.3f -> %.3f rad\n",
+              100.0 * (v1 - v0) / v0, 100.0 * report.relativeChange(), radial0, radial1, turn0, turn1);
+  EXPECT_NEAR(v1, v0, 0.02 * v0);
+  EXPECT_LT(std::abs(report.relativeChange()), 0.02);
+  // The report measures the level set, not the mesh: the dual mesh of the unsmoothed (not yet
+  // signed-distance) level set cuts its corners, 2.4 % less volume measured; 1.2 % after.
+  EXPECT_NEAR(report.volumeBefore, v0, 0.03 * v0);
+  EXPECT_NEAR(report.volumeAfter, v1, 0.02 * v1);
+  EXPECT_LT(radial1, 0.75 * radial0);
+  EXPECT_LT(turn1, 0.95 * turn0);
+
+  // Deterministic: the same bytes with one thread.
+  TriangleMesh serial;
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    serial = meshParticles(p, h, opt);
+  }
+  EXPECT_TRUE(sameMesh(smooth, serial));
+
+  opt.smoothIterations = -1;
+  EXPECT_THROW(meshParticles(p, h, opt), RuntimeError);
 }
 
 }  // namespace
