@@ -79,8 +79,8 @@ struct Material {
   struct Fluid {
     double xsphViscosity = 0.01;  // pbd: XSPH c (Eq. 17), dimensionless
     double vorticity = 0.0;       // pbd: vorticity confinement epsilon (Eq. 16), m/s
-    double cohesion = 0.0;        // pbd: cohesion coefficient (Akinci et al. 2013), dimensionless
-    double relaxation = 100.0;    // pbd: constraint relaxation epsilon (Eq. 11), 1/m^2
+    double cohesion = 0.0;        // pbd: cohesion gamma (Akinci et al. 2013), m/s^2
+    double relaxation = 0.1;      // pbd: constraint relaxation epsilon (Eq. 11), relative (pbd/fluid.h)
     double bulkModulus = 1e5;     // mpm: K, Pa; p = K/gamma ((rho/rho0)^gamma - 1)
     double gamma = 7.0;           // mpm: EOS exponent
     double viscosity = 1e-3;      // mpm: dynamic viscosity, Pa*s

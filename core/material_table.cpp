@@ -52,8 +52,8 @@ std::vector<ParamSpec> buildTable() {
   // fluid (pbd: PBF; mpm: weakly compressible).
   t.push_back(number("fluid", "xsph_viscosity", "-", 0.01, closed(0, 1), P, PHYSKETCH_FIELD(fluid.xsphViscosity)));
   t.push_back(number("fluid", "vorticity", "m/s", 0, closed(0, 100), P, PHYSKETCH_FIELD(fluid.vorticity)));
-  t.push_back(number("fluid", "cohesion", "-", 0, closed(0, 10), P, PHYSKETCH_FIELD(fluid.cohesion)));
-  t.push_back(number("fluid", "relaxation", "1/m^2", 100, openLo(0, 1e9), P, PHYSKETCH_FIELD(fluid.relaxation)));
+  t.push_back(number("fluid", "cohesion", "m/s^2", 0, closed(0, 10), P, PHYSKETCH_FIELD(fluid.cohesion)));
+  t.push_back(number("fluid", "relaxation", "-", 0.1, openLo(0, 1000), P, PHYSKETCH_FIELD(fluid.relaxation)));
   t.push_back(number("fluid", "bulk_modulus", "Pa", 1e5, openLo(0, 1e10), M, PHYSKETCH_FIELD(fluid.bulkModulus)));
   t.push_back(number("fluid", "gamma", "-", 7, closed(1, 10), M, PHYSKETCH_FIELD(fluid.gamma)));
   t.push_back(number("fluid", "viscosity", "Pa*s", 1e-3, closed(0, 1e6), M, PHYSKETCH_FIELD(fluid.viscosity)));

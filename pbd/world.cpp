@@ -20,13 +20,16 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
     {"find_contacts", Cadence::kPerSubstep, "per dynamic rigid body near the ground: its particles within a margin of it"},
     {"find_neighbors", Cadence::kPerSubstep, "particle pairs within reach (one NeighborGrid per substep), reused by every iteration"},
+    {"fluid_neighbors", Cadence::kPerSubstep, "fluids: the PBF neighbour structure over fluid particles and the solids in range"},
     {"particle_contact", Cadence::kPerIteration, "particle pairs and the ground: projection and Coulomb friction (Macklin 2014 §6)"},
+    {"density", Cadence::kPerIteration, "fluids: PBF density constraint, Jacobi lambda and dp (Macklin & Müller 2013 Eq. 11-13)"},
     {"cluster_match", Cadence::kPerIteration, "soft bodies: clustered shape matching with XPBD compliance (Müller 2005, Macklin 2016)"},
     {"distance", Cadence::kPerIteration, "rope and cloth: XPBD stretch and bending, attachments to bodies, tethers"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution"},
+    {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), when set"},
     {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched leave at e times their approach speed (Müller 2020 Eq. 34)"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
@@ -130,6 +133,7 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   for (std::size_t b = 0; b < members_.size(); ++b)
     if (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth) attachStrandEnds(b);
   for (std::size_t b = 0; b < members_.size(); ++b) refreshInverseMasses(b);
+  makeFluidSolver();
   contacts_.planes.push_back(Plane{Vec3::UnitY(), params_.groundY});
   writeParticles();
 }
@@ -147,6 +151,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
                                    BodyMode mode, MaterialKind kind) {
   members_.push_back(std::move(members));
   kind_.push_back(kind);
+  strandRadius_.push_back(0.0f);
   motion_.push_back(motion);
   restCentre_.push_back(restCentre);
   invMass_.push_back(0.0);
@@ -266,6 +271,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
     setupParticleBody(b, range);
     if (kind == MaterialKind::kRope || kind == MaterialKind::kCloth) attachStrandEnds(b);
     refreshInverseMasses(b);
+    makeFluidSolver();
   }
   return static_cast<int>(b);
 }
@@ -496,8 +502,13 @@ std::vector<bool> PbdWorld::work() const {
   on[int(PbdPass::kKinematic)] = kinematic;
   on[int(PbdPass::kFindContacts)] = rigid;
   // Particle pairs exist only with something to touch: another body, or a fluid's own particles.
-  on[int(PbdPass::kFindNeighbors)] = loose && (c.bodies > 1 || c.fluid > 0);
+  on[int(PbdPass::kFindNeighbors)] = loose && c.bodies > 1;
   on[int(PbdPass::kParticleContact)] = loose;
+  on[int(PbdPass::kFluidNeighbors)] = c.fluid > 0;
+  on[int(PbdPass::kDensity)] = c.fluid > 0;
+  on[int(PbdPass::kFluidVelocity)] = c.fluid > 0 && fluid_ &&
+                                     (fluid_->params().xsph > 0.0f || fluid_->params().vorticity > 0.0f ||
+                                      fluid_->params().cohesion > 0.0f);
   on[int(PbdPass::kClusterMatch)] = c.soft > 0;
   on[int(PbdPass::kDistance)] = loose && c.distances;
   on[int(PbdPass::kRigidContact)] = rigid;
@@ -535,9 +546,14 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
       return on ? n(c.looseDynamic + c.kinematicLoose, "moving soft, rope, cloth or fluid bodies")
                 : "no soft, rope, cloth or fluid material moves";
     case PbdPass::kFindNeighbors:
-      return on ? "particle-level material and another body (or a fluid) it can touch"
-                : (c.looseDynamic == 0 ? "no dynamic particle-level material" : "a single particle-level body with nothing else to touch");
+      return on ? "particle-level material and another body it can touch"
+                : (c.looseDynamic == 0 ? "no dynamic particle-level material" : "a single body with nothing else to touch");
     case PbdPass::kClusterMatch: return on ? n(c.soft, "dynamic soft bodies") : "no dynamic soft body";
+    case PbdPass::kFluidNeighbors:
+    case PbdPass::kDensity: return on ? n(c.fluid, "dynamic fluid bodies") : "no fluid in the scene (or all of it fixed)";
+    case PbdPass::kFluidVelocity:
+      return on ? "a fluid sets xsph_viscosity, vorticity or cohesion"
+                : (c.fluid == 0 ? "no fluid in the scene" : "its fluids set no xsph_viscosity, vorticity or cohesion");
     case PbdPass::kDistance:
       return on ? n(c.strands, "dynamic ropes or cloths (or attachments)") : "no rope or cloth moves";
     case PbdPass::kPlasticity:
@@ -572,6 +588,9 @@ std::string PbdWorld::touches(PbdPass pass) const {
       case PbdPass::kParticleUpdate: counts = !rigid && (dyn || m == BodyMode::kKinematic); break;
       case PbdPass::kClusterMatch:
       case PbdPass::kPlasticity: counts = dyn && kind_[b] == MaterialKind::kSoft; break;
+      case PbdPass::kFluidNeighbors:
+      case PbdPass::kDensity:
+      case PbdPass::kFluidVelocity: counts = dyn && kind_[b] == MaterialKind::kFluid; break;
       case PbdPass::kDistance:
         counts = dyn && (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth);
         break;
@@ -664,10 +683,14 @@ bool PbdWorld::runStep(bool checkEachPass) {
       return false;
     if (runs(PbdPass::kFindNeighbors) && !runPass(PbdPass::kFindNeighbors, s, checkEachPass, [&] { findNeighbors(); }))
       return false;
+    if (runs(PbdPass::kFluidNeighbors) &&
+        !runPass(PbdPass::kFluidNeighbors, s, checkEachPass, [&] { fluidNeighbors(); }))
+      return false;
     for (int it = 0; it < params_.iterations; ++it) {
       if (runs(PbdPass::kParticleContact) &&
           !runPass(PbdPass::kParticleContact, s, checkEachPass, [&] { particleContact(); }))
         return false;
+      if (runs(PbdPass::kDensity) && !runPass(PbdPass::kDensity, s, checkEachPass, [&] { density(); })) return false;
       if (runs(PbdPass::kClusterMatch) && !runPass(PbdPass::kClusterMatch, s, checkEachPass, [&] { clusterMatch(h); }))
         return false;
       if (runs(PbdPass::kDistance) && !runPass(PbdPass::kDistance, s, checkEachPass, [&] { distanceConstraints(h); }))
@@ -680,6 +703,9 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
     if (runs(PbdPass::kParticleUpdate) &&
         !runPass(PbdPass::kParticleUpdate, s, checkEachPass, [&] { particleUpdate(h); }))
+      return false;
+    if (runs(PbdPass::kFluidVelocity) &&
+        !runPass(PbdPass::kFluidVelocity, s, checkEachPass, [&] { fluidVelocity(h); }))
       return false;
     if (runs(PbdPass::kPlasticity) && !runPass(PbdPass::kPlasticity, s, checkEachPass, [&] { plasticity(h); }))
       return false;

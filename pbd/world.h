@@ -23,11 +23,16 @@
 //     predict          v += g h, p = x + v h for their dynamic particles
 //     find_neighbors   particle pairs within reach (one NeighborGrid per substep): theirs
 //                      against each other and against rigid bodies' particles
+//     fluid_neighbors  fluids: the PBF kernel's neighbour structure (pbd/fluid.h), fluid
+//                      particles and the solid particles in their range
 //     per iteration:   particle_contact (pairs and ground, Coulomb friction; a rigid body
 //                      takes its share through its generalized inverse mass),
 //                      cluster_match (soft: clustered shape matching), distance (rope and
 //                      cloth stretch and bending, attachments to bodies, tethers)
+//                      and density (PBF: Jacobi lambda and dp; solids in range take their
+//                      share, rigid bodies as an impulse, so a light body floats)
 //     particle_update  v = (p - x) / h, x = p; ground restitution
+//     fluid_velocity   XSPH viscosity, vorticity confinement, cohesion (when set)
 //     plasticity       soft materials with plastic_creep > 0: cluster rest shapes creep
 //
 // Rigid bodies are integrated as bodies, in double precision: a particle-level
@@ -39,6 +44,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -48,6 +54,7 @@
 #include "core/solver.h"
 #include "pbd/constraints.h"
 #include "pbd/contacts.h"
+#include "pbd/fluid.h"
 
 namespace physketch::pbd {
 
@@ -71,13 +78,16 @@ enum class PbdPass : int {
   kKinematic,
   kFindContacts,
   kFindNeighbors,
+  kFluidNeighbors,
   kParticleContact,
+  kDensity,
   kClusterMatch,
   kDistance,
   kRigidContact,
   kBodyContact,
   kUpdate,
   kParticleUpdate,
+  kFluidVelocity,
   kPlasticity,
   kRestitution,
   kWriteParticles,
@@ -119,6 +129,9 @@ class PbdWorld final : public Solver {
   std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
 
   const PbdParams& params() const { return params_; }
+  // The fluids' density error rho/rho0 - 1 at the end of the last substep's iterations
+  // (fluidCount 0 when the scene has no moving fluid).
+  DensityError fluidDensityError() const;
   // Total mass (kg) and rest-frame inertia tensor (kg m^2) of a body.
   double bodyMass(int body) const;
   Mat3 bodyInertiaRest(int body) const;
@@ -183,6 +196,9 @@ class PbdWorld final : public Solver {
   void distanceConstraints(double h);
   void particleUpdate(double h);
   void plasticity(double h);
+  void fluidNeighbors();
+  void density();
+  void fluidVelocity(double h);
   // Centre and mean velocity of a particle-level body (its pose and velocity()); true when
   // some particle may fail the guard (non-finite, too fast, below the ground).
   bool summarizeLoose(std::size_t body);
@@ -228,6 +244,7 @@ class PbdWorld final : public Solver {
   std::vector<GroundCache> groundCache_;
   // --- particle-level kinds -------------------------------------------------
   std::vector<MaterialKind> kind_;  // per body: what it runs as (solverModel(kind, pbd).runsAs)
+  std::vector<float> strandRadius_;  // per body: a rope's or cloth's radius from the brush (m), else 0
   std::vector<float> px_, py_, pz_;  // per particle: predicted position this substep (particle-level kinds)
   std::vector<float> invMassP_;      // per particle: 1/kg for a dynamic particle-level particle, else 0
   std::vector<std::uint8_t> pinned_; // per particle: held where it was drawn (a rope end or cloth on a fixed body)
@@ -270,6 +287,14 @@ class PbdWorld final : public Solver {
   };
   std::vector<Tether> tethers_;
   std::vector<float> groundApproach_;
+  // Fluids: the PBF kernel (pbd/fluid.h), made when the first fluid body is, and the
+  // particles it works on this substep (fluid first, then solids in range), by kernel id.
+  std::unique_ptr<FluidSolver> fluid_;
+  std::vector<std::int32_t> fluidIds_;
+  std::size_t fluidCount_ = 0;
+  std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;
+  std::vector<std::uint8_t> fflag_;
+  void makeFluidSolver();
   bool looseDirty_ = true;             // loose_ must be rebuilt before the next step  // per particle: vy before the solve when it touched the ground, else 0
   std::int64_t steps_ = 0;
   bool validate_ = false;

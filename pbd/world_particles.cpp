@@ -54,7 +54,10 @@ void PbdWorld::setupParticleBody(std::size_t b, const BodyRange& range) {
       clusterColoursDirty_ = true;
       break;
     case MaterialKind::kRope:
-    case MaterialKind::kCloth: buildStrand(b, range); break;
+    case MaterialKind::kCloth:
+      strandRadius_[b] = range.radius;
+      buildStrand(b, range);
+      break;
     default: break;  // fluid: free particles; the density pass finds their neighbours
   }
   looseDirty_ = true;
@@ -220,15 +223,18 @@ void PbdWorld::buildStrand(std::size_t b, const BodyRange& range) {
     }
 }
 
-// A strand attaches where it touches another body at play (within 1.5 particle spacings
-// of one of its particles): a rope by its two ends, a cloth by every node. On a fixed body
+// A strand attaches where it touches another body at play: a node whose sphere (the
+// strand's radius from the brush) reaches a voxel of the body, with half a spacing of slack
+// for a stroke drawn against it (within radius + the voxel's half-diagonal + r of a voxel
+// centre; at least 1.5 spacings): a rope by its two ends, a cloth by every node. On a fixed body
 // the node is pinned; a rope end on a dynamic rigid body is held to that point of the body
 // (the pail, rope and bucket of Phys-Sketch Fig. 5); on a soft body, to the nearest particle.
 // Then every particle of a strand with pinned nodes gets a tether to its nearest anchor.
 void PbdWorld::attachStrandEnds(std::size_t b) {
   const auto& mem = members_[b];
   if (mem.empty()) return;
-  const double reachDist = 1.5 * 2.0 * params_.particleRadius;
+  const double r = params_.particleRadius;
+  const double reachDist = std::max(3.0 * r, double(strandRadius_[b]) + std::sqrt(3.0) * r + r);
   std::vector<std::int32_t> nodes;
   if (kind_[b] == MaterialKind::kRope) {
     nodes.push_back(mem.front());
@@ -500,7 +506,9 @@ void PbdWorld::findNeighbors() {
         if (looseJ && other < i) return;  // each particle-level pair once
         const std::uint32_t phj = parts_.phase[std::size_t(other)];
         const bool sameBody = phase::group(phi) == phase::group(phj);
-        if (sameBody && !phase::has(phi, phase::kFluid)) return;
+        if (sameBody) return;  // a body's own particles: clusters, links or density hold them
+        // Fluid against fluid is the density constraint's, not a contact.
+        if (phase::has(phi, phase::kFluid) && phase::has(phj, phase::kFluid)) return;
         if (invMassP_[std::size_t(i)] == 0.0f && (!looseJ || invMassP_[std::size_t(other)] == 0.0f)) return;
         out.i.push_back(i);
         out.j.push_back(other);
@@ -528,7 +536,11 @@ void PbdWorld::particleContact() {
     const Vec3 pj = rigidJ ? rigidPoint(j) : at(px_, py_, pz_, j);
     const Vec3 d = pi - pj;
     const double dist = d.norm();
-    const double pen = touch - dist;
+    // Fluid against a solid: solid particles count as smaller (R_solid = r / 2 < R_fluid = r,
+    // Phys-Sketch §5.1): the density constraint keeps the fluid off the solid, the contact
+    // only stops a particle that would pass between two solid particles.
+    const bool fluidPair = phase::has(parts_.phase[i], phase::kFluid) != phase::has(parts_.phase[j], phase::kFluid);
+    const double pen = (fluidPair ? 0.75 * touch : touch) - dist;
     if (pen <= 0.0 || dist == 0.0) continue;
     const Vec3 n = d / dist;
     Motion* mj = rigidJ ? &motion_[bj] : nullptr;
@@ -786,6 +798,152 @@ bool PbdWorld::summarizeLoose(std::size_t b) {
   const double floorY = params_.groundY + params_.particleRadius;
   return bad || !(double(maxV2) <= 0.999 * params_.maxSpeed * params_.maxSpeed) ||
          !(double(minY) >= floorY - params_.particleRadius);
+}
+
+}  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+// --- fluids (pbd/fluid.h) -------------------------------------------------------------
+
+// One kernel for every fluid of the scene; its parameters come from the first fluid
+// material (xsph_viscosity, vorticity, cohesion, relaxation); each particle keeps its own
+// rest density, so fluids of different densities layer. Kernel radius 2.1 spacings (~30
+// neighbours, Macklin & Müller 2013).
+void PbdWorld::makeFluidSolver() {
+  if (fluid_) return;
+  const Material* first = nullptr;
+  for (std::size_t b = 0; b < kind_.size() && !first; ++b)
+    if (kind_[b] == MaterialKind::kFluid && !members_[b].empty())
+      first = &materials_[std::size_t(parts_.material[std::size_t(members_[b].front())])];
+  if (!first) return;
+  FluidParams fp;
+  fp.particleRadius = static_cast<float>(params_.particleRadius);
+  fp.kernelRadius = static_cast<float>(2.1 * 2.0 * params_.particleRadius);
+  fp.relaxation = static_cast<float>(first->fluid.relaxation);
+  fp.xsph = static_cast<float>(first->fluid.xsphViscosity);
+  fp.vorticity = static_cast<float>(first->fluid.vorticity);
+  fp.cohesion = static_cast<float>(first->fluid.cohesion);
+  fp.wallLo[1] = static_cast<float>(params_.groundY);
+  fluid_ = std::make_unique<FluidSolver>(fp);
+}
+
+// The kernel's particles this substep: every dynamic fluid particle, then the solid
+// particles within a kernel radius of the fluid's bounding box (particle-level ones at
+// their predicted positions, rigid ones at their body's pose). A solid's inverse mass is
+// its own (rigid: the particle's 1/m, so the body takes sum m dp as an impulse; fixed and
+// carried: 0).
+void PbdWorld::fluidNeighbors() {
+  fluidIds_.clear();
+  Eigen::AlignedBox3d box;
+  for (std::int32_t i : loose_) {
+    const auto k = std::size_t(i);
+    if (!phase::has(parts_.phase[k], phase::kFluid) || invMassP_[k] == 0.0f) continue;
+    fluidIds_.push_back(i);
+    box.extend(at(px_, py_, pz_, k));
+  }
+  fluidCount_ = fluidIds_.size();
+  if (fluidCount_ == 0) return;
+  const double reachH = fluid_->params().kernelRadius;
+  box.min().array() -= reachH;
+  box.max().array() += reachH;
+  for (std::int32_t i : loose_) {
+    const auto k = std::size_t(i);
+    if (phase::has(parts_.phase[k], phase::kFluid)) continue;
+    if (box.contains(at(px_, py_, pz_, k))) fluidIds_.push_back(i);
+  }
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    if (!isRigid(b) || mode_[b] == BodyMode::kEmpty || box.exteriorDistance(motion_[b].c) > reach_[b]) continue;
+    for (std::int32_t i : members_[b])
+      if (box.contains(rigidPoint(std::size_t(i)))) fluidIds_.push_back(i);
+  }
+  const std::size_t n = fluidIds_.size();
+  fx_.resize(n), fy_.resize(n), fz_.resize(n), fw_.resize(n), frho_.resize(n), fflag_.resize(n);
+  fdx_.resize(n), fdy_.resize(n), fdz_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto i = std::size_t(fluidIds_[k]);
+    const auto b = std::size_t(parts_.group(i));
+    const bool rigid = isRigid(b);
+    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(px_, py_, pz_, i));
+    fflag_[k] = k < fluidCount_ ? 1 : 0;
+    fw_[k] = rigid ? (mode_[b] == BodyMode::kDynamic ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i];
+    frho_[k] = static_cast<float>(materials_[std::size_t(parts_.material[i])].density);
+  }
+  FluidInput in;
+  in.count = n;
+  in.x = fx_.data(), in.y = fy_.data(), in.z = fz_.data();
+  in.invMass = fw_.data();
+  in.fluid = fflag_.data();
+  in.restDensity = frho_.data();
+  fluid_->begin(in);
+}
+
+// One Jacobi density iteration on the current positions (other passes moved particles and
+// bodies since the last one); fluid and particle-level solids take their dp, a rigid body
+// the impulse sum m dp of its particles, at body level: dc = sum m dp / M and the rotation
+// by I^-1 sum r x m dp (momentum is conserved: the kernel's sum of m dp is zero).
+void PbdWorld::density() {
+  const std::size_t n = fluidIds_.size();
+  if (fluidCount_ == 0) return;
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto i = std::size_t(fluidIds_[k]);
+    put(fx_, fy_, fz_, k, isRigid(std::size_t(parts_.group(i))) ? rigidPoint(i) : at(px_, py_, pz_, i));
+  }
+  fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
+  fluid_->densityIteration();
+  fluid_->corrections(fdx_.data(), fdy_.data(), fdz_.data());
+  std::map<std::size_t, std::pair<Vec3, Vec3>> impulse;  // body -> (sum m dp, sum r x m dp)
+  for (std::size_t k = 0; k < n; ++k) {
+    if (fw_[k] == 0.0f) continue;
+    const auto i = std::size_t(fluidIds_[k]);
+    const Vec3 d(fdx_[k], fdy_[k], fdz_[k]);
+    const auto b = std::size_t(parts_.group(i));
+    if (!isRigid(b)) {
+      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + d);
+      continue;
+    }
+    auto it = impulse.find(b);
+    if (it == impulse.end()) it = impulse.emplace(b, std::make_pair(Vec3::Zero(), Vec3::Zero())).first;  // Eigen leaves a default Vec3 unset
+    auto& [lin, ang] = it->second;
+    const Vec3 md = double(parts_.mass[i]) * d;
+    lin += md;
+    ang += (rigidPoint(i) - motion_[b].c).cross(md);
+  }
+  for (const auto& [b, j] : impulse) {
+    Motion& mo = motion_[b];
+    mo.c += invMass_[b] * j.first;
+    const Mat3 R = mo.q.toRotationMatrix();
+    const Vec3 dtheta = R * invInertiaRest_[b] * R.transpose() * j.second;
+    const double a = dtheta.norm();
+    if (a > 0.0) mo.q = (Quat(Eigen::AngleAxisd(a, dtheta / a)) * mo.q).normalized();
+  }
+}
+
+void PbdWorld::fluidVelocity(double h) {
+  if (fluidCount_ == 0) return;
+  const std::size_t n = fluidIds_.size();
+  std::vector<float> vx(n), vy(n), vz(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto i = std::size_t(fluidIds_[k]);
+    const bool rigid = isRigid(std::size_t(parts_.group(i)));
+    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(parts_.x, parts_.y, parts_.z, i));
+    vx[k] = parts_.vx[i], vy[k] = parts_.vy[i], vz[k] = parts_.vz[i];
+  }
+  fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
+  fluid_->velocityPasses(vx.data(), vy.data(), vz.data(), static_cast<float>(h));
+  for (std::size_t k = 0; k < fluidCount_; ++k) {
+    const auto i = std::size_t(fluidIds_[k]);
+    parts_.vx[i] = vx[k], parts_.vy[i] = vy[k], parts_.vz[i] = vz[k];
+  }
+}
+
+}  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+DensityError PbdWorld::fluidDensityError() const {
+  if (!fluid_ || fluidCount_ == 0 || fluid_->count() == 0) return DensityError{};
+  return fluid_->densityError();
 }
 
 }  // namespace physketch::pbd

@@ -16,9 +16,10 @@ SolverSupport supportOf(SolverKind solver) {
   s.solver = solver;
   switch (solver) {
     case SolverKind::kPbd:
-      // soft and elastic run as soft bodies (clustered shape matching); rope, cloth and
-      // fluid follow as the sketch lays them out and the density pass lands (issue 8).
-      s.kinds = {MaterialKind::kRigid, MaterialKind::kSoft};
+      // soft and elastic run as soft bodies (clustered shape matching), fluid as PBF,
+      // rope and cloth as XPBD links along the sketch's chains and lattices.
+      s.kinds = {MaterialKind::kRigid, MaterialKind::kSoft, MaterialKind::kFluid, MaterialKind::kRope,
+                 MaterialKind::kCloth};
       s.initialMotion = true;
       s.fixedBodies = true;
       break;

@@ -301,7 +301,7 @@ TEST(Soft, PlasticCubeKeepsPartOfItsDeformation) {
   EXPECT_LT(plastic, elastic - 0.5 * kSpacing) << "elastic " << elastic << " m, plastic " << plastic << " m";
 }
 
-// Deterministic for any thread count: soft, rope and cloth together (more than one chunk
+// Deterministic for any thread count: soft, rope, cloth and fluid together (more than one chunk
 // of particles, so the parallel loops split) give bit-identical states on 1 and 2 threads.
 TEST(Particles, SameStateForOneAndTwoThreads) {
   const auto run = [](int threads) {
@@ -314,9 +314,81 @@ TEST(Particles, SameStateForOneAndTwoThreads) {
     beam.init.fixed = true;
     BodyRange rope = addChain(p, Vec3(0.31, 0.59, 0.01), Vec3(0, -1, 0), 40, 1);
     BodyRange cloth = addSheet(p, Vec3(0.05, 0.4, 0.05), 20, 20, 2);
-    PbdWorld w(p, {jelly, beam, rope, cloth}, mats, params(4, 4));
+    mats.push_back(makeKind("water", MaterialKind::kFluid));
+    BodyRange water = addBox(p, Vec3(0.2, 0.3, 0.2), 10, 10, 10, 4, 4);
+    PbdWorld w(p, {jelly, beam, rope, cloth, water}, mats, params(4, 4));
     for (int s = 0; s < 20; ++s) EXPECT_TRUE(w.step());
     return w.stateHash();
   };
   EXPECT_EQ(run(1), run(2));
+}
+
+namespace {
+
+// A fixed open-topped tank of rigid voxels around [0, inner) x [0, inner) in x and z,
+// `height` layers tall, standing on the ground.
+BodyRange addTank(ParticleArrays& p, int inner, int height, std::int16_t material) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int j = 0; j < height; ++j)
+    for (int k = -1; k <= inner; ++k)
+      for (int i = -1; i <= inner; ++i) {
+        if (i >= 0 && i < inner && k >= 0 && k < inner) continue;
+        const Vec3 x = Vec3(kRadius, kRadius, kRadius) + kSpacing * Vec3(i, j, k);
+        p.push(float(x.x()), float(x.y()), float(x.z()), 9, material);
+      }
+  b.count = static_cast<std::int32_t>(p.size()) - b.first;
+  b.init.fixed = true;
+  return b;
+}
+
+}  // namespace
+
+// Fluid at rest in a fixed tank: after settling, the PBF density constraint holds the mean
+// compression below 1 % at 8 iterations (the issue's bound; measured 0.6 %), and nothing
+// moves faster than 0.1 m/s, a quarter of what a particle falling one spacing reaches
+// (0.44 m/s): no particle rains or pops. Measured 2-5 cm/s of jitter against the tank's
+// particle walls, where the kernel alone between analytic walls rests at 4e-5 m/s
+// (test_fluid.cpp): the particle-wall boundary is open work in issue 8.
+TEST(Fluid, AtRestInATankKeepsItsDensity) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("tank", MaterialKind::kRigid), makeKind("water", MaterialKind::kFluid)};
+  BodyRange tank = addTank(p, 14, 16, 0);
+  BodyRange water = addBox(p, Vec3(kRadius, kRadius, kRadius), 14, 10, 14, 1, 1);
+  PbdWorld w(p, {tank, water}, mats, params(3, 8));
+  const auto names = planNames(w);
+  for (const char* on : {"predict", "fluid_neighbors", "density", "particle_update"}) EXPECT_TRUE(has(names, on)) << on;
+  for (const char* off : {"cluster_match", "distance", "integrate"}) EXPECT_FALSE(has(names, off)) << off;
+  for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  const DensityError e = w.fluidDensityError();
+  ASSERT_GT(e.fluidCount, 0u);
+  EXPECT_LT(e.meanCompression, 0.01f);
+  float vmax = 0.0f;
+  const ParticleArrays& q = w.particles();
+  for (std::int32_t i = water.first; i < water.first + water.count; ++i)
+    vmax = std::max(vmax, std::hypot(q.vx[std::size_t(i)], q.vy[std::size_t(i)], q.vz[std::size_t(i)]));
+  EXPECT_LT(vmax, 0.1f);
+}
+
+// Two-way coupling: a wooden cube (400 kg/m^3) dropped on water floats with its centre near
+// the surface (Archimedes: 40 % submerged puts the centre 0.1 edge above the surface; the
+// window, -0.3 to +0.5 edge, allows for the wave it makes and the coarse particles); a
+// stone cube (3000 kg/m^3) sinks to the bottom half.
+TEST(Fluid, ALightBodyFloatsAndAHeavyOneSinks) {
+  const auto finalHeight = [](double density) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("tank", MaterialKind::kRigid), makeKind("water", MaterialKind::kFluid),
+                                  makeKind("cube", MaterialKind::kRigid, density)};
+    BodyRange tank = addTank(p, 16, 20, 0);
+    BodyRange water = addBox(p, Vec3(kRadius, kRadius, kRadius), 16, 10, 16, 1, 1);
+    BodyRange cube = addBox(p, Vec3(0.05 + kRadius, 0.11 + kRadius, 0.05 + kRadius), 6, 6, 6, 2, 2);
+    PbdWorld w(p, {tank, water, cube}, mats, params(3, 8));
+    for (int s = 0; s < 150; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+    return w.pose(2).centre.y();
+  };
+  const double surface = 10 * kSpacing, edge = 6 * kSpacing;
+  const double wood = finalHeight(400.0), stone = finalHeight(3000.0);
+  EXPECT_GT(wood, surface - 0.3 * edge) << "the wooden cube sank";
+  EXPECT_LT(wood, surface + 0.5 * edge) << "the wooden cube did not settle into the water";
+  EXPECT_LT(stone, 0.5 * surface) << "the stone cube floated";
 }
