@@ -26,10 +26,13 @@ $(BUILD)/build.ninja: | deps
 build: deps $(BUILD)/build.ninja
 	cmake --build $(BUILD) -j $(JOBS)
 
-# Main job: the bundled example stroke file -> PNG frames in out/hello/frames.
+# Main job: the bundled example stroke file -> PNG frames in out/hello/frames; then every PBD
+# kind together (rigid, soft, fluid, rope, cloth) in out/mix/frames.
 demo: build
 	$(PHYSKETCH) run scenes/hello.scene --out out/hello
 	@echo "frames: out/hello/frames/  report: out/hello/report.json"
+	$(PHYSKETCH) run scenes/mix.scene --out out/mix
+	@echo "frames: out/mix/frames/  report: out/mix/report.json"
 
 test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
