@@ -20,6 +20,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
     {"find_contacts", Cadence::kPerSubstep, "per dynamic rigid body near the ground: its particles within a margin of it"},
     {"find_neighbors", Cadence::kPerSubstep, "particle pairs within reach (one NeighborGrid per substep), reused by every iteration"},
+    {"find_colliders", Cadence::kPerSubstep, "mesh colliders: swept spheres stop fast particles and bodies, then contacts within reach (Bullet BVH)"},
     {"fluid_neighbors", Cadence::kPerSubstep, "fluids: the PBF neighbour structure over fluid particles and the solids in range"},
     {"particle_contact", Cadence::kPerIteration, "particle pairs and the ground: projection and Coulomb friction (Macklin 2014 §6)"},
     {"density", Cadence::kPerIteration, "fluids: PBF density constraint, Jacobi lambda and dp (Macklin & Müller 2013 Eq. 11-13)"},
@@ -27,6 +28,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"distance", Cadence::kPerIteration, "rope and cloth: XPBD stretch and bending, attachments to bodies, tethers"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps"},
+    {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution"},
     {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), when set"},
@@ -505,6 +507,9 @@ std::vector<bool> PbdWorld::work() const {
   on[int(PbdPass::kFindNeighbors)] = loose && c.bodies > 1;
   on[int(PbdPass::kParticleContact)] = loose;
   on[int(PbdPass::kFluidNeighbors)] = c.fluid > 0;
+  const bool anyColliders = colliders_ && colliders_->size() > 0;
+  on[int(PbdPass::kFindColliders)] = anyColliders && (rigid || loose);
+  on[int(PbdPass::kColliderContact)] = anyColliders && rigid;
   on[int(PbdPass::kDensity)] = c.fluid > 0;
   on[int(PbdPass::kFluidVelocity)] = c.fluid > 0 && fluid_ &&
                                      (fluid_->params().xsph > 0.0f || fluid_->params().vorticity > 0.0f ||
@@ -549,6 +554,12 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
       return on ? "particle-level material and another body it can touch"
                 : (c.looseDynamic == 0 ? "no dynamic particle-level material" : "a single body with nothing else to touch");
     case PbdPass::kClusterMatch: return on ? n(c.soft, "dynamic soft bodies") : "no dynamic soft body";
+    case PbdPass::kFindColliders:
+      return on ? std::to_string(colliders_->size()) + " mesh colliders and moving material"
+                : (colliders_ && colliders_->size() > 0 ? "nothing moves near the colliders" : "no mesh collider in the scene");
+    case PbdPass::kColliderContact:
+      return on ? n(c.rigidDynamic, "dynamic rigid bodies and mesh colliders")
+                : (colliders_ && colliders_->size() > 0 ? "no dynamic rigid body" : "no mesh collider in the scene");
     case PbdPass::kFluidNeighbors:
     case PbdPass::kDensity: return on ? n(c.fluid, "dynamic fluid bodies") : "no fluid in the scene (or all of it fixed)";
     case PbdPass::kFluidVelocity:
@@ -588,6 +599,8 @@ std::string PbdWorld::touches(PbdPass pass) const {
       case PbdPass::kParticleUpdate: counts = !rigid && (dyn || m == BodyMode::kKinematic); break;
       case PbdPass::kClusterMatch:
       case PbdPass::kPlasticity: counts = dyn && kind_[b] == MaterialKind::kSoft; break;
+      case PbdPass::kFindColliders: counts = dyn; break;
+      case PbdPass::kColliderContact: counts = rigid && dyn; break;
       case PbdPass::kFluidNeighbors:
       case PbdPass::kDensity:
       case PbdPass::kFluidVelocity: counts = dyn && kind_[b] == MaterialKind::kFluid; break;
@@ -683,6 +696,8 @@ bool PbdWorld::runStep(bool checkEachPass) {
       return false;
     if (runs(PbdPass::kFindNeighbors) && !runPass(PbdPass::kFindNeighbors, s, checkEachPass, [&] { findNeighbors(); }))
       return false;
+    if (runs(PbdPass::kFindColliders) && !runPass(PbdPass::kFindColliders, s, checkEachPass, [&] { findColliders(s); }))
+      return false;
     if (runs(PbdPass::kFluidNeighbors) &&
         !runPass(PbdPass::kFluidNeighbors, s, checkEachPass, [&] { fluidNeighbors(); }))
       return false;
@@ -699,6 +714,9 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (runs(PbdPass::kRigidContact) && !runPass(PbdPass::kRigidContact, s, checkEachPass, [&] { rigidContact(); }))
       return false;
     if (runs(PbdPass::kBodyContact) && !runPass(PbdPass::kBodyContact, s, checkEachPass, [&] { bodyContact(); }))
+      return false;
+    if (runs(PbdPass::kColliderContact) &&
+        !runPass(PbdPass::kColliderContact, s, checkEachPass, [&] { rigidColliderContact(); }))
       return false;
     if (runs(PbdPass::kUpdate) && !runPass(PbdPass::kUpdate, s, checkEachPass, [&] { update(h); })) return false;
     if (runs(PbdPass::kParticleUpdate) &&
@@ -1276,6 +1294,142 @@ std::uint64_t PbdWorld::stateHash() const {
     hashBytes(h, d, sizeof d);
   }
   return h;
+}
+
+}  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+void PbdWorld::setColliders(ColliderSet colliders) {
+  colliders_ = std::make_unique<ColliderSet>(std::move(colliders));
+}
+
+// Mesh colliders, once per substep, at the poses of [t0, t1]. Particle-level particles that
+// move more than half a radius are swept from where they were to where they are predicted
+// (a one-triangle-thick wall stops them at any speed), then every one within a radius of a
+// surface gets a contact. A dynamic rigid body near a collider (its centre within reach of a
+// surface) that moves more than half a radius is swept particle by particle and stopped at
+// the first touch (its motion of this substep scaled back to that fraction), then its
+// particles within reach get contacts, solved at body level by collider_contact.
+void PbdWorld::findColliders(int substep) {
+  const double h = params_.dt / params_.substeps, r = params_.particleRadius;
+  const double t0 = double(steps_) * params_.dt + substep * h;
+  colliders_->setSubstep(t0, t0 + h);
+  // Particle-level.
+  looseHits_.clear();
+  std::vector<std::int32_t> ids;
+  std::vector<float> x, y, z;
+  for (std::int32_t i : loose_) {
+    const auto k = std::size_t(i);
+    if (invMassP_[k] == 0.0f) continue;
+    Vec3 p(px_[k], py_[k], pz_[k]);
+    const Vec3 from(parts_.x[k], parts_.y[k], parts_.z[k]);
+    if ((p - from).norm() > 0.5 * r) {
+      const SweepHit hit = colliders_->sweep(from, p, r);
+      if (hit.hit) {
+        p = hit.centre;
+        px_[k] = float(p.x()), py_[k] = float(p.y()), pz_[k] = float(p.z());
+      }
+    }
+    ids.push_back(i);
+    x.push_back(float(p.x())), y.push_back(float(p.y())), z.push_back(float(p.z()));
+  }
+  if (!ids.empty()) {
+    colliders_->contacts(x.data(), y.data(), z.data(), ids.size(), r, r, looseHits_);
+    for (MeshContact& c : looseHits_) c.particle = ids[std::size_t(c.particle)];
+  }
+  // Rigid bodies.
+  bodyHits_.clear();
+  for (std::int32_t bb : active_) {
+    const auto b = std::size_t(bb);
+    Motion& mo = motion_[b];
+    const double travel = (mo.c - mo.cPrev).norm() + 2.0 * std::acos(std::min(1.0, std::abs(mo.q.dot(mo.qPrev)))) * reach_[b];
+    MeshContact probe;
+    if (!colliders_->closest(mo.c, reach_[b] + travel + 2.0 * r, probe)) continue;
+    const auto& mem = members_[b];
+    if (travel > 0.5 * r) {
+      const Mat3 R0 = mo.qPrev.toRotationMatrix(), R1 = mo.q.toRotationMatrix();
+      double first = 1.0;
+      for (std::int32_t i : mem) {
+        const auto k = std::size_t(i);
+        const Vec3 rr(rx_[k], ry_[k], rz_[k]);
+        const SweepHit hit = colliders_->sweep(R0 * rr + mo.cPrev, R1 * rr + mo.c, r);
+        if (hit.hit) first = std::min(first, hit.fraction);
+      }
+      if (first < 1.0) {
+        mo.c = mo.cPrev + first * (mo.c - mo.cPrev);
+        mo.q = mo.qPrev.slerp(first, mo.q).normalized();
+      }
+    }
+    const Mat3 R = mo.q.toRotationMatrix();
+    x.assign(mem.size(), 0.0f), y.assign(mem.size(), 0.0f), z.assign(mem.size(), 0.0f);
+    for (std::size_t m = 0; m < mem.size(); ++m) {
+      const auto k = std::size_t(mem[m]);
+      const Vec3 p = R * Vec3(rx_[k], ry_[k], rz_[k]) + mo.c;
+      x[m] = float(p.x()), y[m] = float(p.y()), z[m] = float(p.z());
+    }
+    BodyColliderContacts bc;
+    bc.body = bb;
+    std::vector<MeshContact> found;
+    colliders_->contacts(x.data(), y.data(), z.data(), mem.size(), r, r, found);
+    for (MeshContact& c : found) {
+      bc.particle.push_back(mem[std::size_t(c.particle)]);
+      bc.contact.push_back(c);
+    }
+    if (!bc.particle.empty()) bodyHits_.push_back(std::move(bc));
+  }
+}
+
+// Body-level contact with mesh colliders, as for the ground: per body and sweep, its
+// particles' penetrations of the contact planes (point, normal) found this substep form a
+// patch, corrected once at its depth-weighted centroid along its depth-weighted normal by
+// the deepest penetration, then Coulomb friction against the collider surface's motion.
+void PbdWorld::rigidColliderContact() {
+  const double r = params_.particleRadius, h = params_.dt / params_.substeps;
+  forEach(bodyHits_.size(), [&](std::size_t j) {
+    const BodyColliderContacts& bc = bodyHits_[j];
+    const auto b = std::size_t(bc.body);
+    Motion& mo = motion_[b];
+    RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
+    const Mat3 Rprev = mo.qPrev.toRotationMatrix();
+    for (int it = 0; it < params_.iterations; ++it) {
+      const Mat3 R = pose.q.toRotationMatrix();
+      double wsum = 0.0, dmax = 0.0, mus = 0.0, muk = 0.0;
+      Vec3 psum = Vec3::Zero(), nsum = Vec3::Zero(), ssum = Vec3::Zero();
+      for (std::size_t k = 0; k < bc.particle.size(); ++k) {
+        const auto i = std::size_t(bc.particle[k]);
+        const MeshContact& c = bc.contact[k];
+        const Vec3 rr(rx_[i], ry_[i], rz_[i]);
+        const Vec3 p = R * rr + pose.c;
+        const double pen = r - (p - c.point).dot(c.normal);
+        if (pen <= 0.0) continue;
+        wsum += pen;
+        dmax = std::max(dmax, pen);
+        psum += pen * p;
+        nsum += pen * c.normal;
+        const Vec3 surface = colliders_->surfaceVelocity(std::size_t(c.collider), c.point) * h;
+        ssum += pen * ((p - (Rprev * rr + mo.cPrev)) - surface);
+        const Material& m = materials_[std::size_t(parts_.material[i])];
+        const auto& fr = colliders_->collider(std::size_t(c.collider)).friction;
+        mus += pen * (fr ? *fr : m.staticFriction);
+        muk += pen * (fr ? *fr : m.dynamicFriction);
+      }
+      if (wsum == 0.0 || nsum.norm() == 0.0) break;
+      const Vec3 n = nsum.normalized(), pc = psum / wsum;
+      const double wn = generalizedInverseMass(pose, pc, n);
+      const double lambdaN = applyPointCorrection(pose, pc, n, dmax);
+      Vec3 slide = ssum / wsum;
+      slide -= n.dot(slide) * n;
+      const double len = slide.norm();
+      if (len > 0.0 && wn > 0.0) {
+        const Vec3 t = -slide / len;
+        const double wt = generalizedInverseMass(pose, pc, t);
+        const double lambdaT = coulomb(len / wt, lambdaN, mus / wsum, muk / wsum);
+        if (lambdaT > 0.0) applyPointCorrection(pose, pc, t, lambdaT * wt);
+      }
+    }
+    mo.c = pose.c, mo.q = pose.q;
+  });
 }
 
 }  // namespace physketch::pbd

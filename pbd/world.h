@@ -55,6 +55,7 @@
 #include "pbd/constraints.h"
 #include "pbd/contacts.h"
 #include "pbd/fluid.h"
+#include "pbd/mesh_collider.h"
 
 namespace physketch::pbd {
 
@@ -78,6 +79,7 @@ enum class PbdPass : int {
   kKinematic,
   kFindContacts,
   kFindNeighbors,
+  kFindColliders,
   kFluidNeighbors,
   kParticleContact,
   kDensity,
@@ -85,6 +87,7 @@ enum class PbdPass : int {
   kDistance,
   kRigidContact,
   kBodyContact,
+  kColliderContact,
   kUpdate,
   kParticleUpdate,
   kFluidVelocity,
@@ -129,6 +132,8 @@ class PbdWorld final : public Solver {
   std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
 
   const PbdParams& params() const { return params_; }
+  // The scene's mesh colliders (pbd/mesh_collider.h); none until set.
+  void setColliders(ColliderSet colliders);
   // The fluids' density error rho/rho0 - 1 at the end of the last substep's iterations
   // (fluidCount 0 when the scene has no moving fluid).
   DensityError fluidDensityError() const;
@@ -197,6 +202,9 @@ class PbdWorld final : public Solver {
   void particleUpdate(double h);
   void plasticity(double h);
   void fluidNeighbors();
+  void findColliders(int substep);
+  void rigidColliderContact();
+  void looseColliderContact();
   void density();
   void fluidVelocity(double h);
   // Centre and mean velocity of a particle-level body (its pose and velocity()); true when
@@ -290,6 +298,16 @@ class PbdWorld final : public Solver {
   // Fluids: the PBF kernel (pbd/fluid.h), made when the first fluid body is, and the
   // particles it works on this substep (fluid first, then solids in range), by kernel id.
   std::unique_ptr<FluidSolver> fluid_;
+  // Mesh colliders and the contacts found this substep: particle-level particles (index into
+  // loose_) and rigid bodies' particles (by body, positions at the substep's predicted pose).
+  std::unique_ptr<ColliderSet> colliders_;
+  std::vector<MeshContact> looseHits_;
+  struct BodyColliderContacts {
+    std::int32_t body = 0;
+    std::vector<std::int32_t> particle;  // particle ids
+    std::vector<MeshContact> contact;    // contact k of particle[k]
+  };
+  std::vector<BodyColliderContacts> bodyHits_;
   std::vector<std::int32_t> fluidIds_;
   std::size_t fluidCount_ = 0;
   std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;

@@ -580,6 +580,7 @@ void PbdWorld::particleContact() {
       put(px_, py_, pz_, j, newJ);
     }
   }
+  looseColliderContact();
   // The ground (and its friction) for every dynamic particle-level particle.
   const double floorY = params_.groundY + params_.particleRadius;
   forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
@@ -711,6 +712,24 @@ void PbdWorld::distanceConstraints(double h) {
 // v = (p - x) / h, x = p for dynamic and carried particles. A particle that hit the
 // ground faster than 2 |g| h leaves it at e times its approach speed.
 void PbdWorld::particleUpdate(double h) {
+  if (colliders_ && colliders_->size() > 0) {
+    // Colliders have the last word: the constraint passes after the last contact sweep
+    // (clusters, links, density) may have pushed a particle into or through a collider. The
+    // contact planes found this substep push it back out, and a particle whose whole move
+    // of the substep still crosses a surface stops at the first touch.
+    looseColliderContact();
+    const double r = params_.particleRadius;
+    forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t k = lo; k < hi; ++k) {
+        const auto i = std::size_t(loose_[k]);
+        if (invMassP_[i] == 0.0f) continue;
+        const Vec3 from = at(parts_.x, parts_.y, parts_.z, i), to = at(px_, py_, pz_, i);
+        if ((to - from).norm() <= 0.25 * r) continue;
+        const SweepHit hit = colliders_->sweep(from, to, r);
+        if (hit.hit) put(px_, py_, pz_, i, hit.centre);
+      }
+    });
+  }
   const float invH = static_cast<float>(1.0 / h);
   const float slow = static_cast<float>(2.0 * params_.gravity.norm() * h);
   forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
@@ -944,6 +963,30 @@ namespace physketch::pbd {
 DensityError PbdWorld::fluidDensityError() const {
   if (!fluid_ || fluidCount_ == 0 || fluid_->count() == 0) return DensityError{};
   return fluid_->densityError();
+}
+
+}  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+// Particle-level particles against the collider contacts found this substep: pushed out of
+// the contact plane to a radius from it, then Coulomb friction against the surface's motion.
+void PbdWorld::looseColliderContact() {
+  if (looseHits_.empty()) return;
+  const double r = params_.particleRadius, h = params_.dt / params_.substeps;
+  for (const MeshContact& c : looseHits_) {
+    const auto i = std::size_t(c.particle);
+    Vec3 p = at(px_, py_, pz_, i);
+    const double pen = r - (p - c.point).dot(c.normal);
+    if (pen <= 0.0) continue;
+    p += pen * c.normal;
+    const Material& m = materials_[std::size_t(parts_.material[i])];
+    const auto& fr = colliders_->collider(std::size_t(c.collider)).friction;
+    Vec3 rel = (p - at(parts_.x, parts_.y, parts_.z, i)) - colliders_->surfaceVelocity(std::size_t(c.collider), c.point) * h;
+    rel -= rel.dot(c.normal) * c.normal;
+    p -= frictionCorrection(rel, pen, fr ? *fr : m.staticFriction, fr ? *fr : m.dynamicFriction);
+    put(px_, py_, pz_, i, p);
+  }
 }
 
 }  // namespace physketch::pbd

@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/material_table.h"
+#include "sketch/mesh_stamp.h"
 #include "mpm/world.h"
 #include "pbd/world.h"
 
@@ -22,6 +23,7 @@ SolverSupport supportOf(SolverKind solver) {
                  MaterialKind::kCloth};
       s.initialMotion = true;
       s.fixedBodies = true;
+      s.meshColliders = true;
       break;
     case SolverKind::kMpm:
       // Kinds as run (solverModel): rigid and soft run as elastic.
@@ -69,6 +71,13 @@ Prepared prepare(const std::string& scenePath, int threads, bool forLint,
   }
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
   p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials, {threads}));
+  for (const MeshCollider& c : p.scene.colliders) {
+    try {
+      p.colliderMeshes.push_back(sketch::readTriangleSoup(c.path));
+    } catch (const InputError& e) {
+      throw InputError(p.scene.path, c.line, "path", "collider '" + c.name + "': " + e.what());
+    }
+  }
   return p;
 }
 
@@ -99,9 +108,12 @@ std::unique_ptr<Solver> makeMpm(const Prepared& p) {
 std::unique_ptr<Solver> makeSolver(const Prepared& p) {
   const SceneDesc& sc = p.scene;
   switch (sc.solver) {
-    case SolverKind::kPbd:
-      return std::make_unique<pbd::PbdWorld>(p.sketch->particles, p.sketch->bodies, sc.materials,
-                                             pbd::paramsFromScene(sc, 0.5 * p.sketch->mapping.voxelSize()));
+    case SolverKind::kPbd: {
+      auto world = std::make_unique<pbd::PbdWorld>(p.sketch->particles, p.sketch->bodies, sc.materials,
+                                                   pbd::paramsFromScene(sc, 0.5 * p.sketch->mapping.voxelSize()));
+      if (!sc.colliders.empty()) world->setColliders(pbd::ColliderSet(sc.colliders, p.colliderMeshes));
+      return world;
+    }
     case SolverKind::kMpm: return makeMpm(p);
   }
   throw InputError(sc.path, sc.solverLine, "name", std::string("solver ") + toString(sc.solver) + " is not available");

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/scene.h"
+#include "core/triangle_soup.h"
 #include "core/solver.h"
 #include "core/support.h"
 #include "sketch/voxelize.h"
@@ -16,6 +17,8 @@ struct Prepared {
   SceneDesc scene;
   sketch::StrokeFile strokes;
   std::unique_ptr<sketch::Sketch> sketch;
+  // One triangle soup per scene collider, in the scene's order (read and checked by prepare).
+  std::vector<TriangleSoup> colliderMeshes;
   // prepare(..., forLint): what the scene's solver does not simulate yet (the error `run`
   // gives), or empty.
   std::string notYet;

@@ -392,3 +392,66 @@ TEST(Fluid, ALightBodyFloatsAndAHeavyOneSinks) {
   EXPECT_LT(wood, surface + 0.5 * edge) << "the wooden cube did not settle into the water";
   EXPECT_LT(stone, 0.5 * surface) << "the stone cube floated";
 }
+
+namespace {
+
+// An open square sheet of two triangles in the plane x = wallX, spanning y and z in
+// [lo, hi] (m): a wall one triangle thick, no inside.
+ColliderSet wallAt(double wallX, double lo, double hi) {
+  MeshCollider c;
+  c.name = "wall";
+  TriangleSoup s;
+  s.vertices = {Vec3(wallX, lo, lo), Vec3(wallX, hi, lo), Vec3(wallX, hi, hi), Vec3(wallX, lo, hi)};
+  s.triangles = {{0, 1, 2}, {0, 2, 3}};
+  s.closed = false;
+  return ColliderSet({c}, {s});
+}
+
+}  // namespace
+
+// A ball thrown at a one-triangle-thick mesh wall never gets a particle past it: at 2 and
+// at 20 particle radii per substep (the sweep stops fast material at the first touch),
+// rigid (body level) and soft (particle level). Zero gravity, so only the wall acts.
+TEST(Colliders, ABallThrownAtAThinMeshWallNeverCrossesIt) {
+  for (const MaterialKind kind : {MaterialKind::kRigid, MaterialKind::kSoft})
+    for (const double radiiPerSubstep : {2.0, 20.0}) {
+      ParticleArrays p;
+      std::vector<Material> mats = {makeKind("ball", kind)};
+      BodyRange ball = addBall(p, Vec3(0.2, 0.5, 0.5), 4, 0, 0);
+      PbdParams prm = params(4, 4, Vec3::Zero());
+      const double h = prm.dt / prm.substeps;
+      ball.init.velocity = Vec3(radiiPerSubstep * kRadius / h, 0.0, 0.0);
+      const double wallX = 0.3;
+      PbdWorld w(p, {ball}, mats, prm);
+      w.setColliders(wallAt(wallX, 0.2, 0.8));
+      bool turned = false;
+      for (int s = 0; s < 60; ++s) {
+        ASSERT_TRUE(w.step()) << w.guard().message();
+        const ParticleArrays& q = w.particles();
+        for (std::int32_t i = ball.first; i < ball.first + ball.count; ++i)
+          ASSERT_LT(q.x[std::size_t(i)], wallX) << toString(kind) << " at " << radiiPerSubstep << " radii per substep, step " << s;
+        turned = turned || w.velocity(0).x() < 0.5 * ball.init.velocity.x();
+      }
+      EXPECT_TRUE(turned) << "the wall did not stop the " << toString(kind) << " ball";
+    }
+}
+
+// A rigid box dropped on a mesh floor (a sheet at y = 0.2 m) rests on it like on the
+// ground: its lowest particle a radius above the sheet, within a fifth of a radius.
+TEST(Colliders, ABoxRestsOnAMeshFloor) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("box", MaterialKind::kRigid)};
+  BodyRange box = addBox(p, Vec3(0.45, 0.3, 0.45), 6, 6, 6, 0, 0);
+  MeshCollider c;
+  c.name = "floor";
+  TriangleSoup s;
+  s.vertices = {Vec3(0.2, 0.2, 0.2), Vec3(0.8, 0.2, 0.2), Vec3(0.8, 0.2, 0.8), Vec3(0.2, 0.2, 0.8)};
+  s.triangles = {{0, 2, 1}, {0, 3, 2}};
+  PbdWorld w(p, {box}, mats, params(4, 4));
+  w.setColliders(ColliderSet({c}, {s}));
+  for (int k = 0; k < 90; ++k) ASSERT_TRUE(w.step()) << w.guard().message();
+  const ParticleArrays& q = w.particles();
+  const float lowest = *std::min_element(q.y.begin(), q.y.end());
+  EXPECT_NEAR(lowest, 0.2 + kRadius, 0.2 * kRadius);
+  EXPECT_LT(w.velocity(0).norm(), 0.01);
+}
