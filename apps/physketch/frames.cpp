@@ -180,12 +180,42 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
         trianglesLastFrame_ += m.triangles;
       }
     }
+    for (std::size_t c = 0; c < colliderHandles_.size(); ++c) {
+      Mat3 R;
+      Vec3 at;
+      sc.colliders[c].poseAt(solver.time(), R, at);
+      Mat4f model = Mat4f::Identity();
+      model.topLeftCorner<3, 3>() = R.cast<float>();
+      model.topRightCorner<3, 1>() = at.cast<float>();
+      renderer_->drawMesh(colliderHandles_[c], model, {0.6f, 0.62f, 0.66f});
+    }
     img = renderer_->endFrame();
   }
   ++frames_;
   if (img.meshSamples == 0 && !meshes_.empty()) framesWithNothingInView_.push_back(frames_ - 1);
   ScopedPass t(profile_, passPng_);
   render::writePng(path, img);
+}
+
+void FrameWriter::setColliders(const std::vector<TriangleSoup>& meshes) {
+  if (!renderer_) return;
+  for (std::size_t c = 0; c < meshes.size() && c < scene_.colliders.size(); ++c) {
+    // Flat-shaded: three vertices per triangle with the face normal, in the collider's
+    // local frame (file coordinates times its scale).
+    const double scale = scene_.colliders[c].scale;
+    render::TriangleMesh m;
+    for (const auto& t : meshes[c].triangles) {
+      const Vec3 a = scale * meshes[c].vertices[std::size_t(t[0])], b = scale * meshes[c].vertices[std::size_t(t[1])],
+                 d = scale * meshes[c].vertices[std::size_t(t[2])];
+      const Vec3 n = (b - a).cross(d - a).normalized();
+      for (const Vec3& v : {a, b, d}) {
+        m.indices.push_back(static_cast<std::uint32_t>(m.positions.size()));
+        m.positions.push_back(v.cast<float>());
+        m.normals.push_back(n.cast<float>());
+      }
+    }
+    colliderHandles_.push_back(renderer_->uploadMesh(m));
+  }
 }
 
 int FrameWriter::exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,

@@ -10,6 +10,7 @@
 
 #include "core/profile.h"
 #include "core/scene.h"
+#include "core/triangle_soup.h"
 #include "core/solver.h"
 #include "render/export.h"
 #include "render/renderer.h"
@@ -39,6 +40,9 @@ class FrameWriter {
 
   // Marks bodies whose particles changed; they are re-meshed before the next frame.
   void markReshaped(const std::vector<int>& bodies);
+  // The scene's mesh colliders (one soup per collider, in scene order), drawn at their pose
+  // at each frame's time in a neutral grey.
+  void setColliders(const std::vector<TriangleSoup>& meshes);
   // Meshes bodies that are new, marked or deforming (each at most once per frame).
   void update(const Solver& solver, const std::vector<Vec3i>& restCells);
   // update(), then draws the solver's bodies and writes the PNG at `path` (needs options.draw).
@@ -62,6 +66,7 @@ class FrameWriter {
   long meshings() const { return profile_.entries()[std::size_t(passMesh_)].calls; }
 
  private:
+  std::vector<int> colliderHandles_;  // GL meshes of the scene's colliders, in scene order
   struct MeshPart {
     int handle;  // GL mesh, -1 without a renderer
     std::int16_t material;

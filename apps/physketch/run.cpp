@@ -288,6 +288,7 @@ int runScene(const RunOptions& opt) {
       fo.keepMeshes = opt.exportMesh;
       fo.smoothIterations = opt.smooth;
       frameWriter = std::make_unique<FrameWriter>(sc, sk.mapping, fo);
+      frameWriter->setColliders(p.colliderMeshes);
     }
     const fs::path out = prepareOutput(opt.outDir, sc.writeFrames, opt);
     if (opt.exportMesh) render::writeMtl((out / "meshes" / "materials.mtl").string(), exportMaterials(sc));
