@@ -13,6 +13,7 @@ const char* toString(GuardKind kind) {
     case GuardKind::kPenetration: return "penetration";
     case GuardKind::kInverted: return "inverted";
     case GuardKind::kCfl: return "cfl";
+    case GuardKind::kCompression: return "compression";
   }
   return "?";
 }

@@ -18,8 +18,10 @@
 namespace physketch {
 
 // kInverted: a deformation gradient with J = det F <= 0 (MPM); kCfl: a particle moved more than
-// one grid cell in a substep, or the time-step bound needs more substeps than allowed (MPM).
-enum class GuardKind { kNone, kNaN, kExplosion, kPenetration, kInverted, kCfl };
+// one grid cell in a substep, or the time-step bound needs more substeps than allowed (MPM);
+// kCompression: a fluid's mean compression rho/rho0 - 1 above the bound (PBD fluids: the
+// density constraint no longer holds the fluid incompressible).
+enum class GuardKind { kNone, kNaN, kExplosion, kPenetration, kInverted, kCfl, kCompression };
 const char* toString(GuardKind kind);
 
 struct GuardRecord {

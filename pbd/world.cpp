@@ -675,6 +675,7 @@ bool PbdWorld::runPass(PbdPass pass, int substep, bool check, F&& f) {
   // routinely inside the ground until rigid_contact lifts it.
   const bool penetration = pass == PbdPass::kRigidContact || pass == PbdPass::kWriteParticles;
   GuardRecord r = checkImplied(pass != PbdPass::kWriteParticles, penetration);
+  if (!r.tripped() && pass == PbdPass::kDensity) r = checkCompression();
   if (!r.tripped()) return true;
   r.pass = kPbdPasses[int(pass)].name;
   r.step = steps_;
@@ -769,6 +770,7 @@ bool PbdWorld::step() {
         // write_particles summarized what it wrote: scan particle by particle only when
         // that summary is suspect (or nothing was written this step).
         if (writtenSuspect_ || !work_[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
+        if (!r.tripped() && work_[std::size_t(PbdPass::kDensity)]) r = checkCompression();
       }
       if (r.tripped()) {
         // Replay the step from its start with a check after every pass, so the record

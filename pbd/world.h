@@ -67,6 +67,8 @@ struct PbdParams {
   double groundY = 0.0;       // m
   double particleRadius = 0.0;  // m; half the particle spacing
   double maxSpeed = 100.0;    // m/s; the guard's explosion bound
+  double maxCompression = 0.1;  // the guard's bound on a fluid's mean rho/rho0 - 1 (10 %: sloshing
+                                // water stays near 1 %; beyond this the fluid visibly shrinks)
 };
 
 // The solver settings a scene file asks for; the radius is half the sketch's voxel size.
@@ -173,6 +175,7 @@ class PbdWorld final : public Solver {
   template <class F>
   bool runPass(PbdPass pass, int substep, bool check, F&& f);
   GuardRecord checkImplied(bool bodiesOnly, bool penetration) const;
+  GuardRecord checkCompression() const;
 
   void integrate(double h);
   void kinematic(int substep);

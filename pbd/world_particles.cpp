@@ -990,3 +990,26 @@ void PbdWorld::looseColliderContact() {
 }
 
 }  // namespace physketch::pbd
+
+namespace physketch::pbd {
+
+// The fluids' mean compression against the guard's bound, at the kernel's current
+// positions (after the last density iteration). The record names the fluid's first particle:
+// the error is a mean over the fluid, not one particle's.
+GuardRecord PbdWorld::checkCompression() const {
+  GuardRecord r;
+  if (!fluid_ || fluidCount_ == 0) return r;
+  const DensityError e = fluid_->densityError();
+  if (!(double(e.meanCompression) > params_.maxCompression) && std::isfinite(e.meanCompression)) return r;
+  const auto i = std::size_t(fluidIds_.front());
+  r.kind = GuardKind::kCompression;
+  r.particle = fluidIds_.front();
+  r.body = parts_.group(i);
+  r.stroke = parts_.stroke[i];
+  r.value = e.meanCompression;
+  r.bound = params_.maxCompression;
+  r.hint = "The fluid is compressed beyond the bound: raise 'iterations' or 'substeps', or lower 'dt'.";
+  return r;
+}
+
+}  // namespace physketch::pbd

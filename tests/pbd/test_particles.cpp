@@ -455,3 +455,28 @@ TEST(Colliders, ABoxRestsOnAMeshFloor) {
   EXPECT_NEAR(lowest, 0.2 + kRadius, 0.2 * kRadius);
   EXPECT_LT(w.velocity(0).norm(), 0.01);
 }
+
+// The guard learns the fluid's failure: a block of water dropped from 30 cm with one
+// substep of one iteration at 1/20 s steps is crushed on landing far beyond the 10 % mean
+// compression bound; the guard stops the run and names the kind (compression), the pass
+// (density) and the fluid's material. With 4 substeps of 8 iterations the same drop passes.
+TEST(Fluid, TheGuardNamesACompressedFluid) {
+  const auto run = [](int substeps, int iterations) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("water", MaterialKind::kFluid)};
+    BodyRange water = addBox(p, Vec3(0.0, 0.3, 0.0), 12, 12, 12, 0, 0);
+    PbdParams prm = params(substeps, iterations);
+    prm.dt = 1.0 / 20.0;
+    PbdWorld w(p, {water}, mats, prm);
+    for (int s = 0; s < 40; ++s)
+      if (!w.step()) break;
+    return w.guard();
+  };
+  const GuardRecord bad = run(1, 1);
+  ASSERT_TRUE(bad.tripped());
+  EXPECT_EQ(bad.kind, GuardKind::kCompression) << bad.message();
+  EXPECT_EQ(bad.pass, "density");
+  EXPECT_EQ(bad.material, "water");
+  EXPECT_GT(bad.value, 0.1);
+  EXPECT_FALSE(run(4, 8).tripped()) << run(4, 8).message();
+}
