@@ -105,7 +105,18 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       opt.latticeOrigin = origin;
       opt.smoothIterations = options_.smoothIterations;
       render::SmoothingReport report;
-      mesh = render::meshParticles(positionsOf(p, ids), mapping_.voxelSize(), opt, &report);
+      std::vector<Vec3> pos = positionsOf(p, ids);
+      if (scene_.materials[static_cast<std::size_t>(material)].kind == MaterialKind::kRope) {
+        // A rope is one particle across: links that run diagonally through the lattice mark
+        // cells that touch only at edges, which mesh as a dashed line. Points along each link
+        // (consecutive ids are neighbours on the chain) mark the cells between.
+        for (std::size_t k = 0; k + 1 < ids.size(); ++k) {
+          if (ids[k + 1] != ids[k] + 1) continue;
+          const Vec3 a = pos[k], b = pos[k + 1];
+          for (double f : {0.25, 0.5, 0.75}) pos.push_back(a + f * (b - a));
+        }
+      }
+      mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
       if (options_.smoothIterations > 0 && report.volumeBefore > 0.0) {
         ++smoothing_.meshes;
         smoothing_.maxAbsChange = std::max(smoothing_.maxAbsChange, std::abs(report.relativeChange()));
