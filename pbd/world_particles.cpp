@@ -301,7 +301,7 @@ void PbdWorld::attachStrandEnds(std::size_t b) {
     if (pinned_[std::size_t(i)]) anchors.push_back(i);
   // Only for inextensible strands: a compliant one must be free to stretch.
   const Material& mat = materials_[std::size_t(parts_.material[std::size_t(mem.front())])];
-  if (anchors.empty() || anchors.size() > 256 || mat.strand.stretchCompliance > 0.0) return;
+  if (anchors.empty() || anchors.size() > 1024 || mat.strand.stretchCompliance > 0.0) return;
   const auto rest = [&](std::int32_t a) { return at(parts_.x, parts_.y, parts_.z, std::size_t(a)); };
   if (kind_[b] == MaterialKind::kRope) {
     // Path length along the chain from its first particle.
