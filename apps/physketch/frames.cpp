@@ -112,8 +112,8 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
         // (consecutive ids are neighbours on the chain) mark the cells between.
         for (std::size_t k = 0; k + 1 < ids.size(); ++k) {
           if (ids[k + 1] != ids[k] + 1) continue;
-          const Vec3 a = pos[k], b = pos[k + 1];
-          for (double f : {0.25, 0.5, 0.75}) pos.push_back(a + f * (b - a));
+          const Vec3 from = pos[k], to = pos[k + 1];
+          for (double f : {0.25, 0.5, 0.75}) pos.push_back(from + f * (to - from));
         }
       }
       mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
