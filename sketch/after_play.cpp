@@ -52,6 +52,22 @@ void moveAfterPlay(const Operation& op, double play, int pass, const GridMapping
   ++sum.stamps;
 }
 
+// Tool: the brush at its first sample as particles (voxel centres, Eq. 5) and the brush's path.
+// Material -1 until the app gives the tool its own (prepare.cpp).
+void toolAfterPlay(const Operation& op, double play, int pass, const GridMapping& m, OperationSummary& sum,
+                   RuntimeOp& r) {
+  moveAfterPlay(op, play, pass, m, sum, r);  // the cells under the brush at its first sample, and the path
+  r.kind = RuntimeOp::Kind::kTool;
+  r.cells = std::move(r.grab);
+  r.grab.clear();
+  r.friction = op.stroke.toolFriction;
+  r.particles.reserve(r.cells.size());
+  for (const Vec3i& c : r.cells) {
+    const Vec3 q = m.toWorld(c);
+    r.particles.push(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), op.id, -1);
+  }
+}
+
 }  // namespace
 
 void strokeAfterPlay(const Operation& op, double play, const InputChecks& checks, OperationSummary& sum,
@@ -67,8 +83,9 @@ void strokeAfterPlay(const Operation& op, double play, const InputChecks& checks
       case StrokeOp::kCreate: throw RuntimeError("strokeAfterPlay: creates after play go to CreatesAfterPlay");
       case StrokeOp::kRemove: removeAfterPlay(op, play, pass, checks.mapping(), sum, r); break;
       case StrokeOp::kMove: moveAfterPlay(op, play, pass, checks.mapping(), sum, r); break;
-      case StrokeOp::kTool: throw RuntimeError("strokeAfterPlay: tool strokes are the solver's (see replay)");
+      case StrokeOp::kTool: toolAfterPlay(op, play, pass, checks.mapping(), sum, r); break;
     }
+    if (r.kind == RuntimeOp::Kind::kTool && r.particles.size() == 0) continue;  // a brush too small for a voxel
     out.push_back(std::move(r));
   }
 }

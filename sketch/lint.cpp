@@ -44,7 +44,8 @@ void lint(const StrokeFile& file, const std::vector<Material>& materials, const 
   std::vector<bool> used(materials.size(), false);
   for (auto m : sk.particles.material) used[static_cast<std::size_t>(m)] = true;
   for (const RuntimeOp& r : sk.runtime)
-    for (auto m : r.particles.material) used[static_cast<std::size_t>(m)] = true;
+    if (r.kind != RuntimeOp::Kind::kTool)  // a tool's particles have the app's material (none yet)
+      for (auto m : r.particles.material) used[static_cast<std::size_t>(m)] = true;
   for (std::size_t m = 0; m < materials.size(); ++m)
     if (!used[m]) sk.warnings.push_back("material '" + materials[m].name + "' is never used");
   // A named body whose strokes do not touch is one rigid body held together by nothing.

@@ -91,9 +91,11 @@ Sketch replay(const StrokeFile& file, const GridMapping& mapping, const std::vec
   for (int id : file.active) {
     const Operation& op = file.operations[static_cast<std::size_t>(id)];
     OperationSummary& sum = sk.operations[static_cast<std::size_t>(id)];
-    // Tool strokes push material in the solver (docs/formats.md); the sketch never sees them.
-    if (op.kind == Operation::Kind::kStroke && op.stroke.op == StrokeOp::kTool) continue;
-    if (!sum.afterPlay)
+    // Tool strokes start at or after play (sketch/strokes.cpp checks) and push material in the
+    // solver: a RuntimeOp, never part of M (docs/formats.md, "Tool strokes").
+    if (op.kind == Operation::Kind::kStroke && op.stroke.op == StrokeOp::kTool)
+      strokeAfterPlay(op, play, checks, sum, sk.runtime);
+    else if (!sum.afterPlay)
       withinCap(file, materials, op, sum, [&] { applyBeforePlay(op, footprints, checks, cells, strands, sum); });
     else if (createsParticles(op)) createsLater.push_back(id);
     else strokeAfterPlay(op, play, checks, sum, sk.runtime);

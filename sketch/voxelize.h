@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,7 +38,7 @@ struct OperationSummary {
 // An operation that happens while the simulation runs (it starts after `play`).
 // Times are simulation times: seconds after play.
 struct RuntimeOp {
-  enum class Kind { kCreate, kRemove, kMove } kind = Kind::kCreate;
+  enum class Kind { kCreate, kRemove, kMove, kTool } kind = Kind::kCreate;
   int op = 0;                  // operation id (provenance)
   int line = 0;
   double start = 0.0, end = 0.0;
@@ -56,6 +57,12 @@ struct RuntimeOp {
   // kinematic and follow the brush path (times, positions) until `end`, then are released.
   std::vector<Vec3i> grab;
   std::vector<std::pair<double, Vec3>> path;
+  // kTool: `particles` (and `cells`) are the brush at its first sample, voxelized like a create's
+  // stamp but not in M, not material and never removed; from `start` to `end` they are a kinematic
+  // body whose centre follows `path` (offset by the first sample), then they leave the simulation.
+  // Their material is the app's (apps/physketch/prepare.cpp gives each tool one); `friction` is
+  // the stroke's friction= (Coulomb coefficient, static = dynamic), if given.
+  std::optional<double> friction;
 };
 
 // Every particle is in a body range; bodies are in the order of their first operation (the

@@ -1,4 +1,5 @@
 #include "apps/physketch/prepare.h"
+#include "apps/physketch/runtime.h"
 
 #include <cmath>
 #include <fstream>
@@ -24,6 +25,7 @@ SolverSupport supportOf(SolverKind solver) {
       s.initialMotion = true;
       s.fixedBodies = true;
       s.meshColliders = true;
+      s.toolStrokes = true;  // kinematic bodies driven by the RuntimeDriver
       break;
     case SolverKind::kMpm:
       // Kinds as run (solverModel): rigid and soft run as elastic.
@@ -71,6 +73,7 @@ Prepared prepare(const std::string& scenePath, int threads, bool forLint,
   }
   const sketch::GridMapping mapping(p.scene.workspaceCenter, p.scene.workspaceSize);
   p.sketch = std::make_unique<sketch::Sketch>(sketch::voxelize(p.strokes, mapping, p.scene.materials, {threads}));
+  addToolMaterials(p.scene.materials, *p.sketch);
   for (const MeshCollider& c : p.scene.colliders) {
     try {
       p.colliderMeshes.push_back(sketch::readTriangleSoup(c.path));

@@ -85,7 +85,7 @@ json runtimeJson(const sketch::Sketch& sk, const RuntimeDriver& runtime) {
   for (std::size_t k = 0; k < sk.runtime.size(); ++k) {
     const auto& op = sk.runtime[k];
     const auto& st = runtime.stats()[k];
-    static const char* kKinds[] = {"create", "remove", "move"};
+    static const char* kKinds[] = {"create", "remove", "move", "tool"};
     rt.push_back({{"op", op.op}, {"line", op.line}, {"kind", kKinds[static_cast<int>(op.kind)]},
                   {"start_s", op.start}, {"end_s", op.end}, {"started", st.started}, {"finished", st.finished},
                   {"body", st.body}, {"grabbed_bodies", st.grabbed}, {"removed_particles", st.removed}});

@@ -248,6 +248,10 @@ int printPlan(const PlanOptions& opt) {
             std::printf("  t %.4g-%.4g s  (no pass)  (%s: a remove; cut bodies are rebuilt, split into pieces if cut "
                         "apart, and re-meshed at the next frame)\n", op.start, op.end, where.c_str());
             break;
+          case sketch::RuntimeOp::Kind::kTool:
+            std::printf("  t %.4g-%.4g s  kinematic  (%s: a tool pushes material along its path, then leaves)\n",
+                        op.start, op.end, where.c_str());
+            break;
         }
       }
       std::fflush(stdout);

@@ -7,6 +7,19 @@ namespace physketch::app {
 
 using sketch::RuntimeOp;
 
+void addToolMaterials(std::vector<Material>& materials, sketch::Sketch& sketch) {
+  for (RuntimeOp& op : sketch.runtime) {
+    if (op.kind != RuntimeOp::Kind::kTool) continue;
+    Material m;
+    m.name = "tool " + std::to_string(op.op);
+    if (op.friction) m.staticFriction = m.dynamicFriction = *op.friction;
+    m.color = {0.35f, 0.35f, 0.4f};
+    const auto index = static_cast<std::int16_t>(materials.size());
+    materials.push_back(m);
+    for (auto& mat : op.particles.material) mat = index;
+  }
+}
+
 RuntimeDriver::RuntimeDriver(const sketch::Sketch& sketch, Solver& solver)
     : sketch_(sketch),
       solver_(solver),
@@ -39,6 +52,29 @@ std::vector<std::int32_t> RuntimeDriver::particlesInCells(const std::vector<Vec3
       out.push_back(static_cast<std::int32_t>(i));
   }
   return out;
+}
+
+// A tool: a kinematic body (infinite mass: it pushes and is not pushed back) from `start`,
+// its centre of mass carried by the brush's displacement since the first sample, removed
+// from the simulation after `end` (docs/formats.md, "Tool strokes").
+void RuntimeDriver::driveTool(std::size_t k, double t0, double t1, std::vector<int>& reshaped) {
+  const RuntimeOp& op = sketch_.runtime[k];
+  OpStats& st = stats_[k];
+  if (!st.started) {
+    BodyRange shape;
+    st.body = solver_.addBody(op.particles, shape, /*kinematic=*/true);
+    restCells_.insert(restCells_.end(), op.cells.begin(), op.cells.end());
+    grabCentre_[k].assign(1, solver_.pose(st.body).centre);
+    reshaped.push_back(st.body);
+    st.started = true;
+  }
+  if (t0 >= op.end) {
+    const std::vector<std::int32_t> ids = solver_.bodyParticles(st.body);  // a copy: removal changes it
+    for (int b : solver_.removeParticles(ids)) reshaped.push_back(b);
+    st.finished = true;
+    return;
+  }
+  solver_.setKinematicTarget(st.body, grabCentre_[k][0] + brushAt(op, std::min(t1, op.end)) - brushAt(op, op.start));
 }
 
 std::vector<int> RuntimeDriver::beforeStep() {
@@ -112,6 +148,7 @@ std::vector<int> RuntimeDriver::beforeStep() {
             solver_.setKinematicTarget(st.grabbed[g],
                                     grabCentre_[k][g] + brushAt(op, std::min(t1, op.end)) - brushAt(op, op.start));
         break;
+      case RuntimeOp::Kind::kTool: driveTool(k, t0, t1, reshaped); break;
     }
   }
   std::sort(reshaped.begin(), reshaped.end());

@@ -11,11 +11,19 @@
 
 namespace physketch::app {
 
+// Each tool gets a material of its own, appended to `materials` (after the scene's, so no
+// index the scene or the sketch uses moves): a rigid material named "tool N" (N its
+// operation) with the stroke's friction= for static and dynamic friction, else the rigid
+// defaults (0.5), and its particles take it. PBD contacts use the mean of the two sides'
+// coefficients (pbd/world.cpp), so a contact of the tool uses the mean of friction= and the
+// touching material's. Call before the solver is made; tools render grey.
+void addToolMaterials(std::vector<Material>& materials, sketch::Sketch& sketch);
+
 class RuntimeDriver {
  public:
   struct OpStats {
     bool started = false, finished = false;
-    int body = -1;               // create: the body it made
+    int body = -1;               // create: the body it made; tool: its kinematic body
     std::vector<int> grabbed;    // move: bodies it carries
     std::vector<BodyMode> modes; // move: each grabbed body's mode before it was grabbed
     std::int64_t removed = 0;    // remove: particles it removed
@@ -33,6 +41,7 @@ class RuntimeDriver {
   const std::vector<OpStats>& stats() const { return stats_; }
 
  private:
+  void driveTool(std::size_t k, double t0, double t1, std::vector<int>& reshaped);
   Vec3 brushAt(const sketch::RuntimeOp& op, double t) const;
   std::vector<std::int32_t> particlesInCells(const std::vector<Vec3i>& cells) const;
 
