@@ -740,6 +740,11 @@ bool PbdWorld::runStep(bool checkEachPass) {
 bool PbdWorld::step() {
   if (guard_.tripped()) return false;
   work_ = work();  // once per step: the replay below restores the same start, so the same passes
+  // Contacts found in an earlier step must not outlive it: a pass that finds them may be off
+  // now (a removed tool leaves one body: find_neighbors is off, particle_contact still on).
+  contacts_.particlePair.clear();
+  looseHits_.clear();
+  bodyHits_.clear();
   active_.clear();
   for (std::size_t b = 0; b < mode_.size(); ++b)
     if (mode_[b] == BodyMode::kDynamic && isRigid(b)) active_.push_back(static_cast<std::int32_t>(b));
