@@ -13,7 +13,7 @@ LAUNCHER   := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMP
 export CCACHE_BASEDIR := $(CURDIR)
 PHYSKETCH  := $(BUILD)/apps/physketch/physketch
 
-.PHONY: all deps build demo test bench sanitize clean
+.PHONY: all deps build demo test bench hard sanitize clean
 
 all: build
 
@@ -36,6 +36,10 @@ demo: build
 
 test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
+
+# The hard scenes at full length; rewrites the measured table in docs/stability.md.
+hard: build
+	python3 scripts/hard.py --exe $(PHYSKETCH) --dir scenes/hard --doc docs/stability.md
 
 bench: build
 	@bash bench/run_all.sh $(BUILD)
