@@ -622,3 +622,29 @@ TEST(RigidBody, AFastBodyThatComesWithinReachDuringAStepStillCollides) {
   }
   EXPECT_LT(w.velocity(0).x(), 0.5);  // stopped (or turned back), not through the wall
 }
+
+TEST(RigidBody, AFastCarriedBodyPushesABoxAtItsOwnSpeed) {
+  // A carried (kinematic) 5x5x5 pusher crosses 1.5 spacings per substep (9 m/s at 60 Hz
+  // and 10 substeps) into a resting box in zero gravity. Position-based contact is
+  // perfectly inelastic: the box leaves at the pusher's speed, along its path. Bounds:
+  // [0.8, 1.25] x 9 m/s along x and under 1 m/s across it. Two defects each break them:
+  // the once-per-step touch test ignored where a carried body goes (its v is zero), so
+  // body_contact was off and the pusher passed through (box speed 0); and contact normals
+  // taken from the current, interleaved particle pairs sent the box sideways and pushed it
+  // by a full depth every sweep (twice the pusher's speed).
+  ParticleArrays p;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), 5, 5, 5, 0), addBox(p, Vec3(-0.15, 0.5, 0.0), 5, 5, 5, 1)};
+  PbdParams prm = params(10, 4);
+  prm.gravity = Vec3::Zero();
+  PbdWorld w(p, bodies, rigidMaterial(), prm);
+  w.setMode(1, BodyMode::kKinematic);
+  const double speed = 1.5 * kSpacing * prm.substeps / prm.dt;  // 9 m/s
+  for (int s = 0; s < 4; ++s) {
+    w.setKinematicTarget(1, w.pose(1).centre + Vec3(speed * prm.dt, 0.0, 0.0));
+    ASSERT_TRUE(w.step()) << w.guard().message();
+  }
+  const Vec3 v = w.velocity(0);
+  EXPECT_GT(v.x(), 0.8 * speed);
+  EXPECT_LT(v.x(), 1.25 * speed);
+  EXPECT_LT(Vec3(0.0, v.y(), v.z()).norm(), 1.0);
+}
