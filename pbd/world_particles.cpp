@@ -208,19 +208,37 @@ void PbdWorld::buildStrand(std::size_t b, const BodyRange& range) {
   }
   if (range.layout != BodyLayout::kLattice || range.rows * range.cols != n)
     throw RuntimeError("PbdWorld: cloth body " + std::to_string(b) + " is not laid out as a rows x cols lattice");
+  // Links go in families (along rows, along columns, both diagonals, then the skip-one
+  // bending links), each family in two colours whose links share no node. One sweep per
+  // substep over links emitted node by node (a row link, a column link, the diagonals, the
+  // bending links of one node, then the next node's) diverged: at 30 substeps x 1
+  // iteration a 45 x 45 sheet pinned at two corners reached 100 m/s within a second (a
+  // standalone loop reproduced it; grouped by family it swings at 2 m/s), because within
+  // a node's links the corrections chase each other around the shear triangles and the
+  // velocity update turns what is left into speed. Colours also make each group's links
+  // independent, the precondition for solving a colour in parallel.
   const std::int32_t rows = range.rows, cols = range.cols;
   const auto id = [&](std::int32_t r, std::int32_t c) { return f + r * cols + c; };
-  for (std::int32_t r = 0; r < rows; ++r)
-    for (std::int32_t c = 0; c < cols; ++c) {
-      if (c + 1 < cols) link(id(r, c), id(r, c + 1), stretch);
-      if (r + 1 < rows) link(id(r, c), id(r + 1, c), stretch);
-      if (r + 1 < rows && c + 1 < cols) {
-        link(id(r, c), id(r + 1, c + 1), stretch);
-        link(id(r, c + 1), id(r + 1, c), stretch);
-      }
-      if (c + 2 < cols) link(id(r, c), id(r, c + 2), bend, id(r, c + 1));
-      if (r + 2 < rows) link(id(r, c), id(r + 2, c), bend, id(r + 1, c));
-    }
+  for (std::int32_t colour = 0; colour < 2; ++colour)  // along rows: by column parity
+    for (std::int32_t r = 0; r < rows; ++r)
+      for (std::int32_t c = colour; c + 1 < cols; c += 2) link(id(r, c), id(r, c + 1), stretch);
+  for (std::int32_t colour = 0; colour < 2; ++colour)  // along columns: by row parity
+    for (std::int32_t r = colour; r + 1 < rows; r += 2)
+      for (std::int32_t c = 0; c < cols; ++c) link(id(r, c), id(r + 1, c), stretch);
+  for (std::int32_t colour = 0; colour < 2; ++colour)  // one diagonal: by row parity
+    for (std::int32_t r = colour; r + 1 < rows; r += 2)
+      for (std::int32_t c = 0; c + 1 < cols; ++c) link(id(r, c), id(r + 1, c + 1), stretch);
+  for (std::int32_t colour = 0; colour < 2; ++colour)  // the other diagonal
+    for (std::int32_t r = colour; r + 1 < rows; r += 2)
+      for (std::int32_t c = 0; c + 1 < cols; ++c) link(id(r, c + 1), id(r + 1, c), stretch);
+  for (std::int32_t colour = 0; colour < 2; ++colour)  // bending along rows: by column pair
+    for (std::int32_t r = 0; r < rows; ++r)
+      for (std::int32_t c = 0; c + 2 < cols; ++c)
+        if ((c / 2) % 2 == colour) link(id(r, c), id(r, c + 2), bend, id(r, c + 1));
+  for (std::int32_t colour = 0; colour < 2; ++colour)  // bending along columns: by row pair
+    for (std::int32_t r = 0; r + 2 < rows; ++r)
+      if ((r / 2) % 2 == colour)
+        for (std::int32_t c = 0; c < cols; ++c) link(id(r, c), id(r + 2, c), bend, id(r + 1, c));
 }
 
 // A strand attaches where it touches another body at play: a node whose sphere (the
