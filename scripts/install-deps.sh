@@ -23,6 +23,7 @@ PACKAGES=(
   libcairo2-dev   # physketch study draws study.png with Cairo (found through pkg-config 'cairo')
   libgtest-dev
   nlohmann-json3-dev libcli11-dev
+  python3         # scripts/hard.py runs the hard-case suite (ctest hard_scenes, make hard)
 )
 
 missing=()
