@@ -2,11 +2,15 @@
 
 #include <cmath>
 
+#include "pbd/parallel.h"
+
 namespace physketch::pbd {
 
-void solveDistances(DistanceConstraints& c, float* px, float* py, float* pz, const float* invMass, double h) {
-  const double invH2 = 1.0 / (h * h);
-  for (std::size_t k = 0; k < c.size(); ++k) {
+namespace {
+
+void solveRange(DistanceConstraints& c, std::size_t lo, std::size_t hi, float* px, float* py, float* pz,
+                const float* invMass, double invH2) {
+  for (std::size_t k = lo; k < hi; ++k) {
     const auto a = static_cast<std::size_t>(c.i[k]), b = static_cast<std::size_t>(c.j[k]);
     const double wa = invMass[a], wb = invMass[b];
     const double dx = double(px[a]) - px[b], dy = double(py[a]) - py[b], dz = double(pz[a]) - pz[b];
@@ -24,6 +28,20 @@ void solveDistances(DistanceConstraints& c, float* px, float* py, float* pz, con
     px[b] = static_cast<float>(px[b] - wb * dlambda * nx);
     py[b] = static_cast<float>(py[b] - wb * dlambda * ny);
     pz[b] = static_cast<float>(pz[b] - wb * dlambda * nz);
+  }
+}
+
+}  // namespace
+
+void solveDistances(DistanceConstraints& c, float* px, float* py, float* pz, const float* invMass, double h) {
+  const double invH2 = 1.0 / (h * h);
+  const std::size_t n = c.size();
+  for (std::size_t lo = 0; lo < n;) {
+    std::size_t hi = lo + 1;
+    if (c.colour[lo] >= 0)
+      while (hi < n && c.colour[hi] == c.colour[lo]) ++hi;
+    forRange(hi - lo, [&](std::size_t a, std::size_t b) { solveRange(c, lo + a, lo + b, px, py, pz, invMass, invH2); });
+    lo = hi;
   }
 }
 

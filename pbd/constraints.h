@@ -32,14 +32,20 @@ struct DistanceConstraints {
   std::vector<float> rest;        // m
   std::vector<float> compliance;  // m/N; 0 = inextensible
   std::vector<float> lambda;      // accumulated Lagrange multiplier of this substep (N s^2)
+  // Colour: a run of consecutive constraints with the same colour >= 0 shares no particle,
+  // so the run can be solved in parallel with the same result (each particle is written by
+  // one constraint of it). -1: solved in order with its neighbours.
+  std::vector<std::int32_t> colour;
   std::size_t size() const { return i.size(); }
-  void add(std::int32_t a, std::int32_t b, float restLength, float alpha) {
+  void add(std::int32_t a, std::int32_t b, float restLength, float alpha, std::int32_t c = -1) {
     i.push_back(a), j.push_back(b), rest.push_back(restLength), compliance.push_back(alpha), lambda.push_back(0.0f);
+    colour.push_back(c);
   }
   void resetMultipliers() { lambda.assign(lambda.size(), 0.0f); }
 };
 
-// One Gauss-Seidel sweep over all distance constraints in array order (deterministic):
+// One Gauss-Seidel sweep over all distance constraints in array order (deterministic; a run
+// of one colour, whose constraints share no particle, in parallel chunks):
 // dlambda = (-C - alpha~ lambda) / (w_i + w_j + alpha~), alpha~ = alpha / h^2, and each end
 // moves by w dlambda along the constraint gradient (XPBD Eq. 18 and 17). Positions are the
 // predicted positions p; invMass 0 holds a particle still.

@@ -163,6 +163,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   dynamicFriction_.push_back(0.0);
   restitution_.push_back(0.0);
   reach_.push_back(0.0);
+  restBox_.emplace_back();
   mode_.push_back(mode);
   groundCache_.emplace_back();
   return members_.size() - 1;
@@ -208,6 +209,7 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
 void PbdWorld::refreshMassProperties(std::size_t b) {
   const auto& mem = members_[b];
   double m = 0.0, mus = 0.0, muk = 0.0, e = 0.0, reach = 0.0;
+  Eigen::AlignedBox3d box;
   for (std::int32_t i : mem) {
     const auto k = std::size_t(i);
     const double mi = parts_.mass[k];
@@ -217,6 +219,7 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
     muk += mi * mat.dynamicFriction;
     e += mi * mat.restitution;
     reach = std::max(reach, Vec3(rx_[k], ry_[k], rz_[k]).norm());
+    box.extend(Vec3(rx_[k], ry_[k], rz_[k]));
   }
   if (mem.empty() || !(m > 0.0)) {
     mode_[b] = BodyMode::kEmpty;
@@ -231,6 +234,9 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
   dynamicFriction_[b] = muk / m;
   restitution_[b] = e / m;
   reach_[b] = reach + params_.particleRadius;
+  box.min().array() -= params_.particleRadius;
+  box.max().array() += params_.particleRadius;
+  restBox_[b] = box;
 }
 
 double PbdWorld::bodyMass(int body) const {

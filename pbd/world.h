@@ -241,6 +241,7 @@ class PbdWorld final : public Solver {
   std::vector<double> staticFriction_, dynamicFriction_;  // mass-weighted means over the body's materials
   std::vector<double> restitution_;         // mass-weighted mean over the body's materials
   std::vector<double> reach_;               // m, max |rest offset| + particle radius
+  std::vector<Eigen::AlignedBox3d> restBox_;  // per body: the box of its rest offsets (m), grown by r
   std::vector<BodyMode> mode_;
   std::vector<std::int32_t> active_;        // dynamic bodies this step
   ContactSet contacts_;                     // found once per substep
@@ -273,6 +274,7 @@ class PbdWorld final : public Solver {
     std::vector<float> extent;        // per cluster: farthest member from restCentre then (m)
   } clusters_;
   DistanceConstraints distances_;     // rope and cloth stretch and bending
+  std::int32_t nextColour_ = 0;  // the next unused DistanceConstraints colour
   std::vector<std::int32_t> distanceVia_;  // per distance constraint: the node a bending link spans, else -1
   std::vector<Vec3> dp_;              // per membership: the correction of this iteration
   // Clusters in 8 colours for parallel matching: colour = parity of the cell (edge twice the

@@ -191,19 +191,32 @@ void PbdWorld::buildStrand(std::size_t b, const BodyRange& range) {
   const Material& mat = materials_[std::size_t(parts_.material[std::size_t(mem.front())])];
   const float stretch = static_cast<float>(mat.strand.stretchCompliance);
   const float bend = static_cast<float>(mat.strand.bendCompliance);
+  // Each family-and-colour group below gets its own colour number, so that two groups next
+  // to each other in the array (or two bodies' groups) never merge into one parallel run.
+  std::int32_t colour = nextColour_;
   const auto link = [&](std::int32_t a, std::int32_t c, float alpha, std::int32_t via = -1) {
     if (!alive(a) || !alive(c) || (via >= 0 && !alive(via))) return;  // a hole of a cut cloth
     const float len = static_cast<float>(
         (at(parts_.x, parts_.y, parts_.z, std::size_t(a)) - at(parts_.x, parts_.y, parts_.z, std::size_t(c))).norm());
-    distances_.add(a, c, len, alpha);
+    distances_.add(a, c, len, alpha, colour);
     distanceVia_.push_back(via);
   };
+  struct NextColour {  // advances the colour when a group ends, and the world's counter at the end
+    std::int32_t& c;
+    std::int32_t& next;
+    ~NextColour() { next = c + 1; }
+  } advance{colour, nextColour_};
   const std::int32_t f = range.first, n = range.count;
   if (kind_[b] == MaterialKind::kRope) {
     if (range.layout != BodyLayout::kChain)
       throw RuntimeError("PbdWorld: rope body " + std::to_string(b) + " is not laid out as a chain");
-    for (std::int32_t k = 0; k + 1 < n; ++k) link(f + k, f + k + 1, stretch);
-    for (std::int32_t k = 0; k + 2 < n; ++k) link(f + k, f + k + 2, bend, f + k + 1);
+    // In colours, like the cloth's links below: even links, odd links, then the bending
+    // links in pairs of pairs.
+    for (std::int32_t parity = 0; parity < 2; ++parity, ++colour)
+      for (std::int32_t k = parity; k + 1 < n; k += 2) link(f + k, f + k + 1, stretch);
+    for (std::int32_t pair = 0; pair < 2; ++pair, ++colour)
+      for (std::int32_t k = 0; k + 2 < n; ++k)
+        if ((k / 2) % 2 == pair) link(f + k, f + k + 2, bend, f + k + 1);
     return;
   }
   if (range.layout != BodyLayout::kLattice || range.rows * range.cols != n)
@@ -219,25 +232,25 @@ void PbdWorld::buildStrand(std::size_t b, const BodyRange& range) {
   // independent, the precondition for solving a colour in parallel.
   const std::int32_t rows = range.rows, cols = range.cols;
   const auto id = [&](std::int32_t r, std::int32_t c) { return f + r * cols + c; };
-  for (std::int32_t colour = 0; colour < 2; ++colour)  // along rows: by column parity
+  for (std::int32_t parity = 0; parity < 2; ++parity, ++colour)  // along rows: by column parity
     for (std::int32_t r = 0; r < rows; ++r)
-      for (std::int32_t c = colour; c + 1 < cols; c += 2) link(id(r, c), id(r, c + 1), stretch);
-  for (std::int32_t colour = 0; colour < 2; ++colour)  // along columns: by row parity
-    for (std::int32_t r = colour; r + 1 < rows; r += 2)
+      for (std::int32_t c = parity; c + 1 < cols; c += 2) link(id(r, c), id(r, c + 1), stretch);
+  for (std::int32_t parity = 0; parity < 2; ++parity, ++colour)  // along columns: by row parity
+    for (std::int32_t r = parity; r + 1 < rows; r += 2)
       for (std::int32_t c = 0; c < cols; ++c) link(id(r, c), id(r + 1, c), stretch);
-  for (std::int32_t colour = 0; colour < 2; ++colour)  // one diagonal: by row parity
-    for (std::int32_t r = colour; r + 1 < rows; r += 2)
+  for (std::int32_t parity = 0; parity < 2; ++parity, ++colour)  // one diagonal: by row parity
+    for (std::int32_t r = parity; r + 1 < rows; r += 2)
       for (std::int32_t c = 0; c + 1 < cols; ++c) link(id(r, c), id(r + 1, c + 1), stretch);
-  for (std::int32_t colour = 0; colour < 2; ++colour)  // the other diagonal
-    for (std::int32_t r = colour; r + 1 < rows; r += 2)
+  for (std::int32_t parity = 0; parity < 2; ++parity, ++colour)  // the other diagonal
+    for (std::int32_t r = parity; r + 1 < rows; r += 2)
       for (std::int32_t c = 0; c + 1 < cols; ++c) link(id(r, c + 1), id(r + 1, c), stretch);
-  for (std::int32_t colour = 0; colour < 2; ++colour)  // bending along rows: by column pair
+  for (std::int32_t pair = 0; pair < 2; ++pair, ++colour)  // bending along rows: by column pair
     for (std::int32_t r = 0; r < rows; ++r)
       for (std::int32_t c = 0; c + 2 < cols; ++c)
-        if ((c / 2) % 2 == colour) link(id(r, c), id(r, c + 2), bend, id(r, c + 1));
-  for (std::int32_t colour = 0; colour < 2; ++colour)  // bending along columns: by row pair
+        if ((c / 2) % 2 == pair) link(id(r, c), id(r, c + 2), bend, id(r, c + 1));
+  for (std::int32_t pair = 0; pair < 2; ++pair, ++colour)  // bending along columns: by row pair
     for (std::int32_t r = 0; r + 2 < rows; ++r)
-      if ((r / 2) % 2 == colour)
+      if ((r / 2) % 2 == pair)
         for (std::int32_t c = 0; c < cols; ++c) link(id(r, c), id(r + 2, c), bend, id(r + 1, c));
 }
 
@@ -363,7 +376,7 @@ void PbdWorld::dropRemovedConstraints() {
   std::vector<std::int32_t> via;
   for (std::size_t k = 0; k < distances_.size(); ++k)
     if (alive(distances_.i[k]) && alive(distances_.j[k]) && (distanceVia_[k] < 0 || alive(distanceVia_[k]))) {
-      kept.add(distances_.i[k], distances_.j[k], distances_.rest[k], distances_.compliance[k]);
+      kept.add(distances_.i[k], distances_.j[k], distances_.rest[k], distances_.compliance[k], distances_.colour[k]);
       via.push_back(distanceVia_[k]);
     }
   distances_ = std::move(kept);
@@ -486,12 +499,47 @@ void PbdWorld::findNeighbors() {
   const float radius = static_cast<float>(3.0 * r);  // touching (2 r) plus half a spacing of travel
   std::vector<float> x, y, z;
   std::vector<std::int32_t> id;
+  // Only pairs of different bodies are contacts, so a particle far from every other body's
+  // box (grown by the search radius) has none: a cloth hanging from a bar searches only its
+  // rows near the bar. Boxes of particle-level bodies from their predicted positions, of
+  // rigid bodies from their centre and reach.
+  std::vector<Eigen::AlignedBox3d> bodyBox(members_.size());
+  for (std::int32_t i : loose_) {
+    const auto k = std::size_t(i);
+    bodyBox[std::size_t(parts_.group(k))].extend(Vec3(px_[k], py_[k], pz_[k]));
+  }
+  for (std::size_t b = 0; b < members_.size(); ++b)
+    if (isRigid(b) && mode_[b] != BodyMode::kEmpty && !members_[b].empty()) {
+      // The rest box's corners at the body's pose (a long bar's reach would cover a cloth
+      // hanging from it).
+      const Motion& mo = motion_[b];
+      const Mat3 R = mo.q.toRotationMatrix();
+      for (int corner = 0; corner < 8; ++corner)
+        bodyBox[b].extend(R * restBox_[b].corner(static_cast<Eigen::AlignedBox3d::CornerType>(corner)) + mo.c);
+    }
+  // Per particle-level body: the parts of its box that another body's grown box covers.
+  std::vector<std::vector<Eigen::AlignedBox3d>> near(members_.size());
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    if (isRigid(b) || bodyBox[b].isEmpty()) continue;
+    for (std::size_t o = 0; o < members_.size(); ++o) {
+      if (o == b || bodyBox[o].isEmpty()) continue;
+      Eigen::AlignedBox3d grown = bodyBox[o];
+      grown.min().array() -= radius;
+      grown.max().array() += radius;
+      const Eigen::AlignedBox3d overlap = grown.intersection(bodyBox[b]);
+      if (!overlap.isEmpty()) near[b].push_back(overlap);
+    }
+  }
   Eigen::AlignedBox3d box;
   for (std::int32_t i : loose_) {
     const auto k = std::size_t(i);
+    const Vec3 p(px_[k], py_[k], pz_[k]);
+    const auto& boxes = near[std::size_t(parts_.group(k))];
+    if (std::none_of(boxes.begin(), boxes.end(), [&](const Eigen::AlignedBox3d& bx) { return bx.contains(p); }))
+      continue;
     x.push_back(px_[k]), y.push_back(py_[k]), z.push_back(pz_[k]);
     id.push_back(i);
-    box.extend(Vec3(px_[k], py_[k], pz_[k]));
+    box.extend(p);
   }
   const std::size_t nl = id.size();
   if (nl == 0) return;
@@ -717,14 +765,18 @@ void PbdWorld::distanceConstraints(double h) {
     }
     mo.c = pose.c, mo.q = pose.q;
   }
-  for (const Tether& t : tethers_) {
-    const auto i = std::size_t(t.particle);
-    if (invMassP_[i] == 0.0f) continue;
-    const Vec3 anchor = at(px_, py_, pz_, std::size_t(t.anchor));
-    const Vec3 d = at(px_, py_, pz_, i) - anchor;
-    const double len = d.norm();
-    if (len > t.length) put(px_, py_, pz_, i, anchor + d * (t.length / len));
-  }
+  // Tethers in parallel: each particle has at most one, and its anchor is pinned (read only).
+  forRange(tethers_.size(), [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t k = lo; k < hi; ++k) {
+      const Tether& t = tethers_[k];
+      const auto i = std::size_t(t.particle);
+      if (invMassP_[i] == 0.0f) continue;
+      const Vec3 anchor = at(px_, py_, pz_, std::size_t(t.anchor));
+      const Vec3 d = at(px_, py_, pz_, i) - anchor;
+      const double len = d.norm();
+      if (len > t.length) put(px_, py_, pz_, i, anchor + d * (t.length / len));
+    }
+  });
 }
 
 // v = (p - x) / h, x = p for dynamic and carried particles. A particle that hit the

@@ -361,7 +361,8 @@ TEST(Particles, SameStateForOneAndTwoThreads) {
     BodyRange beam = addBox(p, Vec3(0.3, 0.6, 0.0), 20, 1, 3, 3, 3);
     beam.init.fixed = true;
     BodyRange rope = addChain(p, Vec3(0.31, 0.59, 0.01), Vec3(0, -1, 0), 40, 1);
-    BodyRange cloth = addSheet(p, Vec3(0.05, 0.4, 0.05), 20, 20, 2);
+    // 100 x 100: each colour of its links (5,000) spans more than one parallel chunk.
+    BodyRange cloth = addSheet(p, Vec3(-0.5, 1.6, 0.3), 100, 100, 2);
     mats.push_back(makeKind("water", MaterialKind::kFluid));
     BodyRange water = addBox(p, Vec3(0.2, 0.3, 0.2), 10, 10, 10, 4, 4);
     PbdWorld w(p, {jelly, beam, rope, cloth, water}, mats, params(4, 4));
