@@ -157,6 +157,7 @@ void FluidSolver::loadRecords(const FluidInput& in) {
   for (std::size_t r = n_; r <= nPad; ++r)
     rec_[r * kRecord + kX] = rec_[r * kRecord + kY] = rec_[r * kRecord + kZ] = kGhostCoord;
   dx_.assign(nPad, 0.0f), dy_.assign(nPad, 0.0f), dz_.assign(nPad, 0.0f);
+  comp_.assign(nPad, 0.0f);
   const float* sx = grid_.sortedX();
   const float* sy = grid_.sortedY();
   const float* sz = grid_.sortedZ();
@@ -264,8 +265,8 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
 }  // namespace
 
 void FluidSolver::lambdaPass() {
-  const PairArgs a =
-      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  a.comp = comp_.data();
   const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? lambdaBlocksAvx2(a, b0, b1) : lambdaBlocksScalar(a, b0, b1);
@@ -409,6 +410,21 @@ void FluidSolver::cohesionPass(float* vx, float* vy, float* vz, float h) const {
 }
 
 // ---- density error -------------------------------------------------------------------
+
+float FluidSolver::lastMeanCompression() const {
+  const std::size_t units = (n_ + kParticleChunk - 1) / kParticleChunk;
+  std::vector<double> sum(units, 0.0);
+  std::vector<std::size_t> count(units, 0);
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    const std::size_t u = b / kParticleChunk;
+    for (std::size_t r = b; r < e; ++r)
+      if (rec_[r * kRecord + kFluid] != 0.0f) sum[u] += comp_[r], ++count[u];
+  });
+  double total = 0.0;
+  std::size_t fluid = 0;
+  for (std::size_t u = 0; u < units; ++u) total += sum[u], fluid += count[u];  // fixed order
+  return fluid ? float(total / double(fluid)) : 0.0f;
+}
 
 DensityError FluidSolver::densityError() const {
   DensityError out;

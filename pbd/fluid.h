@@ -131,6 +131,10 @@ class FluidSolver {
 
   // rho / rho0 - 1 over fluid particles at the current positions.
   DensityError densityError() const;
+  // Mean over fluid particles of max(rho/rho0 - 1, 0) as the last lambda pass saw it (the
+  // start of the last density iteration): what the stability guard checks every step, at
+  // the cost of a sum, where densityError() is another neighbour sweep.
+  float lastMeanCompression() const;
 
   std::size_t count() const { return n_; }
   const NeighborGrid& grid() const { return grid_; }
@@ -164,6 +168,7 @@ class FluidSolver {
   // slots point to.
   std::vector<float> rec_;
   std::vector<float> dx_, dy_, dz_;   // dp by rank (m)
+  std::vector<float> comp_;           // by rank: max(C_i, 0) of fluid particles in the last lambda pass
   // Neighbour lists in blocks of 8 ranks, slot-major: the k-th neighbour of rank 8b + l is
   // bidx_[(boff_[b] + k) * 8 + l], k < bk_[b] = the block's largest count; the rest of a
   // shorter row points to the ghost.

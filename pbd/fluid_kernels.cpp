@@ -31,11 +31,12 @@ WallTerm wallTerm(const PairArgs& a, const float* p) {
 void finishLambda(const PairArgs& a, std::size_t i, const LambdaAcc& acc) {
   if (i >= a.n) return;
   float* ri = a.rec + i * kRecord;
-  float lambda = 0.0f;
+  float lambda = 0.0f, compression = 0.0f;
   if (ri[kFluid] != 0.0f) {
     // C_i = sum_j nu_j W_ij + walls - 1 with the particle's own W(0) = cp h^6.
     const WallTerm wall = wallTerm(a, ri);
     const float c = (a.cp * (acc.rho + ri[kNu] * a.h6) + wall.c) - 1.0f;
+    compression = std::max(c, 0.0f);
     if (c > 0.0f) {
       // grad_i C_i = -cs sum_j nu_j g_ij d_ij + the walls' gradient
       const float gx = wall.g[0] - a.cs * acc.gx, gy = wall.g[1] - a.cs * acc.gy, gz = wall.g[2] - a.cs * acc.gz;
@@ -45,6 +46,7 @@ void finishLambda(const PairArgs& a, std::size_t i, const LambdaAcc& acc) {
     }
   }
   ri[kLambda] = lambda;
+  if (a.comp) a.comp[i] = compression;
 }
 
 void finishCorrection(const PairArgs& a, std::size_t i, const CorrectionAcc& acc) {
@@ -295,8 +297,11 @@ PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256
                                      _mm256_mul_ps(_mm256_set1_ps(a.epsK), ri[kW]));
   const __m256 on = _mm256_and_ps(_mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ), _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
   const __m256 lambda = _mm256_and_ps(on, _mm256_div_ps(_mm256_sub_ps(zero, c), denom));
-  alignas(32) float l8[8];
+  alignas(32) float l8[8], c8[8];
   _mm256_store_ps(l8, lambda);
+  // max(C, 0) of the fluid lanes (the near-wall lanes' scalar finish below rewrites theirs).
+  const __m256 fluidLane = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+  _mm256_store_ps(c8, _mm256_and_ps(fluidLane, _mm256_max_ps(c, zero)));
   const int near = nearWall8(a, ri);
   if (near) {  // the scalar finish needs every accumulator of those lanes
     alignas(32) float s[5][8];
@@ -307,7 +312,10 @@ PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256
   }
   for (int l = 0; l < 8; ++l) {
     const std::size_t i = b * kLanes + std::size_t(l);
-    if (!(near >> l & 1) && i < a.n) a.rec[i * kRecord + kLambda] = l8[l];
+    if (!(near >> l & 1) && i < a.n) {
+      a.rec[i * kRecord + kLambda] = l8[l];
+      if (a.comp) a.comp[i] = c8[l];
+    }
   }
 }
 

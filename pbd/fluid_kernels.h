@@ -24,6 +24,7 @@ struct PairArgs {
   float* dx = nullptr;                 // dp by rank (correction pass output)
   float* dy = nullptr;
   float* dz = nullptr;
+  float* comp = nullptr;               // by rank (lambda pass output): max(C_i, 0) of a fluid particle, else 0
   std::size_t n = 0;                   // real particles (lanes >= n are not written)
   float h = 0, h2 = 0, h6 = 0;         // kernel radius (m) and its powers
   float cp = 0;                        // poly6 constant 315 / (64 pi h^9)

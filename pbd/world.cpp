@@ -481,16 +481,21 @@ PbdWorld::Census PbdWorld::census() const {
     if (m == BodyMode::kEmpty) continue;
     ++c.bodies;
     const bool dyn = m == BodyMode::kDynamic;
+    const auto count = [&](long& n, std::vector<std::size_t>& list, bool yes) {
+      if (!yes) return;
+      ++n;
+      list.push_back(b);
+    };
     if (isRigid(b)) {
-      c.rigidDynamic += dyn;
-      c.bouncy += dyn && restitution_[b] > 0.0;
+      count(c.rigidDynamic, c.rigidBodies, dyn);
+      count(c.bouncy, c.bouncyBodies, dyn && restitution_[b] > 0.0);
     } else {
-      c.looseDynamic += dyn;
-      c.soft += dyn && kind_[b] == MaterialKind::kSoft;
-      c.strands += dyn && (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth);
-      c.fluid += dyn && kind_[b] == MaterialKind::kFluid;
+      count(c.looseDynamic, c.looseBodies, dyn);
+      count(c.soft, c.softBodies, dyn && kind_[b] == MaterialKind::kSoft);
+      count(c.strands, c.strandBodies, dyn && (kind_[b] == MaterialKind::kRope || kind_[b] == MaterialKind::kCloth));
+      count(c.fluid, c.fluidBodies, dyn && kind_[b] == MaterialKind::kFluid);
     }
-    c.kinematic += m == BodyMode::kKinematic;
+    count(c.kinematic, c.kinematicBodies, m == BodyMode::kKinematic);
     c.kinematicLoose += m == BodyMode::kKinematic && !isRigid(b);
   }
   for (std::size_t k = 0; k < clusters_.creep.size(); ++k)
@@ -533,9 +538,50 @@ std::vector<bool> PbdWorld::work() const {
   return on;
 }
 
+std::string PbdWorld::whichStrokes(const std::vector<std::size_t>& bodies) const {
+  constexpr std::size_t kMaxNamed = 6;
+  std::vector<std::pair<std::int16_t, std::vector<int>>> byMaterial;  // in order of first appearance
+  for (std::size_t k = 0; k < std::min(bodies.size(), kMaxNamed); ++k) {
+    const auto first = std::size_t(members_[bodies[k]].front());
+    const std::int16_t mat = parts_.material[first];
+    auto it = std::find_if(byMaterial.begin(), byMaterial.end(), [&](const auto& e) { return e.first == mat; });
+    if (it == byMaterial.end()) it = byMaterial.insert(byMaterial.end(), {mat, {}});
+    it->second.push_back(parts_.stroke[first]);
+  }
+  std::string out = bodies.size() == 1 ? "stroke " : "strokes ";
+  for (std::size_t m = 0; m < byMaterial.size(); ++m) {
+    if (m > 0) out += "; ";
+    for (std::size_t k = 0; k < byMaterial[m].second.size(); ++k)
+      out += (k > 0 ? ", " : "") + std::to_string(byMaterial[m].second[k]);
+    out += " (" + materials_[std::size_t(byMaterial[m].first)].name + ")";
+  }
+  if (bodies.size() > kMaxNamed) out += " and " + std::to_string(bodies.size() - kMaxNamed) + " more";
+  return out;
+}
+
 std::string PbdWorld::reason(PbdPass pass, bool on) const {
   const Census c = census();
-  const auto n = [](long k, const char* what) { return std::to_string(k) + " " + what; };
+  const auto n = [&](long k, const char* what) {
+    const std::vector<std::size_t>* list = nullptr;
+    switch (pass) {
+      case PbdPass::kIntegrate:
+      case PbdPass::kFindContacts:
+      case PbdPass::kRigidContact:
+      case PbdPass::kColliderContact: list = &c.rigidBodies; break;
+      case PbdPass::kKinematic: list = &c.kinematicBodies; break;
+      case PbdPass::kPredict:
+      case PbdPass::kParticleContact: list = &c.looseBodies; break;
+      case PbdPass::kClusterMatch: list = &c.softBodies; break;
+      case PbdPass::kFluidNeighbors:
+      case PbdPass::kDensity: list = &c.fluidBodies; break;
+      case PbdPass::kDistance: list = &c.strandBodies; break;
+      case PbdPass::kRestitution: list = &c.bouncyBodies; break;
+      default: break;
+    }
+    std::string out = std::to_string(k) + " " + what;
+    if (list && !list->empty()) out += ": " + whichStrokes(*list);
+    return out;
+  };
   switch (pass) {
     case PbdPass::kIntegrate:
     case PbdPass::kFindContacts:

@@ -163,7 +163,13 @@ class PbdWorld final : public Solver {
     long bouncy = 0;        // dynamic rigid bodies with restitution > 0
     long plastic = 0;       // clusters of dynamic soft bodies with plastic_creep > 0
     bool distances = false; // a distance constraint, attachment or tether with a dynamic end
+    // The bodies behind the counts, for reasons that name their strokes and materials.
+    std::vector<std::size_t> rigidBodies, looseBodies, softBodies, strandBodies, fluidBodies, bouncyBodies,
+        kinematicBodies;
   };
+  // "strokes 0, 3 (wood); 5 (water)": the first stroke of each body, grouped by material
+  // (at most 6 strokes, then how many more).
+  std::string whichStrokes(const std::vector<std::size_t>& bodies) const;
   Census census() const;
   // Which passes have work in the current state (the plan and the step both read it).
   std::vector<bool> work() const;

@@ -1069,7 +1069,8 @@ namespace physketch::pbd {
 GuardRecord PbdWorld::checkCompression() const {
   GuardRecord r;
   if (!fluid_ || fluidCount_ == 0) return r;
-  const DensityError e = fluid_->densityError();
+  DensityError e;
+  e.meanCompression = fluid_->lastMeanCompression();
   if (!(double(e.meanCompression) > params_.maxCompression) && std::isfinite(e.meanCompression)) return r;
   const auto i = std::size_t(fluidIds_.front());
   r.kind = GuardKind::kCompression;

@@ -313,6 +313,28 @@ TEST(Soft, PlanListsOnlyTheParticlePassesItNeeds) {
 
 // Cutting a rope (a remove after play) drops the constraints across the cut: the part
 // below falls freely while the part above still hangs.
+// Issue 11: a pass says which strokes and materials need it. A jelly (stroke 0), a stone
+// (stroke 1) and water (stroke 2): density names the water's stroke and material and not
+// the others, cluster_match the jelly's, integrate the stone's.
+TEST(Particles, PlanReasonsNameTheStrokesAndMaterialsThatNeedAPass) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("stone", MaterialKind::kRigid),
+                                makeKind("water", MaterialKind::kFluid)};
+  BodyRange jelly = addBox(p, Vec3(0.0, 0.1, 0.0), 4, 4, 4, 0, 0);
+  BodyRange stone = addBox(p, Vec3(0.2, 0.1, 0.0), 3, 3, 3, 1, 1);
+  BodyRange water = addBox(p, Vec3(0.4, 0.1, 0.0), 4, 4, 4, 2, 2);
+  PbdWorld w(p, {jelly, stone, water}, mats, params(2, 2));
+  const auto reasonOf = [&](const char* name) {
+    for (const PlanEntry& e : w.plan())
+      if (e.name == name) return e.reason;
+    return std::string("(off)");
+  };
+  EXPECT_EQ(reasonOf("density"), "1 dynamic fluid bodies: stroke 2 (water)");
+  EXPECT_EQ(reasonOf("cluster_match"), "1 dynamic soft bodies: stroke 0 (jelly)");
+  EXPECT_EQ(reasonOf("integrate"), "1 dynamic rigid bodies: stroke 1 (stone)");
+  EXPECT_EQ(reasonOf("particle_contact"), "2 dynamic soft, rope, cloth or fluid bodies: strokes 0 (jelly); 2 (water)");
+}
+
 TEST(Rope, RemovingAParticleCutsTheRope) {
   ParticleArrays p;
   std::vector<Material> mats = {makeKind("beam", MaterialKind::kRigid), makeKind("rope", MaterialKind::kRope)};
