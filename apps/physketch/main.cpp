@@ -61,6 +61,11 @@ int main(int argc, char** argv) {
                      "Smooth the surfaces of deforming bodies: N iterations of mean-curvature flow, volume kept "
                      "(report.json: frames.smoothing); 0 = off")
       ->check(CLI::Range(0, 100));
+  runCmd->add_option("--budget", run.budgetMs,
+                     "Pick substeps and iterations (pbd) so that the solver takes about MS milliseconds per frame on "
+                     "this machine, from a short calibration of the scene's first frames; prints the error expected "
+                     "(report.json: budget; docs/accuracy.md)")
+      ->check(CLI::PositiveNumber);
 
   PlanOptions plan;
   auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, how often and why");

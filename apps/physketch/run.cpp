@@ -2,6 +2,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -19,6 +20,7 @@
 #include "apps/physketch/prepare.h"
 #include "apps/physketch/report.h"
 #include "apps/physketch/runtime.h"
+#include "apps/physketch/study.h"
 #include "apps/physketch/video.h"
 #include "core/atomic_file.h"
 #include "core/error.h"
@@ -260,6 +262,41 @@ int printPlan(const PlanOptions& opt) {
   });
 }
 
+namespace {
+
+// What --budget chose, on stderr before the run.
+void printBudget(const BudgetChoice& b, double budgetMs) {
+  std::fprintf(stderr,
+               "budget: %s for %.4g ms per frame: %.4g ms per frame and an error of %.3g m expected (RMS of body "
+               "centres over frames 1-%d against %s)\n",
+               settingText(b.setting).c_str(), budgetMs, b.predictedMs, b.predictedError, b.calibrationFrames,
+               settingText(b.reference).c_str());
+  if (!b.fits)
+    std::fprintf(stderr, "warning: --budget %.4g ms: no calibrated setting fits; running the fastest stable one\n",
+                 budgetMs);
+}
+
+json budgetJson(const BudgetChoice& b, double budgetMs, double measuredMs) {
+  json tried = json::array();
+  for (const BudgetCandidate& c : b.candidates)
+    tried.push_back({{"setting", settingText(c.setting)},
+                     {"ms_per_frame", c.msPerFrame},
+                     {"error_m", std::isfinite(c.error) ? json(c.error) : json(nullptr)},
+                     {"status", c.status}});
+  return {{"budget_ms_per_frame", budgetMs},
+          {"setting", settingText(b.setting)},
+          {"fits", b.fits},
+          {"calibration_frames", b.calibrationFrames},
+          {"reference", settingText(b.reference)},
+          {"predicted_ms_per_frame", b.predictedMs},
+          {"predicted_error_m", b.predictedError},
+          {"measured_ms_per_frame", measuredMs},
+          {"measured_over_budget", budgetMs > 0.0 ? measuredMs / budgetMs : 0.0},
+          {"candidates", tried}};
+}
+
+}  // namespace
+
 int runScene(const RunOptions& opt) {
   const double tStart = nowSeconds();
   // One thread limit for the whole run: voxelizing as well as the solver and the meshing.
@@ -267,8 +304,15 @@ int runScene(const RunOptions& opt) {
   tbb::global_control threadLimit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
   Prepared p;
   std::unique_ptr<Solver> solver;
+  std::optional<BudgetChoice> budget;
   if (const int rc = withExitCodes([&] {
-        p = prepare(opt.scene, threads);
+        if (opt.budgetMs > 0.0) {
+          budget = calibrateBudget(opt.scene, opt.budgetMs, threads, opt.quiet);
+          p = prepare(opt.scene, threads, false, [&](SceneDesc& sc) { applySetting(budget->setting, sc, "--budget"); });
+          printBudget(*budget, opt.budgetMs);
+        } else {
+          p = prepare(opt.scene, threads);
+        }
         solver = makeSolver(p);
         return kExitOk;
       });
@@ -303,12 +347,16 @@ int runScene(const RunOptions& opt) {
     int written = 0;
     double exportSeconds = 0.0;
     const double tSimStart = nowSeconds();
+    double stepSeconds = 0.0;  // the solver's steps only (what --budget fits)
     for (int f = 0; f < frames; ++f) {
       if (f > 0) {
         for (int s = 0; s < sc.stepsPerFrame(); ++s) {
           const std::vector<int> reshaped = runtime.beforeStep();
           if (frameWriter) frameWriter->markReshaped(reshaped);
-          if (!solver->step()) break;
+          const double t0 = nowSeconds();
+          const bool ok = solver->step();
+          stepSeconds += nowSeconds() - t0;
+          if (!ok) break;
         }
         if (solver->guard().tripped()) break;
       }
@@ -365,6 +413,7 @@ int runScene(const RunOptions& opt) {
                                     {"mean_volume_change_percent", st.meshes ? 100.0 * st.sumChange / double(st.meshes) : 0.0}};
     }
     if (!video.is_null()) rep["frames"]["video"] = video;
+    if (budget) rep["budget"] = budgetJson(*budget, opt.budgetMs, written > 1 ? 1e3 * stepSeconds / (written - 1) : 0.0);
     if (opt.exportMesh || opt.exportParticles || opt.exportVdb) {
       json kinds = json::array();
       if (opt.exportMesh) kinds.push_back("mesh");

@@ -151,7 +151,7 @@ void checkExpectations(const Prepared& p) {
 // every repeat must be the same) and returns its part. `analytic`: measure the error against
 // the scene's expect records here.
 json runSetting(const std::string& scenePath, const Setting& setting, int repeats, int threads, bool analytic,
-                const std::string& option) {
+                const std::string& option, int maxFrames) {
   tbb::task_arena arena(threads);
   json part;
   arena.execute([&] {
@@ -164,7 +164,7 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
     }
     if (analytic) checkExpectations(p);
     const SceneDesc& sc = p.scene;
-    const int frames = sc.frameCount();
+    const int frames = maxFrames > 0 ? std::min(maxFrames, sc.frameCount()) : sc.frameCount();
     Trajectory tr;
     std::vector<double> msPerFrame;
     std::uint64_t hash = 0;
@@ -415,7 +415,7 @@ std::vector<json> runAll(const StudyOptions& opt, const std::vector<Setting>& se
       const std::size_t i = next++;
       if (i >= settings.size() || stop) return;
       try {
-        parts[i] = runSetting(opt.scene, settings[i], opt.repeat, threads, analytic, "setting");
+        parts[i] = runSetting(opt.scene, settings[i], opt.repeat, threads, analytic, "setting", 0);
       } catch (...) {
         std::lock_guard<std::mutex> lock(mutex);
         if (!failure) failure = std::current_exception();
@@ -539,6 +539,14 @@ int collect(const StudyOptions& opt) {
 
 }  // namespace
 
+Trajectory calibrationRun(const std::string& scenePath, const Setting& setting, int threads, int maxFrames,
+                          double& msPerFrame, std::string& status) {
+  const json part = runSetting(scenePath, setting, 1, threads, false, "--budget", maxFrames);
+  msPerFrame = part.at("ms_per_frame").get<double>();
+  status = part.at("status").get<std::string>();
+  return trajectoryFrom(part.at("trajectory"));
+}
+
 int runStudy(const StudyOptions& opt) {
   try {
     if (!opt.collect.empty()) return collect(opt);
@@ -552,7 +560,7 @@ int runStudy(const StudyOptions& opt) {
       one.vary.clear();
       for (const auto& [k, v] : s) one.vary.push_back(settingText({{k, v}}));
       const Plan plan = makePlan(one, scene);
-      json part = runSetting(opt.scene, s, opt.repeat, threads, plan.analytic, "--only");
+      json part = runSetting(opt.scene, s, opt.repeat, threads, plan.analytic, "--only", 0);
       if (!plan.analytic) {
         part["reference_setting"] = settingJson(plan.reference);
         part["is_reference"] = settingText(s) == settingText(plan.reference);

@@ -121,6 +121,41 @@ struct StudyOptions {
 };
 int runStudy(const StudyOptions& options);
 
+// --- run --budget MS (study_budget.cpp; docs/accuracy.md, "A time budget") ----------------
+
+// One calibrated setting: its solver time per frame and its error against the reference over
+// the calibration frames (RMS of body centres, m; NaN when the guard stopped it).
+struct BudgetCandidate {
+  Setting setting;
+  double msPerFrame = 0.0;
+  double error = 0.0;
+  std::string status = "ok";
+};
+// The most accurate candidate that ran stably within the budget; when none fits, the fastest
+// stable one (fits = false). Ties: the earlier candidate. Returns the index, or -1 when no
+// candidate is stable.
+std::ptrdiff_t chooseWithinBudget(const std::vector<BudgetCandidate>& candidates, double budgetMs, bool& fits);
+
+struct BudgetChoice {
+  Setting setting;
+  bool fits = false;
+  double predictedMs = 0.0;     // the chosen candidate's calibrated ms per frame
+  double predictedError = 0.0;  // its calibrated error (m)
+  int calibrationFrames = 0;    // frames 1..K of the scene the calibration ran
+  Setting reference;            // the fine run the errors are measured against
+  std::vector<BudgetCandidate> candidates;
+};
+// Runs frames 0..maxFrames-1 of the scene with one setting (study's runner); its solver ms
+// per frame and status ("ok" or "unstable: ...").
+Trajectory calibrationRun(const std::string& scenePath, const Setting& setting, int threads, int maxFrames,
+                          double& msPerFrame, std::string& status);
+// Calibrates a PBD scene for a solver time per frame: for iterations 1, 2 and 4, runs the
+// scene's first K frames (a fifth of them, at least 5) with substeps 1, 2, 4, ... until a
+// setting is over the budget, then the substep count interpolated between the last two to fill
+// it; the errors against a finer run (twice the most substeps tried, 4 iterations). Throws
+// InputError for a non-PBD scene or a budget that is not a positive number.
+BudgetChoice calibrateBudget(const std::string& scenePath, double budgetMs, int threads, bool quiet);
+
 // Plot size of study.png (pixels).
 constexpr int kPlotWidth = 900;
 constexpr int kPlotHeight = 600;

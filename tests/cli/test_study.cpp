@@ -16,6 +16,8 @@
 #include <set>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "apps/physketch/study.h"
 #include "core/error.h"
 
@@ -388,5 +390,69 @@ TEST(StudyCli, RestAndHeightErrorsMatchClosedForms) {
   ASSERT_EQ(r.code, 0) << r.err;
   for (const auto& row : readCsv(dir / "land" / "study.csv"))
     EXPECT_NEAR(std::stod(row.at("error_m")), 0.05 - 7.5 / 151.0, 1e-6);
+  fs::remove_all(dir);
+}
+
+// run --budget's choice against a table built by hand: the most accurate stable setting within
+// the budget; none within it: the fastest stable one (fits = false); no stable one: -1.
+TEST(StudyBudget, ChoosesTheMostAccurateStableSettingWithinTheBudget) {
+  const auto cand = [](int substeps, double ms, double error, const char* status = "ok") {
+    BudgetCandidate c;
+    c.setting = {{"iterations", 1.0}, {"substeps", double(substeps)}};
+    c.msPerFrame = ms, c.error = error, c.status = status;
+    return c;
+  };
+  const std::vector<BudgetCandidate> table = {
+      cand(1, 1.0, 0.5, "unstable: penetration"), cand(2, 2.0, 0.2), cand(4, 4.0, 0.1),
+      cand(8, 9.0, 0.01),  // the most accurate, over a budget of 5
+      cand(6, 4.5, 0.3)};
+  bool fits = false;
+  EXPECT_EQ(chooseWithinBudget(table, 5.0, fits), 2);  // 4 substeps: 0.1 m at 4 ms
+  EXPECT_TRUE(fits);
+  EXPECT_EQ(chooseWithinBudget(table, 20.0, fits), 3);
+  EXPECT_TRUE(fits);
+  EXPECT_EQ(chooseWithinBudget(table, 1.5, fits), 1);  // nothing fits: the fastest stable (2 ms)
+  EXPECT_FALSE(fits);
+  EXPECT_EQ(chooseWithinBudget({cand(1, 1.0, 0.5, "unstable: nan")}, 5.0, fits), -1);
+}
+
+// run --budget end to end on a small falling box: the report names the chosen setting, which is
+// one of the calibrated candidates, fits the budget as calibrated, and has the smallest error
+// of those that fit; a scene of solver mpm and a bad budget are clear errors.
+TEST(StudyBudget, RunBudgetReportsTheCalibratedChoice) {
+  const fs::path dir = freshDir("budget");
+  std::ofstream(dir / "s.strokes") << "physketch-strokes 1\nprimitive box stone 0  0 0.4 0  0.06 0.06 0.06 body=box\nplay 0\n";
+  std::ofstream(dir / "a.scene") << "physketch-scene 1\nstrokes s.strokes\nduration 0.3\nmaterial stone rigid density=2400\n"
+                                    "output report\n";
+  Result r = runCli("run '" + (dir / "a.scene").string() + "' --budget 2 --threads 1 --out '" + (dir / "o").string() + "'",
+                    dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("budget: "), std::string::npos) << r.err;
+  const nlohmann::json budget = nlohmann::json::parse(slurp(dir / "o" / "report.json")).at("budget");
+  // The candidates' (setting, ms, error, status) from the report, and the choice recomputed.
+  std::vector<BudgetCandidate> table;
+  for (const nlohmann::json& c : budget.at("candidates")) {
+    BudgetCandidate b;
+    b.setting = {{c.at("setting").get<std::string>(), 0.0}};
+    b.msPerFrame = c.at("ms_per_frame").get<double>();
+    b.error = c.at("error_m").is_null() ? NAN : c.at("error_m").get<double>();
+    b.status = c.at("status").get<std::string>();
+    table.push_back(b);
+  }
+  const std::string chosen = budget.at("setting").get<std::string>();
+  EXPECT_GT(budget.at("measured_ms_per_frame").get<double>(), 0.0);
+  ASSERT_GE(table.size(), 3u);
+  bool fits = false;
+  const std::ptrdiff_t k = chooseWithinBudget(table, 2.0, fits);
+  ASSERT_GE(k, 0);
+  EXPECT_EQ(chosen, table[std::size_t(k)].setting[0].first);
+
+  std::ofstream(dir / "m.scene") << "physketch-scene 1\nstrokes s.strokes\nsolver mpm\nduration 0.3\n"
+                                    "material stone elastic preset=hard\noutput report\n";
+  r = runCli("run '" + (dir / "m.scene").string() + "' --budget 2 --out '" + (dir / "o2").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("m.scene:3: field 'solver'"), std::string::npos) << r.err;
+  r = runCli("run '" + (dir / "a.scene").string() + "' --budget -1 --out '" + (dir / "o3").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
   fs::remove_all(dir);
 }
