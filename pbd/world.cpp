@@ -5,6 +5,8 @@
 #include <cstring>
 #include <map>
 
+#include <Eigen/Eigenvalues>
+
 
 #include "core/error.h"
 #include "core/lattice.h"
@@ -1156,7 +1158,32 @@ void PbdWorld::bodyContact() {
         ssum += d * motion;
       }
       if (wsum == 0.0 || nsum.norm() == 0.0) continue;
-      const Vec3 n = nsum.normalized();  // from b towards a
+      Vec3 n = nsum.normalized();  // from b towards a
+      // A flat patch (face on face) takes its normal from the plane through its pair
+      // midpoints, not from the pair directions: those tilt by offset / spacing where the
+      // two lattices do not line up (a particle face is bumpy), which pushed aligned boxes
+      // sideways off each other like balls stacked on balls.
+      bool flat = false;
+      {
+        const Vec3 pc0 = psum / wsum;
+        Mat3 cov = Mat3::Zero();
+        int touching = 0;
+        for (std::int32_t k = k0; k < k1; ++k) {
+          Vec3 pi, pj, motion, nk;
+          const double d = pairDepth(k, pi, pj, motion, nk);
+          if (d <= 0.0) continue;
+          const Vec3 m = 0.5 * (pi + pj) - pc0;
+          cov += d * m * m.transpose();
+          ++touching;
+        }
+        const Eigen::SelfAdjointEigenSolver<Mat3> eig(cov / wsum);
+        const Vec3 ev = eig.eigenvalues();  // ascending
+        // Flat: at least 3 x 3 touching pairs spread over the plane (the middle variance of
+        // a patch three particles wide, (2/3) touch^2, is above touch^2 / 8) and thin across
+        // it (a tenth of that).
+        flat = touching >= 9 && ev(1) > 0.125 * touch * touch && ev(0) < 0.1 * ev(1);
+        if (flat) n = eig.eigenvectors().col(0).dot(n) < 0.0 ? Vec3(-eig.eigenvectors().col(0)) : Vec3(eig.eigenvectors().col(0));
+      }
       // The patch's depth along n: each pair's depth times how much of it moving along n
       // resolves.
       double dmax = 0.0;
@@ -1170,20 +1197,40 @@ void PbdWorld::bodyContact() {
       const double wa = da ? generalizedInverseMass(pa, pc, n) : 0.0, wb = db ? generalizedInverseMass(pb, pc, n) : 0.0;
       if (wa + wb <= 0.0) continue;
       const double lambdaN = dmax / (wa + wb);
+      // The contact point as a point of each body, to follow it through the normal correction.
+      const Vec3 localA = pa.q.conjugate() * (pc - pa.c), localB = pb.q.conjugate() * (pc - pb.c);
       if (da) applyPointCorrection(pa, pc, n, lambdaN * wa);
       if (db) applyPointCorrection(pb, pc, -n, lambdaN * wb);
-      Vec3 slide = ssum / wsum;
+      // The normal correction turns the bodies about their centres, which slides the contact
+      // point of one over the other (by the turn times the centre's height above the patch);
+      // friction must undo that slide too, as rigid_contact does against the ground. Left
+      // out, a stack's tilt corrections became sideways slips that fed a growing
+      // tilt-and-slide mode, and a 10-box stack fell after 2 s from round-off.
+      const Vec3 slipA = (pa.q * localA + pa.c) - pc, slipB = (pb.q * localB + pb.c) - pc;
+      Vec3 slide = ssum / wsum + (slipA - slipB);
       slide -= n.dot(slide) * n;
       const double len = slide.norm();
       if (len > 0.0) {
         const Vec3 t = -slide / len;  // against a's motion relative to b
-        const double wta = da ? generalizedInverseMass(pa, pc, t) : 0.0, wtb = db ? generalizedInverseMass(pb, pc, t) : 0.0;
+        // (stacked: a flat patch between two dynamic bodies; see the friction below)
+        const bool stacked = flat && da && db;
+        const double wta = !da ? 0.0 : stacked ? pa.invMass : generalizedInverseMass(pa, pc, t);
+        const double wtb = !db ? 0.0 : stacked ? pb.invMass : generalizedInverseMass(pb, pc, t);
         const double mus = 0.5 * (staticFriction_[a] + staticFriction_[b]);
         const double muk = 0.5 * (dynamicFriction_[a] + dynamicFriction_[b]);
         if (wta + wtb > 0.0) {
           const double lambdaT = coulomb(len / (wta + wtb), lambdaN, mus, muk);
-          if (da && lambdaT > 0.0) applyPointCorrection(pa, pc, t, lambdaT * wta);
-          if (db && lambdaT > 0.0) applyPointCorrection(pb, pc, -t, lambdaT * wtb);
+          // On a flat patch friction acts through the bodies' centres: its torque about the
+          // centre is taken by the pressure across the face, which one normal correction at
+          // the patch centroid cannot represent (it answers only once the body has tilted).
+          // Applied at the centroid it turned each tilt correction into a rocking that grew
+          // from round-off, x13 every 4 frames, until a stack of 3 boxes fell (measured).
+          // A small patch (a corner, an edge, a ball) keeps the torque: that is what rolls a
+          // ball; so does a patch against a fixed or carried body (a tool pushing a box low
+          // on its side must tip it, not press it into the ground).
+          const Vec3 atA = stacked ? pa.c : pc, atB = stacked ? pb.c : pc;
+          if (da && lambdaT > 0.0) applyPointCorrection(pa, atA, t, lambdaT * wta);
+          if (db && lambdaT > 0.0) applyPointCorrection(pb, atB, -t, lambdaT * wtb);
         }
       }
       if (da) ma.c = pa.c, ma.q = pa.q;
