@@ -8,8 +8,7 @@
 #include <cstring>
 #include <limits>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include "core/parallel.h"
 
 namespace physketch {
 namespace {
@@ -20,22 +19,6 @@ constexpr std::size_t kParticleChunk = 8192;  // particles per unit of the per-p
 constexpr std::size_t kCellChunk = 512;       // cells per unit of the row and list passes
 
 std::size_t chunkCount(std::size_t n, std::size_t chunk) { return (n + chunk - 1) / chunk; }
-
-// Calls f(begin, end) for the fixed units [c * chunk, min(n, (c + 1) * chunk)).
-template <class F>
-void forChunks(std::size_t n, std::size_t chunk, F&& f) {
-  const std::size_t units = chunkCount(n, chunk);
-  if (units <= 1) {
-    if (n) f(std::size_t(0), n);
-    return;
-  }
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, units, 1),
-      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t u = r.begin(); u != r.end(); ++u) f(u * chunk, std::min(n, (u + 1) * chunk));
-      },
-      tbb::simple_partitioner());
-}
 
 void checkCount(std::size_t n, const char* who) {
   if (n > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))

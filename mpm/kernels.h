@@ -6,31 +6,16 @@
 #include <cmath>
 #include <cstddef>
 
-#include <tbb/parallel_for.h>
-
+#include "core/parallel.h"
 #include "mpm/world.h"
 
 namespace physketch::mpm::detail {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kBlock = 4;        // cells per block edge (P2G's unit of work)
-constexpr std::size_t kChunk = 4096;  // per-particle loops: fixed chunks, serial below one chunk
-
-template <class F>
-inline void forRange(std::size_t n, F&& f) {
-  const std::size_t chunks = (n + kChunk - 1) / kChunk;
-  if (chunks <= 1) {
-    if (n > 0) f(std::size_t(0), n);
-    return;
-  }
-  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t j) { f(j * kChunk, std::min(n, (j + 1) * kChunk)); });
-}
-
-template <class F>
-inline void forEach(std::size_t n, F&& f) {
-  if (n == 1) f(std::size_t(0));
-  else if (n > 1) tbb::parallel_for(std::size_t(0), n, f);
-}
+using physketch::forEach;   // fixed-chunk parallel loops (core/parallel.h): serial below one chunk
+using physketch::forRange;
+using physketch::kChunk;
 
 // Quadratic B-spline weights (Hu et al. 2018 §5; Jiang et al. 2016 Eq. 123) of the three nodes
 // base, base+1, base+2 for a particle at fractional offset f = x/dx - base in [0.5, 1.5).

@@ -4,10 +4,8 @@
 #include <cmath>
 #include <string>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include "core/error.h"
+#include "core/parallel.h"
 #include "pbd/fluid_kernels.h"
 
 namespace physketch::pbd {
@@ -20,21 +18,6 @@ constexpr float kGhostCoord = 1e18f;  // far from everything; its squared distan
 // Fixed work units (boundaries depend only on the sizes, never on the thread count).
 constexpr std::size_t kBlockChunk = 64;      // list blocks (x 8 ranks) per unit
 constexpr std::size_t kParticleChunk = 2048;
-
-template <class F>
-void forChunks(std::size_t n, std::size_t chunk, F&& f) {
-  const std::size_t units = (n + chunk - 1) / chunk;
-  if (units <= 1) {
-    if (n) f(std::size_t(0), n);
-    return;
-  }
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, units, 1),
-      [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t u = r.begin(); u != r.end(); ++u) f(u * chunk, std::min(n, (u + 1) * chunk));
-      },
-      tbb::simple_partitioner());
-}
 
 void require(bool ok, const std::string& what) {
   if (!ok) throw RuntimeError("FluidSolver: " + what);
