@@ -176,6 +176,37 @@ SceneDesc build(const RecordFile& file) {
     } else if (kw == "gravity") {
       FieldReader f(file, r, {"gx", "gy", "gz"});
       s.gravity = Vec3(f.inRange(0, -1000, 1000), f.inRange(1, -1000, 1000), f.inRange(2, -1000, 1000));
+    } else if (kw == "walls") {
+      // walls KIND [SIDE=KIND ...]: every wall KIND, then per side (x-, x+, y-, y+, z-, z+).
+      if (r.tokens.size() < 2) throw InputError(file.path, r.line, "kind", "missing (walls KIND [SIDE=KIND ...])");
+      const auto wallKind = [&](const std::string& w, const char* field, SceneDesc::Wall& out) {
+        if (w == "sticky") out = SceneDesc::Wall::kSticky;
+        else if (w == "slip") out = SceneDesc::Wall::kSlip;
+        else if (w == "separate") out = SceneDesc::Wall::kSeparate;
+        else throw InputError(file.path, r.line, field, "unknown wall kind '" + w + "' (known: sticky, slip, separate)");
+      };
+      SceneDesc::Wall all;
+      wallKind(r.tokens[1], "kind", all);
+      for (auto& w : s.walls) w = all;
+      static const char* kSides[6] = {"x-", "x+", "y-", "y+", "z-", "z+"};
+      bool given[6] = {false, false, false, false, false, false};
+      for (std::size_t k = 2; k < r.tokens.size(); ++k) {
+        const std::string& w = r.tokens[k];
+        const std::size_t eq = w.find('=');
+        const std::string side = w.substr(0, eq);
+        const int at = int(std::find_if(std::begin(kSides), std::end(kSides), [&](const char* x) { return side == x; }) -
+                           std::begin(kSides));
+        if (eq == std::string::npos || at == 6)
+          throw InputError(file.path, r.line, "side", "'" + w + "' is not SIDE=KIND with SIDE one of x-, x+, y-, y+, z-, z+");
+        if (given[at]) throw InputError(file.path, r.line, "side", "wall " + side + " given twice");
+        given[at] = true;
+        wallKind(w.substr(eq + 1), "kind", s.walls[at]);
+      }
+      s.wallsLine = r.line;
+    } else if (kw == "grid_dx") {
+      FieldReader f(file, r, {"spacings"});
+      s.gridDx = f.inRange(0, 1.0, 4.0);
+      s.gridDxLine = r.line;
     } else if (kw == "ground") {
       FieldReader f(file, r, {"y"});
       s.groundY = f.number(0);
@@ -227,7 +258,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "ground duration fps material collider keyframe expect camera image output)");
+                                                  "walls grid_dx ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");

@@ -72,6 +72,14 @@ struct SceneDesc {
   int substepsLine = 0;      // line of the 'substeps' record, 0 = the default
   int iterations = 4;        // constraint iterations per substep
   Vec3 gravity{0.0, -9.81, 0.0};  // m/s^2
+  // solver mpm: how each domain wall acts (`walls`), in the order x-, x+, y-, y+, z-, z+
+  // (y- is the floor; the ground plane, when inside the domain, acts as it does), and the
+  // grid spacing as a multiple of the particle spacing (`grid_dx`, default 2: 8 per cell).
+  enum class Wall { kSticky, kSlip, kSeparate };
+  Wall walls[6] = {Wall::kSeparate, Wall::kSeparate, Wall::kSeparate, Wall::kSeparate, Wall::kSeparate, Wall::kSeparate};
+  int wallsLine = 0;          // line of the 'walls' record, 0 = the default
+  double gridDx = 2.0;
+  int gridDxLine = 0;         // line of the 'grid_dx' record, 0 = the default
   double groundY = 0.0;      // m, height of the ground plane (y up)
   double duration = 2.0;     // s of simulated time
   double fps = 30.0;         // frames per simulated second; 1/fps is a whole number of steps

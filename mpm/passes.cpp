@@ -172,7 +172,7 @@ void MpmWorld::p2g(float h) {
 
 void MpmWorld::gridUpdate(float h) {
   const float g[3] = {float(h * params_.gravity.x()), float(h * params_.gravity.y()), float(h * params_.gravity.z())};
-  const WallKind kind = params_.walls;
+  const WallKind(&kind)[6] = params_.walls;  // x-, x+, y-, y+, z-, z+
   const int floorNode = std::max(wallLo_[1], groundNode_);
   forEach(activeNodeBlocks_.size(), [&](std::size_t k) {
     const auto block = std::size_t(activeNodeBlocks_[k]);
@@ -194,8 +194,8 @@ void MpmWorld::gridUpdate(float h) {
         const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
         for (int a = 0; a < 3; ++a) {
           const int lowest = a == 1 ? floorNode : wallLo_[a];
-          if (idx[a] <= lowest) applyWall(v, a, 1.0f, kind, gfs_[node] / m, gfk_[node] / m);
-          else if (idx[a] >= wallHi_[a]) applyWall(v, a, -1.0f, kind, gfs_[node] / m, gfk_[node] / m);
+          if (idx[a] <= lowest) applyWall(v, a, 1.0f, kind[2 * a], gfs_[node] / m, gfk_[node] / m);
+          else if (idx[a] >= wallHi_[a]) applyWall(v, a, -1.0f, kind[2 * a + 1], gfs_[node] / m, gfk_[node] / m);
         }
       }
       gx_[node] = v[0];

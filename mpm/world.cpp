@@ -57,6 +57,16 @@ std::string num(double v) {
 
 }  // namespace
 
+std::string wallsText(const WallKind (&walls)[6]) {
+  static const char* kSides[6] = {"x-", "x+", "y-", "y+", "z-", "z+"};
+  bool same = true;
+  for (int k = 1; k < 6; ++k) same = same && walls[k] == walls[0];
+  if (same) return std::string(toString(walls[0]));
+  std::string out;
+  for (int k = 0; k < 6; ++k) out += std::string(k ? ", " : "") + kSides[k] + " " + toString(walls[k]);
+  return out;
+}
+
 const char* toString(WallKind kind) {
   switch (kind) {
     case WallKind::kSticky: return "sticky";
@@ -75,6 +85,11 @@ MpmParams paramsFromScene(const SceneDesc& scene, double spacing) {
   p.spacing = spacing;
   p.domainSize = scene.workspaceSize;
   p.domainMin = scene.workspaceCenter - Vec3::Constant(0.5 * scene.workspaceSize);
+  p.dxPerSpacing = scene.gridDx;
+  for (int k = 0; k < 6; ++k)
+    p.walls[k] = scene.walls[k] == SceneDesc::Wall::kSticky ? WallKind::kSticky
+                 : scene.walls[k] == SceneDesc::Wall::kSlip ? WallKind::kSlip
+                                                             : WallKind::kSeparate;
   return p;
 }
 
@@ -452,7 +467,7 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
     case MpmPass::kG2P:
       return on ? "materials " + list : "no dynamic particle (all fixed, held or removed)";
     case MpmPass::kGridUpdate:
-      return on ? std::string("gravity, ") + toString(params_.walls) +
+      return on ? std::string("gravity, ") + wallsText(params_.walls) +
                       " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY)
                 : "no dynamic particle";
     case MpmPass::kProjection: return on ? "walls and ground" : "no dynamic particle";

@@ -41,6 +41,8 @@ namespace physketch::mpm {
 // (static_friction, dynamic_friction).
 enum class WallKind { kSticky, kSlip, kSeparate };
 const char* toString(WallKind kind);
+// "separate" when every wall is, else "x- sticky, x+ slip, ..." in that order.
+std::string wallsText(const WallKind (&walls)[6]);
 
 struct MpmParams {
   double dt = 1.0 / 60.0;  // s per step
@@ -51,7 +53,9 @@ struct MpmParams {
   double dxPerSpacing = 2.0;  // grid spacing dx = dxPerSpacing * h (2: eight particles per cell)
   Vec3 domainMin = Vec3(-0.5, 0.0, -0.5);  // m, corner of the simulated cube (the workspace)
   double domainSize = 1.0;                 // m, its edge
-  WallKind walls = WallKind::kSeparate;    // the domain walls and the ground
+  // The domain walls x-, x+, y-, y+, z-, z+ (y-: the floor, and the ground plane inside the domain).
+  WallKind walls[6] = {WallKind::kSeparate, WallKind::kSeparate, WallKind::kSeparate,
+                       WallKind::kSeparate, WallKind::kSeparate, WallKind::kSeparate};
   double waveCourant = 0.5;    // C in h <= C dx / c_p (c_p the material's P-wave speed)
   double velocityCourant = 0.5;  // h <= velocityCourant dx / |v|max
   double maxSpeed = 100.0;     // m/s, the guard's explosion bound

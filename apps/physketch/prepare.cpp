@@ -33,6 +33,7 @@ SolverSupport supportOf(SolverKind solver) {
                  MaterialKind::kPlasticine};
       s.initialMotion = true;
       s.fixedBodies = true;
+      s.domainGrid = true;
       break;
   }
   return s;
@@ -49,6 +50,7 @@ SolverSupport eventualSupportOf(SolverKind solver) {
     if (model.simulated) s.kinds.push_back(model.runsAs);
   }
   s.meshColliders = s.toolStrokes = s.initialMotion = s.fixedBodies = true;
+  s.domainGrid = solver == SolverKind::kMpm;  // PBD has neither walls nor a grid, now or later
   return s;
 }
 

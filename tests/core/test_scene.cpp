@@ -709,3 +709,32 @@ TEST(Scene, EveryBadExpectNamesLineAndField) {
   EXPECT_EQ(e.line(), 11);
   EXPECT_NE(std::string(e.what()).find("give one"), std::string::npos);
 }
+
+TEST(Scene, WallsGiveEveryWallAKindAndSidesOverrideIt) {
+  SceneDesc s = parseScene(std::string(kGood) + "walls slip y-=sticky z+=separate\ngrid_dx 1.5\n", "dir/x.scene");
+  using W = SceneDesc::Wall;
+  const W want[6] = {W::kSlip, W::kSlip, W::kSticky, W::kSlip, W::kSlip, W::kSeparate};
+  for (int k = 0; k < 6; ++k) EXPECT_EQ(s.walls[k], want[k]) << k;
+  EXPECT_EQ(s.wallsLine, 10);
+  EXPECT_DOUBLE_EQ(s.gridDx, 1.5);
+  s = parseScene(kGood, "dir/x.scene");  // defaults: separate everywhere, 2 spacings
+  for (W w : s.walls) EXPECT_EQ(w, W::kSeparate);
+  EXPECT_DOUBLE_EQ(s.gridDx, 2.0);
+  EXPECT_EQ(sceneError("walls bouncy\n").field(), "kind");
+  EXPECT_EQ(sceneError("walls slip y-=bouncy\n").field(), "kind");
+  EXPECT_EQ(sceneError("walls slip q-=sticky\n").field(), "side");
+  EXPECT_EQ(sceneError("walls slip x-=slip x-=sticky\n").field(), "side");
+  EXPECT_EQ(sceneError("walls\n").field(), "kind");
+  EXPECT_EQ(sceneError("grid_dx 0.5\n").field(), "spacings");
+  EXPECT_EQ(sceneError("grid_dx nan\n").field(), "spacings");
+}
+
+TEST(Support, WallsAndGridDxAreForSolverMpm) {
+  const SceneDesc scene = parseScene(std::string(kGood) + "walls sticky\n", "dir/x.scene");
+  SolverSupport pbd;
+  pbd.solver = SolverKind::kPbd;
+  pbd.kinds = {MaterialKind::kRigid};
+  const InputError e = supportError(scene, usesOfMaterials({{"wood", 2}}), pbd);
+  EXPECT_EQ(e.line(), 10);
+  EXPECT_NE(std::string(e.what()).find("walls: solver pbd (the default) has no domain walls"), std::string::npos) << e.what();
+}

@@ -159,7 +159,7 @@ TEST(MpmWorld, AWaterColumnSpreadsLikeMartinAndMoyce) {
   std::vector<BodyRange> bodies;
   MpmParams q = unitDomain(h, 0, 1.0 / 600.0);
   q.domainSize = 0.5;
-  q.walls = WallKind::kSlip;
+  for (WallKind& k : q.walls) k = WallKind::kSlip;
   addBox(p, bodies, Vec3(0.5 * h, 0.5 * h, 0.5 * h), int(a / h), int(2 * a / h), int(q.domainSize / h), h, 0);
   Material water = makeMaterial(MaterialKind::kFluid, "water");
   water.fluid.bulkModulus = 2e5;  // c = 14 m/s, 5x the front speed 2 sqrt(g a): weakly compressible
@@ -382,4 +382,54 @@ TEST(MpmWorld, GroundFrictionComesFromTheMaterial) {
   const double free = slide(0.0), rough = slide(0.5);
   EXPECT_NEAR(free, 2.0, 0.05);
   EXPECT_NEAR(2.0 - rough, 0.5 * 9.81 * 0.2, 0.1 * 0.5 * 9.81 * 0.2);
+}
+
+// Per-wall kinds (scene `walls`): the same block sliding at 2 m/s with friction 0.5. A slip
+// floor keeps its speed whatever the friction (slip removes only the normal component: within
+// 2.5 %, as the frictionless block above); a sticky floor holds the nodes it touches at rest,
+// so the block, gripped at its base, slows far below the frictional 1.02 m/s (it tumbles:
+// below 0.7 m/s); a separate floor gives Coulomb's 2 - mu g t. Each case sets only y- (index
+// 2) and makes every other wall the opposite kind, so a wrong side index shows.
+TEST(MpmWorld, EachWallActsAsItsKindSays) {
+  const double h = 0.01;
+  const auto slide = [&](WallKind floor, WallKind others) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies;
+    BodyInit push;
+    push.velocity = Vec3(2.0, 0.0, 0.0);
+    addBox(p, bodies, Vec3(0.2, 0.5 * h, 0.45), 8, 8, 8, h, 0, push);
+    Material m = elastic(1e5);
+    m.staticFriction = m.dynamicFriction = 0.5;
+    MpmParams q = unitDomain(h, 0);
+    for (WallKind& k : q.walls) k = others;
+    q.walls[2] = floor;
+    MpmWorld w(p, bodies, {m}, q);
+    for (int s = 0; s < 12; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+    return w.velocity(0).x();
+  };
+  EXPECT_NEAR(slide(WallKind::kSlip, WallKind::kSticky), 2.0, 0.05);
+  EXPECT_LT(slide(WallKind::kSticky, WallKind::kSlip), 0.7);
+  EXPECT_NEAR(2.0 - slide(WallKind::kSeparate, WallKind::kSticky), 0.5 * 9.81 * 0.2, 0.1 * 0.5 * 9.81 * 0.2);
+}
+
+// grid_dx: the grid spacing is that multiple of the particle spacing. Free fall does not
+// depend on it: with F = I and a uniform velocity, P2G and G2P pass the velocity through on
+// any grid (the B-spline weights sum to 1 and their first moments vanish), so the block's
+// centre follows symplectic Euler, y0 - g hs^2 n (n + 1) / 2, on grids of 1.5 and 3 spacings
+// as on 2. Tolerance 3e-5 m, as for the free fall above (float32 rounding over 500 substeps).
+TEST(MpmWorld, AFinerOrCoarserGridStillFallsFreely) {
+  const double h = 0.01;
+  for (double dxPer : {1.5, 2.0, 3.0}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies;
+    addBox(p, bodies, Vec3(0.45, 0.7, 0.45), 6, 6, 6, h, 0);
+    MpmParams q = unitDomain(h, 50);
+    q.dxPerSpacing = dxPer;
+    MpmWorld w(p, bodies, {elastic(1e5)}, q);
+    EXPECT_DOUBLE_EQ(w.dx(), dxPer * h);
+    const double y0 = w.pose(0).centre.y();
+    for (int s = 0; s < 10; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+    const double hs = q.dt / q.substeps, n = 10.0 * q.substeps;
+    EXPECT_NEAR(w.pose(0).centre.y(), y0 - 9.81 * hs * hs * n * (n + 1.0) / 2.0, 3e-5) << "grid_dx " << dxPer;
+  }
 }
