@@ -130,6 +130,28 @@ Expectation parseExpect(const RecordFile& file, const Record& r, const std::vect
   return e;
 }
 
+// `scale k` (PhysGen3D §A.4): lengths are k times the real ones at the same time scale, so
+// accelerations are k times larger (g' = k g) and, holding each body's mass fixed (density'
+// = density / k^3), stresses are 1/k of the real ones (E' = E / k, as PhysGen3D states it):
+// then E'/density' = k^2 E/density and every wave speed is k times the real one, as the
+// motion is. Dynamic viscosity: mu' = mu / k (kinematic viscosity k^2). Friction, Poisson's
+// ratio, angles and strains are dimensionless and unchanged.
+void applyRealWorldScale(SceneDesc& s) {
+  s.gravityUnscaled = s.gravity;
+  s.materialsUnscaled = s.materials;
+  if (s.scale == 1.0) return;
+  const double k = s.scale;
+  s.gravity = k * s.gravity;
+  for (Material& m : s.materials) {
+    m.density /= k * k * k;
+    m.elastic.youngs /= k;
+    m.fluid.bulkModulus /= k;
+    m.fluid.viscosity /= k;
+    m.sand.cohesion /= k;
+    m.plasticine.yieldStress /= k;
+  }
+}
+
 SceneDesc build(const RecordFile& file) {
   SceneDesc s;
   s.path = file.path;
@@ -203,6 +225,10 @@ SceneDesc build(const RecordFile& file) {
         wallKind(w.substr(eq + 1), "kind", s.walls[at]);
       }
       s.wallsLine = r.line;
+    } else if (kw == "scale") {
+      FieldReader f(file, r, {"k"});
+      s.scale = f.inRange(0, 1e-3, 1e3);
+      s.scaleLine = r.line;
     } else if (kw == "grid_dx") {
       FieldReader f(file, r, {"spacings"});
       s.gridDx = f.inRange(0, 1.0, 4.0);
@@ -258,7 +284,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "walls grid_dx ground duration fps material collider keyframe expect camera image output)");
+                                                  "walls grid_dx scale ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");
@@ -277,6 +303,7 @@ SceneDesc build(const RecordFile& file) {
   if (std::abs(ratio - std::round(ratio)) > 1e-6 * ratio || std::round(ratio) < 1.0)
     throw InputError(file.path, fpsLine ? fpsLine : dtLine, fpsLine ? "frames_per_second" : "seconds",
                      "1/fps must be a whole multiple of dt (1/fps / dt = " + std::to_string(ratio) + ")");
+  applyRealWorldScale(s);
   return s;
 }
 

@@ -80,6 +80,15 @@ struct SceneDesc {
   int wallsLine = 0;          // line of the 'walls' record, 0 = the default
   double gridDx = 2.0;
   int gridDxLine = 0;         // line of the 'grid_dx' record, 0 = the default
+  // solver mpm: real-world scale k = simulated size / real size (PhysGen3D §A.4, `scale`),
+  // applied when the scene is parsed: g' = k g and, holding each body's mass fixed, density'
+  // = density / k^3, stresses (E, bulk modulus, yield stress, sand cohesion) / k, dynamic
+  // viscosity / k; so every wave speed and the motion scale with the length and time is
+  // unchanged. The values before scaling are kept for the plan.
+  double scale = 1.0;
+  int scaleLine = 0;
+  Vec3 gravityUnscaled{0.0, -9.81, 0.0};
+  std::vector<Material> materialsUnscaled;
   double groundY = 0.0;      // m, height of the ground plane (y up)
   double duration = 2.0;     // s of simulated time
   double fps = 30.0;         // frames per simulated second; 1/fps is a whole number of steps

@@ -80,10 +80,10 @@ void checkSupport(const SceneDesc& scene, const SketchUses& uses, const SolverSu
     throw InputError(scene.path, c.line, "record",
                      "collider '" + c.name + "': " + solverText(scene) + " does not simulate mesh colliders yet");
   }
-  if (!support.domainGrid && (scene.wallsLine > 0 || scene.gridDxLine > 0)) {
-    const bool walls = scene.wallsLine > 0;
-    throw InputError(scene.path, walls ? scene.wallsLine : scene.gridDxLine, "record",
-                     std::string(walls ? "walls" : "grid_dx") + ": " + solverText(scene) +
+  if (!support.domainGrid && (scene.wallsLine > 0 || scene.gridDxLine > 0 || scene.scaleLine > 0)) {
+    const bool walls = scene.wallsLine > 0, grid = !walls && scene.gridDxLine > 0;
+    throw InputError(scene.path, walls ? scene.wallsLine : grid ? scene.gridDxLine : scene.scaleLine, "record",
+                     std::string(walls ? "walls" : grid ? "grid_dx" : "scale") + ": " + solverText(scene) +
                          " has no domain walls or background grid (the record is for solver mpm)");
   }
   checkFeature(uses.toolStroke, support.toolStrokes, scene, "tool strokes");

@@ -137,6 +137,25 @@ class Progress {
   double start_, last_;
 };
 
+// `scale k`: the values the solver runs with, next to the scene's (docs/formats.md).
+void printScale(const SceneDesc& sc) {
+  std::printf("real-world scale k = %g (PhysGen3D: g' = k g; mass held, density / k^3; stresses / k):\n", sc.scale);
+  std::printf("  gravity %g -> %g m/s^2\n", sc.gravityUnscaled.norm(), sc.gravity.norm());
+  for (std::size_t i = 0; i < sc.materials.size() && i < sc.materialsUnscaled.size(); ++i) {
+    const Material &a = sc.materialsUnscaled[i], &b = sc.materials[i];
+    std::printf("  %s: density %g -> %g kg/m^3", a.name.c_str(), a.density, b.density);
+    if (a.kind == MaterialKind::kFluid)
+      std::printf(", bulk modulus %g -> %g Pa, viscosity %g -> %g Pa s", a.fluid.bulkModulus, b.fluid.bulkModulus,
+                  a.fluid.viscosity, b.fluid.viscosity);
+    else
+      std::printf(", E %g -> %g Pa", a.elastic.youngs, b.elastic.youngs);
+    if (a.kind == MaterialKind::kPlasticine) std::printf(", yield stress %g -> %g Pa", a.plasticine.yieldStress, b.plasticine.yieldStress);
+    if (a.kind == MaterialKind::kSand && a.sand.cohesion > 0.0) std::printf(", cohesion %g -> %g Pa", a.sand.cohesion, b.sand.cohesion);
+    std::printf("\n");
+  }
+  std::fflush(stdout);
+}
+
 }  // namespace
 
 int lintScene(const std::string& scenePath) {
@@ -215,6 +234,7 @@ int printPlan(const PlanOptions& opt) {
     std::cout << "scene " << sc.path << ": " << p.sketch->particles.size() << " particles, " << solver->bodyCount()
               << " bodies; solver " << solver->name() << ", dt " << sc.dt << " s, " << (sc.substepsAuto ? std::string("auto") : std::to_string(sc.substeps)) << " substeps, "
               << sc.iterations << " iterations\n";
+    if (sc.scale != 1.0) printScale(sc);
     std::cout << (opt.all ? "every pass of the step, at play:\n" : "per step, at play:\n");
     for (const auto& pass : opt.all ? solver->planAll() : solver->plan()) {
       std::cout << "  " << (opt.all ? (pass.on ? "on   " : "off  ") : "") << pass.name;

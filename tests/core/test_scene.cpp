@@ -738,3 +738,32 @@ TEST(Support, WallsAndGridDxAreForSolverMpm) {
   EXPECT_EQ(e.line(), 10);
   EXPECT_NE(std::string(e.what()).find("walls: solver pbd (the default) has no domain walls"), std::string::npos) << e.what();
 }
+
+// scale k (PhysGen3D §A.4): g' = k g; mass held, so density' = density / k^3; E' = E / k (the
+// paper's rule), and the other stresses and the dynamic viscosity likewise; dimensionless
+// parameters unchanged. Closed forms: E'/density' = k^2 E/density (wave speeds scale with
+// length at the same time scale), and the self-weight sag density g H^2 / (2 E) scales by k.
+TEST(Scene, ScaleScalesGravityDensityAndStresses) {
+  const std::string mats =
+      "material jelly elastic E=4e4 nu=0.3 density=1000\n"
+      "material water fluid bulk_modulus=2e4 viscosity=0.001\n"
+      "material clay plasticine yield_stress=1e4\n"
+      "scale 0.5\n";
+  const SceneDesc s = parseScene(std::string(kGood) + mats, "dir/x.scene");
+  const double k = 0.5;
+  EXPECT_EQ(s.scaleLine, 13);
+  EXPECT_DOUBLE_EQ(s.gravity.y(), -9.81 * k);
+  const Material &jelly = s.materials[1], &water = s.materials[2], &clay = s.materials[3];
+  EXPECT_DOUBLE_EQ(jelly.density, 1000.0 / (k * k * k));
+  EXPECT_DOUBLE_EQ(jelly.elastic.youngs, 4e4 / k);
+  EXPECT_DOUBLE_EQ(jelly.elastic.poisson, 0.3);
+  EXPECT_DOUBLE_EQ(water.fluid.bulkModulus, 2e4 / k);
+  EXPECT_DOUBLE_EQ(water.fluid.viscosity, 0.001 / k);
+  EXPECT_DOUBLE_EQ(clay.plasticine.yieldStress, 1e4 / k);
+  const auto sag = [](const Material& m, double g, double H) { return m.density * g * H * H / (2.0 * m.elastic.youngs); };
+  const Material& real = s.materialsUnscaled[1];
+  EXPECT_NEAR(sag(jelly, k * 9.81, k * 0.1) / sag(real, 9.81, 0.1), k, 1e-12);
+  EXPECT_NEAR((jelly.elastic.youngs / jelly.density) / (real.elastic.youngs / real.density), k * k, 1e-12);
+  EXPECT_EQ(sceneError("scale 0\n").field(), "k");
+  EXPECT_EQ(sceneError("scale -2\n").field(), "k");
+}
