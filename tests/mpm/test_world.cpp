@@ -4,7 +4,11 @@
 
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
 #include <random>
 
 #include "core/error.h"
@@ -432,4 +436,50 @@ TEST(MpmWorld, AFinerOrCoarserGridStillFallsFreely) {
     const double hs = q.dt / q.substeps, n = 10.0 * q.substeps;
     EXPECT_NEAR(w.pose(0).centre.y(), y0 - 9.81 * hs * hs * n * (n + 1.0) / 2.0, 3e-5) << "grid_dx " << dxPer;
   }
+}
+
+// Martin & Moyce 1952 at the published gate: the front Z(T) of the same 2-D dam break,
+// sampled every step, against every row of tests/pbd/data/martin-moyce-1952-front.csv with
+// T <= 3 (the run's Z interpolated linearly in T): RMSE <= 10 % of the mean Z. Measured: 0.216
+// against 0.225 (the front lags the experiment by up to 0.4 a at T = 3: MPM's grid transfer
+// damps the surge at 5 cells across a). Deterministic, so the small margin cannot flake; a
+// column only 4 particles deep in z spreads sideways too and lags twice as much.
+TEST(MpmWorld, ADamBreakFrontMeetsMartinAndMoyceRmse) {
+  const double h = 0.01, a = 0.1;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  MpmParams q = unitDomain(h, 0, 1.0 / 600.0);
+  q.domainSize = 0.5;
+  for (WallKind& k : q.walls) k = WallKind::kSlip;
+  addBox(p, bodies, Vec3(0.5 * h, 0.5 * h, 0.5 * h), int(a / h), int(2 * a / h), int(q.domainSize / h), h, 0);
+  Material water = makeMaterial(MaterialKind::kFluid, "water");
+  water.fluid.bulkModulus = 2e5;
+  MpmWorld w(p, bodies, {water}, q);
+  const double tScale = std::sqrt(2.0 * 9.81 / a);
+  std::vector<double> T{0.0}, Z{1.0};
+  while (w.time() * tScale < 3.1) {
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    float front = 0.0f;
+    for (float x : w.particles().x) front = std::max(front, x);
+    T.push_back(w.time() * tScale);
+    Z.push_back((front + 0.5 * h) / a);
+  }
+  std::ifstream csv(std::string(PHYSKETCH_SOURCE_DIR) + "/tests/pbd/data/martin-moyce-1952-front.csv");
+  ASSERT_TRUE(csv) << "the published data file";
+  std::string line;
+  double sum = 0.0, sumZ = 0.0;
+  int n = 0;
+  while (std::getline(csv, line)) {
+    double t = 0, z = 0;
+    if (line.empty() || line[0] == '#' || std::sscanf(line.c_str(), "%lf,%lf", &t, &z) != 2 || t > 3.0) continue;
+    const auto it = std::lower_bound(T.begin(), T.end(), t);
+    const std::size_t j = std::size_t(std::max<std::ptrdiff_t>(1, it - T.begin()));
+    const double f = (t - T[j - 1]) / (T[j] - T[j - 1]);
+    const double zr = Z[j - 1] + f * (Z[j] - Z[j - 1]);
+    sum += (zr - z) * (zr - z), sumZ += z, ++n;
+  }
+  ASSERT_GE(n, 10);
+  const double rmse = std::sqrt(sum / n), meanZ = sumZ / n;
+  std::printf("dam break: front RMSE %.3f (mean Z %.3f, %d rows)\n", rmse, meanZ, n);
+  EXPECT_LE(rmse, 0.1 * meanZ);
 }
