@@ -23,8 +23,9 @@
 set -euo pipefail
 
 SUITE=bookworm
-# What a developer starts from: a compiler, build tools, GoogleTest, git and python3.
-BASE_PACKAGES=g++,make,cmake,ninja-build,libgtest-dev,googletest,git,python3,ca-certificates
+# What a developer starts from: a compiler, build tools, GoogleTest and git (python3, which
+# the hard-scene test needs, comes from scripts/install-deps.sh like every other dependency).
+BASE_PACKAGES=g++,make,cmake,ninja-build,libgtest-dev,googletest,git,ca-certificates
 CHECK_COMMAND='make test && make demo'
 
 dir=${PHYSKETCH_FRESH_ROOT:-/var/tmp/physketch-fresh-root}
