@@ -24,7 +24,8 @@
 #include <cmath>
 
 #include <Eigen/Core>
-#include <Eigen/SVD>
+
+#include "mpm/svd3.h"
 
 namespace physketch::mpm {
 
@@ -35,30 +36,6 @@ struct Lame {
 };
 inline Lame lameFromYoungs(double E, double nu) {
   return {E / (2.0 * (1.0 + nu)), E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))};
-}
-
-// F = U diag(sigma) V^T with U, V proper rotations (det +1): a reflection, if any, is moved
-// into the smallest singular value, which then is negative for an inverted element
-// (Irving et al. 2004 §5). Eigen's SVD returns non-negative singular values and possibly
-// improper U, V.
-template <class S>
-struct Svd3 {
-  Eigen::Matrix<S, 3, 3> U, V;
-  Eigen::Matrix<S, 3, 1> sigma;
-};
-template <class S>
-Svd3<S> svd3(const Eigen::Matrix<S, 3, 3>& F) {
-  Eigen::JacobiSVD<Eigen::Matrix<S, 3, 3>> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Svd3<S> r{svd.matrixU(), svd.matrixV(), svd.singularValues()};
-  if (r.U.determinant() < S(0)) {
-    r.U.col(2) = -r.U.col(2);
-    r.sigma(2) = -r.sigma(2);
-  }
-  if (r.V.determinant() < S(0)) {
-    r.V.col(2) = -r.V.col(2);
-    r.sigma(2) = -r.sigma(2);
-  }
-  return r;
 }
 
 // Fixed-corotated Kirchhoff stress, given the rotation R of F's polar decomposition (R = U V^T).

@@ -1,12 +1,14 @@
-// Stresses and return maps against independent oracles: the energy densities of the papers
+// Stresses, the 3x3 SVD and return maps against independent oracles (Eigen's JacobiSVD in double for the SVD): the energy densities of the papers
 // (differentiated by finite differences), the Drucker-Prager cone equation, and the closed
 // forms of the snow clamp.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <random>
 
 #include <Eigen/Geometry>
+#include <Eigen/SVD>
 
 #include "mpm/constitutive.h"
 #include "mpm/plasticity.h"
@@ -176,4 +178,96 @@ TEST(MpmPlasticity, TaitPressureIsZeroAtRestAndPushesBackWhenCompressed) {
   const double p = 1e5 / 7.0 * (std::pow(0.99, -7.0) - 1.0);
   EXPECT_NEAR(t(0, 0), -0.99 * p, 1e-3 * p);
   EXPECT_EQ(t(0, 1), 0.0f);
+}
+
+// --- svd3 (mpm/svd3.h) against Eigen's JacobiSVD in double --------------------------------
+
+namespace {
+
+// Matrices that break 3x3 SVDs: general (half of them inverted), near the identity (three
+// nearly equal singular values, MPM's common case), exactly repeated values, rank 1 and 2,
+// zero, a 1e6 spread, and inverted stretches.
+std::vector<M3> hardMatrices() {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0), a(-3.0, 3.0), s(0.2, 3.0);
+  const auto rot = [&] { return M3(Eigen::AngleAxisd(a(rng), V3(u(rng), u(rng), u(rng)).normalized())); };
+  std::vector<M3> out;
+  for (int k = 0; k < 200; ++k) out.push_back(M3::NullaryExpr([&](Eigen::Index, Eigen::Index) { return u(rng); }));
+  for (int k = 0; k < 100; ++k)
+    out.push_back(M3::Identity() + 1e-4 * M3::NullaryExpr([&](Eigen::Index, Eigen::Index) { return u(rng); }));
+  for (int k = 0; k < 50; ++k) out.push_back(rot() * V3(1.1, 1.1, 0.9).asDiagonal() * rot());
+  for (int k = 0; k < 50; ++k) out.push_back(rot() * V3(s(rng), s(rng), s(rng)).asDiagonal() * rot());
+  for (int k = 0; k < 50; ++k) out.push_back(rot() * V3(s(rng), s(rng), -s(rng)).asDiagonal() * rot());
+  for (int k = 0; k < 50; ++k) out.push_back(rot() * V3(1e3, 1.0, 1e-3).asDiagonal() * rot());
+  for (int k = 0; k < 50; ++k) out.push_back(rot() * V3(s(rng), s(rng), 0.0).asDiagonal() * rot());
+  for (int k = 0; k < 50; ++k) out.push_back(rot() * V3(s(rng), 0.0, 0.0).asDiagonal() * rot());
+  // Diagonal in every order, exact and within float round-off (svd3's shortcut for them).
+  const V3 diag(0.9, 1.3, 1.1);
+  int perm[3] = {0, 1, 2};
+  do {
+    const M3 D = V3(diag(perm[0]), diag(perm[1]), diag(perm[2])).asDiagonal();
+    out.push_back(D);
+    out.push_back(D + 1e-8 * M3::NullaryExpr([&](Eigen::Index, Eigen::Index) { return u(rng); }));
+  } while (std::next_permutation(perm, perm + 3));
+  out.push_back(M3::Zero());
+  out.push_back(M3::Identity());
+  out.push_back(-M3::Identity());
+  return out;
+}
+
+// The decomposition holds to tol (relative to |A|): A = U diag(sigma) V^T, U and V proper
+// rotations, |sigma| equal to the oracle's singular values and in its (descending) order,
+// and sigma_2 < 0 where det A < 0 (beyond round-off).
+template <class S>
+void expectSvd(const M3& A, double tol) {
+  const Eigen::Matrix<S, 3, 3> As = A.cast<S>();
+  const Svd3<S> d = svd3<S>(As);
+  const M3 U = d.U.template cast<double>(), V = d.V.template cast<double>();
+  const V3 sigma = d.sigma.template cast<double>();
+  const double scale = std::max(A.norm(), 1e-300);
+  const V3 oracle = Eigen::JacobiSVD<M3>(A).singularValues();
+  EXPECT_LE((U * sigma.asDiagonal() * V.transpose() - A).norm(), tol * scale) << A;
+  EXPECT_LE((U.transpose() * U - M3::Identity()).norm(), tol) << A;
+  EXPECT_LE((V.transpose() * V - M3::Identity()).norm(), tol) << A;
+  EXPECT_NEAR(U.determinant(), 1.0, tol) << A;
+  EXPECT_NEAR(V.determinant(), 1.0, tol) << A;
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(std::abs(sigma(k)), oracle(k), tol * scale) << A;
+  EXPECT_GE(sigma(0), 0.0);
+  EXPECT_GE(sigma(1), 0.0);
+  const double det = A.determinant();
+  if (std::abs(det) > 1e3 * tol * scale * scale * scale) {
+    EXPECT_EQ(sigma(2) < 0.0, det < 0.0) << A;
+  }
+}
+
+}  // namespace
+
+// Tolerances: double 1e-12 and float 2e-6 relative to |A| (a few tens of units in the last
+// place: the rotations and the QR each add a few ulp; A^T A's conditioning moves V but not
+// the reconstruction, because the QR recovers sigma from A itself).
+TEST(MpmSvd3, MatchesEigensJacobiSvdOnHardMatricesInDouble) {
+  for (const M3& A : hardMatrices()) expectSvd<double>(A, 1e-12);
+}
+
+TEST(MpmSvd3, MatchesEigensJacobiSvdOnHardMatricesInFloat) {
+  for (const M3& A : hardMatrices()) expectSvd<float>(A, 2e-6);
+}
+
+// The fixed-corotated stress needs only R = U V^T, the polar rotation: it must be the
+// rotation closest to F (Eigen's polar decomposition from its SVD in double), also for an
+// inverted F (there the reflection goes into the smallest singular value, not into R).
+TEST(MpmSvd3, TheRotationIsTheClosestProperRotation) {
+  for (const M3& F : hardMatrices()) {
+    const Svd3<double> d = svd3<double>(F);
+    const M3 R = d.U * d.V.transpose();
+    Eigen::JacobiSVD<M3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    M3 D = M3::Identity();
+    D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    const M3 oracle = svd.matrixU() * D * svd.matrixV().transpose();  // argmax tr(R^T F) over SO(3)
+    // R is unique where the two smallest signed singular values do not cancel; its condition
+    // number is 1 / (sigma_1 + sigma_2) (Higham 2008, Thm. 8.9).
+    const double gap = std::abs(svd.singularValues()(1)) + D(2, 2) * svd.singularValues()(2);
+    if (gap < 1e-3 * std::max(svd.singularValues()(0), 1e-300)) continue;
+    EXPECT_LE((R - oracle).norm(), 1e-12 * F.norm() / gap) << F;
+  }
 }
