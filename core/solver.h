@@ -47,6 +47,10 @@ class Solver {
   double time() const { return double(stepCount()) * dt(); }
   // A hash of the whole state (positions, velocities, poses): equal states, equal hashes.
   virtual std::uint64_t stateHash() const = 0;
+  // What the run did that its user should hear about though nothing failed (e.g. MPM material
+  // stopped at the domain's walls), one sentence each: the CLI prints them as warnings and
+  // writes them into report.json.
+  virtual std::vector<std::string> runNotes() const { return {}; }
 
   // --- changes while the simulation runs (sketching after play) -------------
   // Appends a body made of `particles` (positions at rest, stroke and material set; a rope's

@@ -59,4 +59,34 @@ inline int stencilBase(float fromOrigin, float invDx, int n) {
   return std::clamp(int(std::floor(fromOrigin * invDx - 0.5f)), 0, n - 3);
 }
 
+// A particle's 3x3x3 stencil on the block-major grid (4^3 nodes per block, nb blocks per
+// axis): the B-spline weights, the offsets f = x/dx - base, and per axis the part of each
+// node's index that axis contributes, so that node (a, b, c) is ix[a] + iy[b] + iz[c] with no
+// index arithmetic in the 27-node loops of P2G and G2P.
+struct Stencil {
+  float f[3];
+  float w[3][3];
+  std::size_t ix[3], iy[3], iz[3];
+  std::size_t node(int a, int b, int c) const { return ix[a] + iy[b] + iz[c]; }
+};
+
+// x, y, z: the particle's position relative to the grid origin (m).
+inline Stencil makeStencil(float x, float y, float z, float invDx, int n, int nb) {
+  Stencil s;
+  const float p[3] = {x, y, z};
+  const std::size_t blockStride[3] = {std::size_t(nb) * std::size_t(nb) * 64, std::size_t(nb) * 64, 64};
+  const int localShift[3] = {4, 2, 0};
+  std::size_t* idx[3] = {s.ix, s.iy, s.iz};
+  for (int a = 0; a < 3; ++a) {
+    const int base = stencilBase(p[a], invDx, n);
+    s.f[a] = p[a] * invDx - float(base);
+    bsplineWeights(s.f[a], s.w[a]);
+    for (int k = 0; k < 3; ++k) {
+      const int node = base + k;
+      idx[a][k] = std::size_t(node >> 2) * blockStride[a] + (std::size_t(node & 3) << localShift[a]);
+    }
+  }
+  return s;
+}
+
 }  // namespace physketch::mpm::detail

@@ -2,6 +2,7 @@
 // projection and plasticity. The step, the plan and the guard are in world.cpp.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "mpm/constitutive.h"
 #include "mpm/kernels.h"
@@ -97,46 +98,46 @@ void MpmWorld::p2g(float h) {
   sortByBlock();
   forEach(activeNodeBlocks_.size(), [&](std::size_t k) {
     const std::size_t first = std::size_t(activeNodeBlocks_[k]) * 64;
-    std::fill_n(gm_.begin() + std::ptrdiff_t(first), 64, 0.0f);
-    std::fill_n(gx_.begin() + std::ptrdiff_t(first), 64, 0.0f);
-    std::fill_n(gy_.begin() + std::ptrdiff_t(first), 64, 0.0f);
-    std::fill_n(gz_.begin() + std::ptrdiff_t(first), 64, 0.0f);
-    std::fill_n(gfs_.begin() + std::ptrdiff_t(first), 64, 0.0f);
-    std::fill_n(gfk_.begin() + std::ptrdiff_t(first), 64, 0.0f);
+    std::fill_n(grid_.begin() + std::ptrdiff_t(first), 64, Node{0.0f, 0.0f, 0.0f, 0.0f});
+    if (mixedFriction_) {
+      std::fill_n(gfs_.begin() + std::ptrdiff_t(first), 64, 0.0f);
+      std::fill_n(gfk_.begin() + std::ptrdiff_t(first), 64, 0.0f);
+    }
     std::fill_n(held_.begin() + std::ptrdiff_t(first), 64, std::uint8_t(0));
   });
   const float inv = float(1.0 / dx_), dx = float(dx_);
   const float volume = float(params_.spacing * params_.spacing * params_.spacing);
   const float stressScale = -h * volume * 4.0f * inv * inv;  // Hu et al. 2018 Eq. 16: -h V_p 4/dx^2
   const float ox = float(origin_.x()), oy = float(origin_.y()), oz = float(origin_.z());
+  const bool mixed = mixedFriction_;
   const auto scatter = [&](std::size_t i) {
-    const float fxr = (parts_.x[i] - ox) * inv, fyr = (parts_.y[i] - oy) * inv, fzr = (parts_.z[i] - oz) * inv;
-    const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
-    const int by = stencilBase(parts_.y[i] - oy, inv, n_);
-    const int bz = stencilBase(parts_.z[i] - oz, inv, n_);
-    const float f[3] = {fxr - float(bx), fyr - float(by), fzr - float(bz)};
-    float w[3][3];
-    for (int a = 0; a < 3; ++a) bsplineWeights(f[a], w[a]);
+    const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
     const float mp = parts_.mass[i];
     const MatModel& mat = models_[std::size_t(parts_.material[i])];
     const float ms = mp * mat.mus, mk = mp * mat.muk;
     const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
     const float mv[3] = {mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]};
     for (int a = 0; a < 3; ++a) {
-      const float dxa = (float(a) - f[0]) * dx;
+      const float dxa = (float(a) - st.f[0]) * dx;
       for (int b = 0; b < 3; ++b) {
-        const float dyb = (float(b) - f[1]) * dx;
-        const float wab = w[0][a] * w[1][b];
+        const float dyb = (float(b) - st.f[1]) * dx;
+        const float wab = st.w[0][a] * st.w[1][b];
+        // The affine momentum at the row's first node, then per node one step of A's z column.
+        const float r0 = mv[0] + A(0, 0) * dxa + A(0, 1) * dyb, r1 = mv[1] + A(1, 0) * dxa + A(1, 1) * dyb,
+                    r2 = mv[2] + A(2, 0) * dxa + A(2, 1) * dyb;
         for (int c = 0; c < 3; ++c) {
-          const float dzc = (float(c) - f[2]) * dx;
-          const float wt = wab * w[2][c];
-          const std::size_t node = nodeIndex(bx + a, by + b, bz + c);
-          gm_[node] += wt * mp;
-          gfs_[node] += wt * ms;
-          gfk_[node] += wt * mk;
-          gx_[node] += wt * (mv[0] + A(0, 0) * dxa + A(0, 1) * dyb + A(0, 2) * dzc);
-          gy_[node] += wt * (mv[1] + A(1, 0) * dxa + A(1, 1) * dyb + A(1, 2) * dzc);
-          gz_[node] += wt * (mv[2] + A(2, 0) * dxa + A(2, 1) * dyb + A(2, 2) * dzc);
+          const float dzc = (float(c) - st.f[2]) * dx;
+          const float wt = wab * st.w[2][c];
+          const std::size_t node = st.node(a, b, c);
+          Node& g = grid_[node];
+          g.m += wt * mp;
+          g.x += wt * (r0 + A(0, 2) * dzc);
+          g.y += wt * (r1 + A(1, 2) * dzc);
+          g.z += wt * (r2 + A(2, 2) * dzc);
+          if (mixed) {
+            gfs_[node] += wt * ms;
+            gfk_[node] += wt * mk;
+          }
         }
       }
     }
@@ -151,17 +152,15 @@ void MpmWorld::p2g(float h) {
   for (std::size_t i = 0; i < parts_.size(); ++i) {
     if (phase::dynamic(parts_.phase[i]) || phase::has(parts_.phase[i], phase::kRemoved)) continue;
     if (hx_.empty()) {
-      hx_.assign(gm_.size(), 0.0f);
-      hy_.assign(gm_.size(), 0.0f);
-      hz_.assign(gm_.size(), 0.0f);
+      hx_.assign(grid_.size(), 0.0f);
+      hy_.assign(grid_.size(), 0.0f);
+      hz_.assign(grid_.size(), 0.0f);
     }
-    const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
-    const int by = stencilBase(parts_.y[i] - oy, inv, n_);
-    const int bz = stencilBase(parts_.z[i] - oz, inv, n_);
+    const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b)
         for (int c = 0; c < 3; ++c) {
-          const std::size_t node = nodeIndex(bx + a, by + b, bz + c);
+          const std::size_t node = st.node(a, b, c);
           held_[node] = 1;
           hx_[node] = parts_.vx[i];
           hy_[node] = parts_.vy[i];
@@ -180,12 +179,13 @@ void MpmWorld::gridUpdate(float h) {
               bz = int(block % std::size_t(nb_)) * kBlock;
     for (int l = 0; l < 64; ++l) {
       const std::size_t node = block * 64 + std::size_t(l);
-      const float m = gm_[node];
+      Node& gn = grid_[node];
+      const float m = gn.m;
       if (!(m > 0.0f)) {
-        gx_[node] = gy_[node] = gz_[node] = 0.0f;
+        gn.x = gn.y = gn.z = 0.0f;
         continue;
       }
-      float v[3] = {gx_[node] / m + g[0], gy_[node] / m + g[1], gz_[node] / m + g[2]};
+      float v[3] = {gn.x / m + g[0], gn.y / m + g[1], gn.z / m + g[2]};
       if (held_[node]) {
         v[0] = hx_[node];
         v[1] = hy_[node];
@@ -194,13 +194,17 @@ void MpmWorld::gridUpdate(float h) {
         const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
         for (int a = 0; a < 3; ++a) {
           const int lowest = a == 1 ? floorNode : wallLo_[a];
-          if (idx[a] <= lowest) applyWall(v, a, 1.0f, kind[2 * a], gfs_[node] / m, gfk_[node] / m);
-          else if (idx[a] >= wallHi_[a]) applyWall(v, a, -1.0f, kind[2 * a + 1], gfs_[node] / m, gfk_[node] / m);
+          const bool low = idx[a] <= lowest, high = idx[a] >= wallHi_[a];
+          if (!low && !high) continue;
+          const float mus = mixedFriction_ ? gfs_[node] / m : uniformMus_;
+          const float muk = mixedFriction_ ? gfk_[node] / m : uniformMuk_;
+          if (low) applyWall(v, a, 1.0f, kind[2 * a], mus, muk);
+          else applyWall(v, a, -1.0f, kind[2 * a + 1], mus, muk);
         }
       }
-      gx_[node] = v[0];
-      gy_[node] = v[1];
-      gz_[node] = v[2];
+      gn.x = v[0];
+      gn.y = v[1];
+      gn.z = v[2];
     }
   });
 }
@@ -211,33 +215,31 @@ void MpmWorld::g2p(float h) {
   forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
     for (std::size_t o = lo; o < hi; ++o) {
       const auto i = std::size_t(order_[o]);
-      const float fxr = (parts_.x[i] - ox) * inv, fyr = (parts_.y[i] - oy) * inv, fzr = (parts_.z[i] - oz) * inv;
-      const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
-      const int by = stencilBase(parts_.y[i] - oy, inv, n_);
-      const int bz = stencilBase(parts_.z[i] - oz, inv, n_);
-      const float f[3] = {fxr - float(bx), fyr - float(by), fzr - float(bz)};
-      float w[3][3];
-      for (int a = 0; a < 3; ++a) bsplineWeights(f[a], w[a]);
+      const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
       float v[3] = {0, 0, 0};
-      Eigen::Matrix3f B = Eigen::Matrix3f::Zero();
+      float Bm[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};  // sum of w v d^T (row r, column axis)
       for (int a = 0; a < 3; ++a) {
-        const float d0 = (float(a) - f[0]) * dx;
+        const float d0 = (float(a) - st.f[0]) * dx;
         for (int b = 0; b < 3; ++b) {
-          const float d1 = (float(b) - f[1]) * dx;
+          const float d1 = (float(b) - st.f[1]) * dx;
+          const float wab = st.w[0][a] * st.w[1][b];
           for (int c = 0; c < 3; ++c) {
-            const float d2 = (float(c) - f[2]) * dx;
-            const float wt = w[0][a] * w[1][b] * w[2][c];
-            const std::size_t node = nodeIndex(bx + a, by + b, bz + c);
-            const float u[3] = {wt * gx_[node], wt * gy_[node], wt * gz_[node]};
+            const float d2 = (float(c) - st.f[2]) * dx;
+            const float wt = wab * st.w[2][c];
+            const std::size_t node = st.node(a, b, c);
+            const Node& g = grid_[node];
+            const float u[3] = {wt * g.x, wt * g.y, wt * g.z};
             for (int r = 0; r < 3; ++r) {
               v[r] += u[r];
-              B(r, 0) += u[r] * d0;
-              B(r, 1) += u[r] * d1;
-              B(r, 2) += u[r] * d2;
+              Bm[r][0] += u[r] * d0;
+              Bm[r][1] += u[r] * d1;
+              Bm[r][2] += u[r] * d2;
             }
           }
         }
       }
+      Eigen::Matrix3f B;
+      B << Bm[0][0], Bm[0][1], Bm[0][2], Bm[1][0], Bm[1][1], Bm[1][2], Bm[2][0], Bm[2][1], Bm[2][2];
       const Eigen::Matrix3f C = (4.0f * inv * inv) * B;  // Hu et al. 2018 Eq. 17 with D^-1 = 4/dx^2
       parts_.vx[i] = v[0];
       parts_.vy[i] = v[1];
@@ -266,33 +268,59 @@ void MpmWorld::g2p(float h) {
 
 // A particle the grid let past a wall or the ground is put back on it and loses its velocity
 // into it: positions never leave [lo, hi], so P2G's stencil never leaves the grid.
-void MpmWorld::projection() {
-  std::vector<std::int64_t> counts((order_.size() + kChunk - 1) / kChunk, 0);
+// Particles at the domain's edge -- within 1.5 dx of one of its six walls, where the wall's
+// nodes are in their stencil and the wall, not the scene, shapes their motion -- are counted
+// (the ground is not an edge: it is a boundary the scene asks for), and the first (the lowest
+// id in the first substep with any) is kept for the run's report.
+void MpmWorld::projection(int substep) {
+  const std::size_t chunks = (order_.size() + kChunk - 1) / kChunk;
+  std::vector<std::int64_t> counts(chunks, 0);
+  std::vector<std::int32_t> first(chunks, -1);
+  std::vector<std::int8_t> firstSide(chunks, -1);
+  const float margin = 1.5f * float(dx_);
+  float edgeLo[3], edgeHi[3];
+  for (int a = 0; a < 3; ++a) {
+    edgeLo[a] = lo_[a] + margin;
+    edgeHi[a] = hi_[a] - margin;
+  }
+  if (groundNode_ >= 0 || params_.groundY >= double(lo_[1])) edgeLo[1] = -std::numeric_limits<float>::infinity();
   forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
-    std::int64_t stopped = 0;
+    std::int64_t atEdge = 0;
+    std::int32_t firstHere = -1;
+    std::int8_t sideHere = -1;
     for (std::size_t o = lo; o < hi; ++o) {
       const auto i = std::size_t(order_[o]);
       float* x[3] = {&parts_.x[i], &parts_.y[i], &parts_.z[i]};
       float* v[3] = {&parts_.vx[i], &parts_.vy[i], &parts_.vz[i]};
-      bool hit = false;
+      int wall = -1;  // 0..5: x-, x+, y-, y+, z-, z+
       for (int a = 0; a < 3; ++a) {
         if (*x[a] < lo_[a]) {
           *x[a] = lo_[a];
           *v[a] = std::max(*v[a], 0.0f);
-          hit = true;
         } else if (*x[a] > hi_[a]) {
           *x[a] = hi_[a];
           *v[a] = std::min(*v[a], 0.0f);
-          hit = true;
-        } else if (!(*x[a] == *x[a])) {
-          continue;  // NaN: left for the guard to report
-        }
+        }  // NaN compares false both ways: left for the guard to report
+        if (*x[a] < edgeLo[a]) wall = 2 * a;
+        else if (*x[a] > edgeHi[a]) wall = 2 * a + 1;
       }
-      stopped += hit;
+      if (wall < 0) continue;
+      ++atEdge;
+      if (firstHere < 0 || std::int32_t(i) < firstHere) {  // block order, not id order
+        firstHere = std::int32_t(i);
+        sideHere = std::int8_t(wall);
+      }
     }
-    counts[lo / kChunk] = stopped;
+    counts[lo / kChunk] = atEdge;
+    first[lo / kChunk] = firstHere;
+    firstSide[lo / kChunk] = sideHere;
   });
-  for (std::int64_t c : counts) stopped_ += c;
+  const bool firstWithAny = firstEdge_.particle < 0;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    atEdge_ += counts[c];
+    if (firstWithAny && first[c] >= 0 && (firstEdge_.particle < 0 || first[c] < firstEdge_.particle))
+      firstEdge_ = {first[c], firstSide[c], steps_, substep};
+  }
 }
 
 void MpmWorld::plasticity() {

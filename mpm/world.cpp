@@ -185,12 +185,15 @@ void MpmWorld::initGrid() {
     lo_[1] = float(g);
   }
   const std::size_t nodes = std::size_t(n_) * std::size_t(n_) * std::size_t(n_);
-  gm_.assign(nodes, 0.0f);
-  gx_.assign(nodes, 0.0f);
-  gy_.assign(nodes, 0.0f);
-  gz_.assign(nodes, 0.0f);
-  gfs_.assign(nodes, 0.0f);
-  gfk_.assign(nodes, 0.0f);
+  grid_.assign(nodes, Node{0.0f, 0.0f, 0.0f, 0.0f});
+  mixedFriction_ = false;
+  uniformMus_ = models_.empty() ? 0.0f : models_[0].mus;
+  uniformMuk_ = models_.empty() ? 0.0f : models_[0].muk;
+  for (const MatModel& m : models_) mixedFriction_ |= m.mus != uniformMus_ || m.muk != uniformMuk_;
+  if (mixedFriction_) {
+    gfs_.assign(nodes, 0.0f);
+    gfk_.assign(nodes, 0.0f);
+  }
   held_.assign(nodes, 0);
   nodeBlockMark_.assign(std::size_t(nb_) * nb_ * nb_, 0);
 }
@@ -205,11 +208,6 @@ void MpmWorld::initParticle(std::size_t i) {
   plastic_[i] = models_[m].kind == MaterialKind::kSand ? 0.0f : 1.0f;  // q = 0; snow J_p = 1; fluid J = 1
   float* pos[3] = {&parts_.x[i], &parts_.y[i], &parts_.z[i]};
   for (int a = 0; a < 3; ++a) *pos[a] = std::clamp(*pos[a], lo_[a], hi_[a]);
-}
-
-std::size_t MpmWorld::nodeIndex(int i, int j, int k) const {
-  const std::size_t block = (std::size_t(i >> 2) * std::size_t(nb_) + std::size_t(j >> 2)) * std::size_t(nb_) + std::size_t(k >> 2);
-  return block * 64 + std::size_t(((i & 3) << 4) | ((j & 3) << 2) | (k & 3));
 }
 
 Vec3 MpmWorld::centreOfMass(std::size_t b) const {
@@ -538,7 +536,8 @@ std::vector<PlanEntry> MpmWorld::plan() const {
 struct MpmWorld::Saved {
   std::vector<float> x, y, z, vx, vy, vz, plastic;
   std::vector<Eigen::Matrix3f> C, F;
-  std::int64_t stopped = 0;
+  std::int64_t atEdge = 0;
+  EdgeHit firstEdge;
 };
 
 GuardRecord MpmWorld::check(MpmPass pass) const {
@@ -608,7 +607,7 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
     if (runs(MpmPass::kGridUpdate) && !runPass(MpmPass::kGridUpdate, s, checkEachPass, [&] { gridUpdate(h); }))
       return false;
     if (runs(MpmPass::kG2P) && !runPass(MpmPass::kG2P, s, checkEachPass, [&] { g2p(h); })) return false;
-    if (runs(MpmPass::kProjection) && !runPass(MpmPass::kProjection, s, checkEachPass, [&] { projection(); }))
+    if (runs(MpmPass::kProjection) && !runPass(MpmPass::kProjection, s, checkEachPass, [&] { projection(s); }))
       return false;
     if (runs(MpmPass::kPlasticity) && !runPass(MpmPass::kPlasticity, s, checkEachPass, [&] { plasticity(); }))
       return false;
@@ -636,7 +635,7 @@ bool MpmWorld::step() {
   if (validate_) {
     runStep(substeps, true);
   } else {
-    Saved start{parts_.x, parts_.y, parts_.z, parts_.vx, parts_.vy, parts_.vz, plastic_, C_, F_, stopped_};
+    Saved start{parts_.x, parts_.y, parts_.z, parts_.vx, parts_.vy, parts_.vz, plastic_, C_, F_, atEdge_, firstEdge_};
     runStep(substeps, false);
     if (work_[std::size_t(MpmPass::kGuard)]) {
       GuardRecord r;
@@ -649,7 +648,7 @@ bool MpmWorld::step() {
         // the pass that produced the bad value (the step is deterministic).
         parts_.x = start.x, parts_.y = start.y, parts_.z = start.z;
         parts_.vx = start.vx, parts_.vy = start.vy, parts_.vz = start.vz;
-        plastic_ = start.plastic, C_ = start.C, F_ = start.F, stopped_ = start.stopped;
+        plastic_ = start.plastic, C_ = start.C, F_ = start.F, atEdge_ = start.atEdge, firstEdge_ = start.firstEdge;
         if (runStep(substeps, true)) {
           r.pass = "guard";
           r.step = steps_;
@@ -673,10 +672,23 @@ bool MpmWorld::step() {
 
 // --- observers -----------------------------------------------------------------------
 
+std::vector<std::string> MpmWorld::runNotes() const {
+  if (atEdge_ == 0 || firstEdge_.particle < 0) return {};
+  static const char* const kWall[6] = {"x-", "x+", "y- (floor)", "y+", "z-", "z+"};
+  const auto i = std::size_t(firstEdge_.particle);
+  std::ostringstream o;
+  o << "material reached the domain's edge (" << atEdge_ << " particle-substeps within 1.5 grid cells of a wall, "
+    << "where the wall, not the scene, moves it); first: particle " << firstEdge_.particle << " (stroke " << parts_.stroke[i]
+    << ", " << materials_[std::size_t(parts_.material[i])].name << ") at the " << kWall[std::size_t(firstEdge_.wall)]
+    << " wall in step " << firstEdge_.step << " (substep " << firstEdge_.substep
+    << "). The walls are the workspace's faces: enlarge 'workspace' if the material should go on.";
+  return {o.str()};
+}
+
 double MpmWorld::gridMass() const {
   double m = 0.0;
   for (std::int32_t b : activeNodeBlocks_)
-    for (std::size_t l = 0; l < 64; ++l) m += gm_[std::size_t(b) * 64 + l];
+    for (std::size_t l = 0; l < 64; ++l) m += grid_[std::size_t(b) * 64 + l].m;
   return m;
 }
 
@@ -685,7 +697,7 @@ Vec3 MpmWorld::gridMomentum() const {
   for (std::int32_t b : activeNodeBlocks_)
     for (std::size_t l = 0; l < 64; ++l) {
       const std::size_t k = std::size_t(b) * 64 + l;
-      p += double(gm_[k]) * Vec3(gx_[k], gy_[k], gz_[k]);
+      p += double(grid_[k].m) * Vec3(grid_[k].x, grid_[k].y, grid_[k].z);
     }
   return p;
 }

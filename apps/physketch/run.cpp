@@ -448,6 +448,7 @@ int runScene(const RunOptions& opt) {
                          " frames show no body (first: frame " + std::to_string(empty.front()) +
                          "): the camera does not look at the sketch; check the scene's 'camera' record");
     }
+    for (const std::string& note : solver->runNotes()) warnings.push_back(note);
     rep["warnings"] = warnings;
     // Body poses per frame, so trajectories can be checked without decoding images.
     json bodies = json::array();

@@ -512,6 +512,17 @@ TEST(Cli, ASceneWithSolverMpmRunsElasticSandAndFluidToFramesAndReport) {
   EXPECT_EQ(passes, "p2g grid_update g2p projection plasticity guard ");
   EXPECT_GT(rep["frames"]["triangles"].get<long>(), 0);
   EXPECT_TRUE(fs::exists(dir / "o" / "frames" / "frame_0003.png"));
+  EXPECT_TRUE(rep["warnings"].empty()) << rep["warnings"];  // nothing near the domain's walls
+  // Thrown at the x+ wall: the run says that material reached the domain's edge, and where.
+  writeText(dir / "t.strokes", "physketch-strokes 1\nprimitive box jelly 0  0.3 0.3 0  0.08 0.08 0.08 vel=6,0,0\n");
+  writeText(dir / "t.scene", "physketch-scene 1\nstrokes t.strokes\nsolver mpm\nsubsteps auto\n" + mats + "output report\n");
+  r = runCli("run '" + (dir / "t.scene").string() + "' -q --frames 4 --out '" + (dir / "t").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("warning: material reached the domain's edge"), std::string::npos) << r.err;
+  const auto thrown = readJson(dir / "t" / "report.json");
+  ASSERT_EQ(thrown["warnings"].size(), 1u) << thrown["warnings"];
+  EXPECT_NE(thrown["warnings"][0].get<std::string>().find("(stroke 0, jelly) at the x+ wall"), std::string::npos)
+      << thrown["warnings"];
   // 'substeps auto' is MPM's: under pbd it is an error naming the record's field.
   writeText(dir / "p.scene", head + "substeps auto\n" + mats);
   r = runCli("run '" + (dir / "p.scene").string() + "' -q --out '" + (dir / "p").string() + "'", dir);
