@@ -1,6 +1,8 @@
 #include "core/guard.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace physketch {
@@ -14,6 +16,7 @@ const char* toString(GuardKind kind) {
     case GuardKind::kInverted: return "inverted";
     case GuardKind::kCfl: return "cfl";
     case GuardKind::kCompression: return "compression";
+    case GuardKind::kEnergyGrowth: return "energy_growth";
   }
   return "?";
 }
@@ -81,6 +84,50 @@ GuardRecord checkParticles(const ParticleArrays& p, double maxSpeed) {
       return r;
     }
   }
+  return r;
+}
+
+GuardRecord EnergyWatch::check(const ParticleArrays& p, const Vec3& gravity, double spacing, bool closed,
+                               const std::string& hint) {
+  GuardRecord r;
+  if (!closed) {
+    armed_ = false;  // work from outside: a new reference once it stops
+    return r;
+  }
+  // Sums in double, in id order: the same state gives the same sums for any thread count.
+  double kinetic = 0.0, potential = 0.0, mass = 0.0, lowest = std::numeric_limits<double>::infinity(), most = -1.0;
+  std::size_t mostAt = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!phase::dynamic(p.phase[i]) || phase::has(p.phase[i], phase::kRemoved)) continue;
+    const double m = p.mass[i];
+    const double k = 0.5 * m * (double(p.vx[i]) * p.vx[i] + double(p.vy[i]) * p.vy[i] + double(p.vz[i]) * p.vz[i]);
+    const double height = -(gravity.x() * p.x[i] + gravity.y() * p.y[i] + gravity.z() * p.z[i]);  // J/kg
+    kinetic += k;
+    potential += m * height;
+    mass += m;
+    lowest = std::min(lowest, height);
+    if (k > most) {
+      most = k;
+      mostAt = i;
+    }
+  }
+  if (mass <= 0.0 || !std::isfinite(kinetic + potential)) return r;  // nothing to watch, or NaN: the NaN check's
+  const double energy = kinetic + potential;
+  if (!armed_) {
+    armed_ = true;
+    ref_ = energy;
+    const double available = kinetic + (potential - mass * lowest);
+    allowed_ = available + 0.5 * mass * 0.25 + mass * gravity.norm() * 2.0 * spacing;
+    return r;
+  }
+  if (energy <= ref_ + allowed_) return r;
+  r.kind = GuardKind::kEnergyGrowth;
+  r.particle = static_cast<std::int32_t>(mostAt);
+  r.body = p.group(mostAt);
+  r.stroke = p.stroke.empty() ? -1 : p.stroke[mostAt];
+  r.value = energy;
+  r.bound = ref_ + allowed_;
+  r.hint = hint;
   return r;
 }
 

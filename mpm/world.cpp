@@ -279,6 +279,7 @@ Vec3 MpmWorld::angularVelocity(int body) const {
 }
 
 int MpmWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kinematic) {
+  energy_.reset();
   const BodyInit& init = shape.init;
   if (p.size() == 0) throw RuntimeError("MpmWorld::addBody: a body needs particles");
   const int b = static_cast<int>(members_.size());
@@ -308,6 +309,7 @@ int MpmWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
 // the nodes they touch take their velocity (sticky). A released carried body keeps the
 // velocity of its last prescribed motion.
 void MpmWorld::setMode(int body, BodyMode mode) {
+  energy_.reset();
   const auto b = static_cast<std::size_t>(body);
   if (mode_.at(b) == BodyMode::kEmpty || mode == BodyMode::kEmpty) return;
   const BodyMode before = mode_[b];
@@ -328,6 +330,7 @@ void MpmWorld::setMode(int body, BodyMode mode) {
 }
 
 void MpmWorld::setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) {
+  energy_.reset();
   const auto b = static_cast<std::size_t>(body);
   if (mode_.at(b) != BodyMode::kDynamic) throw RuntimeError("MpmWorld::setVelocity: body is not dynamic");
   if (!velocity.allFinite() || !angularVelocity.allFinite()) throw RuntimeError("MpmWorld::setVelocity: not finite");
@@ -354,6 +357,7 @@ void MpmWorld::setKinematicTarget(int body, const Vec3& centre) {
 }
 
 std::vector<int> MpmWorld::removeParticles(const std::vector<std::int32_t>& ids) {
+  energy_.reset();
   std::vector<int> changed;
   for (std::int32_t i : ids) {
     if (i < 0 || static_cast<std::size_t>(i) >= parts_.size() || !alive(i)) continue;
@@ -633,7 +637,14 @@ bool MpmWorld::step() {
   }
   lastSubsteps_ = substeps;
   if (validate_) {
-    runStep(substeps, true);
+    if (runStep(substeps, true) && work_[std::size_t(MpmPass::kGuard)]) {
+      GuardRecord r = checkEnergy(substeps);  // a whole-step check: no pass of its own to name
+      if (r.tripped()) {
+        r.pass = "guard";
+        r.step = steps_;
+        guard_ = std::move(r);
+      }
+    }
   } else {
     Saved start{parts_.x, parts_.y, parts_.z, parts_.vx, parts_.vy, parts_.vz, plastic_, C_, F_, atEdge_, firstEdge_};
     runStep(substeps, false);
@@ -642,6 +653,7 @@ bool MpmWorld::step() {
       {
         ScopedPass t(profile_, MpmPass::kGuard);
         r = check(MpmPass::kGuard);
+        if (!r.tripped()) r = checkEnergy(substeps);
       }
       if (r.tripped()) {
         // Replay the step from its start with a check after every pass, so the record names
@@ -668,6 +680,16 @@ bool MpmWorld::step() {
   if (guard_.particle >= 0)
     guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
   return false;
+}
+
+// Energy growth while the system is closed (no carried body). The hint names the substep
+// count to try.
+GuardRecord MpmWorld::checkEnergy(int substeps) {
+  bool closed = true;
+  for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
+  const std::string hint = "Energy grew in a closed system (nothing moved it from outside): raise 'substeps' from " +
+                           std::to_string(substeps) + " to at least " + std::to_string(2 * substeps) + ", or lower 'dt'.";
+  return energy_.check(parts_, params_.gravity, params_.spacing, closed, hint);
 }
 
 // --- observers -----------------------------------------------------------------------

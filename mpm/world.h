@@ -169,6 +169,7 @@ class MpmWorld final : public Solver {
   template <class F>
   bool runPass(MpmPass pass, int substep, bool check, F&& f);
   GuardRecord check(MpmPass pass) const;
+  GuardRecord checkEnergy(int substeps);
 
   void sortByBlock();
   void p2g(float h);
@@ -227,6 +228,7 @@ class MpmWorld final : public Solver {
   std::vector<std::string> warnings_;
   Profile profile_{kMpmPasses};
   GuardRecord guard_;
+  EnergyWatch energy_;  // energy growth while closed; reset by every outside event
 };
 
 }  // namespace physketch::mpm

@@ -273,6 +273,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
   const BodyMode mode = kinematic ? BodyMode::kKinematic : init.fixed ? BodyMode::kFixed : BodyMode::kDynamic;
   const MaterialKind kind = kindOf(p.material[0]);
   appendBody(std::move(ids), init, mode, kind);
+  energy_.reset();
   const std::size_t b = members_.size() - 1;
   if (kind != MaterialKind::kRigid) {
     BodyRange range = shape;
@@ -290,6 +291,7 @@ void PbdWorld::setMode(int body, BodyMode mode) {
   const auto b = static_cast<std::size_t>(body);
   if (mode_.at(b) == BodyMode::kEmpty || mode == BodyMode::kEmpty) return;
   mode_[b] = mode;
+  energy_.reset();
   // Prescribed particles have infinite mass: the dynamic passes leave them alone.
   const std::int32_t group = static_cast<std::int32_t>(b);
   const std::uint32_t flags = mode == BodyMode::kDynamic ? 0u : phase::kPrescribed;
@@ -308,6 +310,7 @@ void PbdWorld::setVelocity(int body, const Vec3& velocity, const Vec3& angularVe
   if (mode_.at(b) != BodyMode::kDynamic) throw RuntimeError("PbdWorld::setVelocity: body is not dynamic");
   motion_[b].v = velocity;
   motion_[b].w = angularVelocity;
+  energy_.reset();
 }
 
 void PbdWorld::setKinematicTarget(int body, const Vec3& centre) {
@@ -404,6 +407,7 @@ void PbdWorld::labelDesignPieces(std::size_t b) {
 
 std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids) {
   std::vector<int> changed;
+  energy_.reset();
   for (std::int32_t i : ids) {
     if (i < 0 || static_cast<std::size_t>(i) >= parts_.size() || !alive(i)) continue;
     const auto k = std::size_t(i);
@@ -810,7 +814,14 @@ bool PbdWorld::step() {
     looseDirty_ = false;
   }
   if (validate_) {
-    runStep(true);
+    if (runStep(true) && work_[std::size_t(PbdPass::kGuard)]) {
+      GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
+      if (r.tripped()) {
+        r.pass = "guard";
+        r.step = steps_;
+        guard_ = std::move(r);
+      }
+    }
   } else {
     const std::vector<Motion> start = motion_;  // per body: cheap to keep
     const std::vector<GroundCache> cacheStart = groundCache_;
@@ -830,6 +841,7 @@ bool PbdWorld::step() {
         // that summary is suspect (or nothing was written this step).
         if (writtenSuspect_ || !work_[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
         if (!r.tripped() && work_[std::size_t(PbdPass::kDensity)]) r = checkCompression();
+        if (!r.tripped()) r = checkEnergy();
       }
       if (r.tripped()) {
         // Replay the step from its start with a check after every pass, so the record
@@ -855,6 +867,20 @@ bool PbdWorld::step() {
   if (guard_.particle >= 0)
     guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
   return false;
+}
+
+// Energy growth while the system is closed: no carried body (tools included) and no collider
+// moving along keyframes. The hint names the substep count to try: substeps damp the growth
+// where iterations do not (docs/accuracy.md, Small Steps).
+GuardRecord PbdWorld::checkEnergy() {
+  bool closed = true;
+  for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
+  if (colliders_)
+    for (std::size_t c = 0; c < colliders_->size(); ++c) closed &= !colliders_->moving(c);
+  const std::string hint = "Energy grew in a closed system (nothing moved it from outside): raise 'substeps' from " +
+                           std::to_string(params_.substeps) + " to at least " + std::to_string(2 * params_.substeps) +
+                           " (more substeps damp what more iterations do not), or lower 'dt'.";
+  return energy_.check(parts_, params_.gravity, 2.0 * params_.particleRadius, closed, hint);
 }
 
 // The particle state the bodies imply (or, for write_particles, the particle arrays

@@ -182,6 +182,7 @@ class PbdWorld final : public Solver {
   bool runPass(PbdPass pass, int substep, bool check, F&& f);
   GuardRecord checkImplied(bool bodiesOnly, bool penetration) const;
   GuardRecord checkCompression() const;
+  GuardRecord checkEnergy();
 
   void integrate(double h);
   void kinematic(int substep);
@@ -331,6 +332,7 @@ class PbdWorld final : public Solver {
   bool writtenSuspect_ = true;  // write_particles' summary: some particle may fail the guard
   Profile profile_{kPbdPasses};
   GuardRecord guard_;
+  EnergyWatch energy_;  // energy growth while closed; reset by every outside event
 };
 
 }  // namespace physketch::pbd

@@ -80,3 +80,48 @@ TEST(Phase, PacksGroupAndFlags) {
   EXPECT_EQ(phase::group(phase::make(-1)), -1);
   EXPECT_TRUE(phase::dynamic(phase::make(0)));
 }
+
+// EnergyWatch against energies summed by hand: masses 1, 2, 3 kg at heights 1, 2, 0.5 m,
+// g = 10 m/s^2, spacing 0.1 m, at rest. E_ref = 10 (1 + 4 + 1.5) = 65 J; available = 65 - 6 kg
+// x 10 x 0.5 m = 35 J; floor = 6 x 0.25 / 2 + 6 x 10 x 2 x 0.1 = 12.75 J: bound 112.75 J.
+TEST(Guard, EnergyGrowthTripsAboveTheAvailableEnergyAndOnlyWhileClosed) {
+  ParticleArrays p;
+  const float heights[3] = {1.0f, 2.0f, 0.5f};
+  for (int i = 0; i < 3; ++i) {
+    p.push(0.0f, heights[i], 0.0f, 10 + i, 0);
+    p.mass[std::size_t(i)] = float(i + 1);
+  }
+  for (auto& ph : p.phase) ph = phase::make(4);
+  const Vec3 g(0.0, -10.0, 0.0);
+  EnergyWatch w;
+  EXPECT_FALSE(w.check(p, g, 0.1, true, "hint").tripped());  // arms
+  ASSERT_TRUE(w.armed());
+  EXPECT_NEAR(w.reference(), 65.0, 1e-5);
+  EXPECT_NEAR(w.bound(), 112.75, 1e-5);
+  // 47 J of kinetic energy on the 3 kg particle: 112 J, inside the bound.
+  p.vy[2] = float(std::sqrt(2.0 * 47.0 / 3.0));
+  EXPECT_FALSE(w.check(p, g, 0.1, true, "hint").tripped());
+  // 48 J: 113 J, above it; the record names the particle with the most kinetic energy.
+  p.vy[2] = float(std::sqrt(2.0 * 48.0 / 3.0));
+  const GuardRecord r = w.check(p, g, 0.1, true, "raise substeps");
+  ASSERT_TRUE(r.tripped());
+  EXPECT_EQ(r.kind, GuardKind::kEnergyGrowth);
+  EXPECT_EQ(r.particle, 2);
+  EXPECT_EQ(r.stroke, 12);
+  EXPECT_NEAR(r.value, 113.0, 1e-4);
+  EXPECT_NEAR(r.bound, 112.75, 1e-5);
+  EXPECT_EQ(r.hint, "raise substeps");
+  EXPECT_NE(r.message().find("energy_growth"), std::string::npos);
+  // A prescribed particle's motion is the input's: it is not counted.
+  p.vy[2] = 0.0f;
+  p.phase[0] = phase::make(4, phase::kPrescribed);
+  p.vx[0] = 1000.0f;
+  EXPECT_FALSE(w.check(p, g, 0.1, true, "hint").tripped());
+  // Open (a body carried): never trips, and the next closed check takes a new reference.
+  p.vy[2] = 100.0f;
+  EXPECT_FALSE(w.check(p, g, 0.1, false, "hint").tripped());
+  EXPECT_FALSE(w.armed());
+  EXPECT_FALSE(w.check(p, g, 0.1, true, "hint").tripped());
+  EXPECT_TRUE(w.armed());
+  EXPECT_GT(w.reference(), 1e4);
+}
