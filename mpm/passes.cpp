@@ -192,6 +192,10 @@ void MpmWorld::gridUpdate(float h) {
         v[2] = hz_[node];
       } else {
         const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
+        if (!colliders_.empty()) {
+          const Vec3 x = origin_ + dx_ * Vec3(idx[0], idx[1], idx[2]);
+          collideNode(x, v, h, mixedFriction_ ? gfs_[node] / m : uniformMus_, mixedFriction_ ? gfk_[node] / m : uniformMuk_);
+        }
         for (int a = 0; a < 3; ++a) {
           const int lowest = a == 1 ? floorNode : wallLo_[a];
           const bool low = idx[a] <= lowest, high = idx[a] >= wallHi_[a];
@@ -304,6 +308,7 @@ void MpmWorld::projection(int substep) {
         if (*x[a] < edgeLo[a]) wall = 2 * a;
         else if (*x[a] > edgeHi[a]) wall = 2 * a + 1;
       }
+      if (!colliders_.empty()) pushOutOfColliders(i);
       if (wall < 0) continue;
       ++atEdge;
       if (firstHere < 0 || std::int32_t(i) < firstHere) {  // block order, not id order
@@ -320,6 +325,35 @@ void MpmWorld::projection(int substep) {
     atEdge_ += counts[c];
     if (firstWithAny && first[c] >= 0 && (firstEdge_.particle < 0 || first[c] < firstEdge_.particle))
       firstEdge_ = {first[c], firstSide[c], steps_, substep};
+  }
+}
+
+// A particle inside a collider goes back to its surface along the normal and loses its
+// velocity into it, relative to the collider (PhyVR's anti-penetration for its tools).
+void MpmWorld::pushOutOfColliders(std::size_t i) {
+  for (const Collider& c : colliders_) {
+    const Vec3 x(parts_.x[i], parts_.y[i], parts_.z[i]);
+    if ((x.array() < c.lo.array()).any() || (x.array() > c.hi.array()).any()) continue;
+    const Vec3 local = c.R1.transpose() * (x - c.p1);
+    double phi = 0.0;
+    Vec3 grad;
+    if (!c.sdf.sample(local, phi, grad) || phi >= 0.0) continue;
+    const double g = grad.norm();
+    if (g < 1e-6) continue;  // deep inside, no direction out: the grid moves it with the collider
+    const Vec3 n = c.R1 * (grad / g);
+    const Vec3 to = x - phi * n;
+    parts_.x[i] = float(to.x());
+    parts_.y[i] = float(to.y());
+    parts_.z[i] = float(to.z());
+    const Vec3 vc = (to - (c.R0 * local + c.p0)) / std::max(double(lastH_), 1e-12);
+    const Vec3 rel = Vec3(parts_.vx[i], parts_.vy[i], parts_.vz[i]) - vc;
+    const double vn = rel.dot(n);
+    if (vn < 0.0) {
+      const Vec3 v = rel - vn * n + vc;
+      parts_.vx[i] = float(v.x());
+      parts_.vy[i] = float(v.y());
+      parts_.vz[i] = float(v.z());
+    }
   }
 }
 

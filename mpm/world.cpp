@@ -470,9 +470,13 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
       return on ? "materials " + list : "no dynamic particle (all fixed, held or removed)";
     case MpmPass::kGridUpdate:
       return on ? std::string("gravity, ") + wallsText(params_.walls) +
-                      " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY)
+                      " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY) +
+                      (colliders_.empty() ? std::string() : ", " + std::to_string(colliders_.size()) + " mesh collider(s)")
                 : "no dynamic particle";
-    case MpmPass::kProjection: return on ? "walls and ground" : "no dynamic particle";
+    case MpmPass::kProjection:
+      return on ? std::string("walls and ground") +
+                      (colliders_.empty() ? std::string() : ", " + std::to_string(colliders_.size()) + " mesh collider(s)")
+                : "no dynamic particle";
     case MpmPass::kPlasticity:
       return on ? "plastic materials " + list : "no dynamic particle of a plastic kind (sand, snow, plasticine)";
     case MpmPass::kGuard: return on ? "checks every step" : "no particles";
@@ -607,6 +611,8 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
   const float h = float(params_.dt / substeps);
   const auto runs = [&](MpmPass p) { return bool(work_[std::size_t(p)]); };
   for (int s = 0; s < substeps; ++s) {
+    lastH_ = h;
+    if (!colliders_.empty()) poseColliders(double(steps_) * params_.dt + double(s) * double(h), double(h));
     if (runs(MpmPass::kP2G) && !runPass(MpmPass::kP2G, s, checkEachPass, [&] { p2g(h); })) return false;
     if (runs(MpmPass::kGridUpdate) && !runPass(MpmPass::kGridUpdate, s, checkEachPass, [&] { gridUpdate(h); }))
       return false;
@@ -682,14 +688,74 @@ bool MpmWorld::step() {
   return false;
 }
 
-// Energy growth while the system is closed (no carried body). The hint names the substep
+// Energy growth while the system is closed (no carried body, no moving collider). The hint names the substep
 // count to try.
 GuardRecord MpmWorld::checkEnergy(int substeps) {
   bool closed = true;
   for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
+  for (const Collider& c : colliders_) closed &= c.desc.keyframes.empty();  // a moving collider does work
   const std::string hint = "Energy grew in a closed system (nothing moved it from outside): raise 'substeps' from " +
                            std::to_string(substeps) + " to at least " + std::to_string(2 * substeps) + ", or lower 'dt'.";
   return energy_.check(parts_, params_.gravity, params_.spacing, closed, hint);
+}
+
+// --- mesh colliders -----------------------------------------------------------------
+
+void MpmWorld::setColliders(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes) {
+  if (descs.size() != meshes.size()) throw RuntimeError("MpmWorld::setColliders: one mesh per collider");
+  colliders_.clear();
+  for (std::size_t c = 0; c < descs.size(); ++c)
+    colliders_.push_back({descs[c], ColliderSdf(meshes[c], descs[c].scale, 0.5 * dx_, 1.5 * dx_)});
+  energy_.reset();
+}
+
+// Poses at t0 and t0 + h, and the world box the end pose's field covers.
+void MpmWorld::poseColliders(double t0, double h) {
+  for (Collider& c : colliders_) {
+    c.desc.poseAt(t0, c.R0, c.p0);
+    c.desc.poseAt(t0 + h, c.R1, c.p1);
+    c.lo = Vec3::Constant(std::numeric_limits<double>::infinity());
+    c.hi = -c.lo;
+    for (int k = 0; k < 8; ++k) {
+      const Vec3 corner((k & 1) ? c.sdf.boundsMax().x() : c.sdf.boundsMin().x(),
+                        (k & 2) ? c.sdf.boundsMax().y() : c.sdf.boundsMin().y(),
+                        (k & 4) ? c.sdf.boundsMax().z() : c.sdf.boundsMin().z());
+      const Vec3 w = c.R1 * corner + c.p1;
+      c.lo = c.lo.cwiseMin(w);
+      c.hi = c.hi.cwiseMax(w);
+    }
+  }
+}
+
+void MpmWorld::collideNode(const Vec3& x, float v[3], float h, float mus, float muk) const {
+  for (const Collider& c : colliders_) {
+    if ((x.array() < c.lo.array()).any() || (x.array() > c.hi.array()).any()) continue;
+    const Vec3 local = c.R1.transpose() * (x - c.p1);
+    double phi = 0.0;
+    Vec3 grad;
+    if (!c.sdf.sample(local, phi, grad) || phi >= 0.0) continue;
+    // The collider's velocity at x: where its material point now at x was at the substep's start.
+    const Vec3 vc = (x - (c.R0 * local + c.p0)) / double(h);
+    Vec3 rel = Vec3(v[0], v[1], v[2]) - vc;
+    const double g = grad.norm();
+    if (g < 1e-6) {
+      rel.setZero();  // deep inside: no normal to slide along, so the node moves with the collider
+    } else {
+      const Vec3 n = c.R1 * (grad / g);
+      const double vn = rel.dot(n);
+      if (vn < 0.0) {
+        rel -= vn * n;
+        const double fs = c.desc.friction ? *c.desc.friction : double(mus);
+        const double fk = c.desc.friction ? *c.desc.friction : double(muk);
+        const double t = rel.norm();
+        rel *= t <= fs * (-vn) ? 0.0 : std::max(0.0, 1.0 - fk * (-vn) / t);
+      }
+    }
+    const Vec3 out = rel + vc;
+    v[0] = float(out.x());
+    v[1] = float(out.y());
+    v[2] = float(out.z());
+  }
 }
 
 // --- observers -----------------------------------------------------------------------

@@ -31,6 +31,8 @@
 #include "core/math.h"
 #include "core/scene.h"
 #include "core/solver.h"
+#include "core/triangle_soup.h"
+#include "mpm/collider_sdf.h"
 
 namespace physketch::mpm {
 
@@ -108,6 +110,13 @@ class MpmWorld final : public Solver {
   // Marks the particles removed; bodies keep the rest (MPM material is not split into bodies
   // by connectivity: a cut body stays one group). Returns the bodies that lost particles.
   std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
+
+  // The scene's mesh colliders (static or keyframed), meshes[i] for descs[i]: each becomes a
+  // distance field (mpm/collider_sdf.h, voxel dx/2) that grid_update imposes on the nodes inside
+  // it (separate, with Coulomb friction, relative to the collider's motion) and projection on
+  // the particles inside it (pushed out along the normal). An open sheet is a shell 1.5 dx thick.
+  void setColliders(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes);
+  int colliderCount() const { return int(colliders_.size()); }
 
   const MpmParams& params() const { return params_; }
   double dx() const { return dx_; }
@@ -211,6 +220,21 @@ class MpmWorld final : public Solver {
   bool mixedFriction_ = false;
   float uniformMus_ = 0.0f, uniformMuk_ = 0.0f;
   std::vector<float> gfs_, gfk_;
+  // Mesh colliders, and their poses at the start (0) and end (1) of the current substep.
+  struct Collider {
+    MeshCollider desc;
+    ColliderSdf sdf;
+    Mat3 R0 = Mat3::Identity(), R1 = Mat3::Identity();
+    Vec3 p0 = Vec3::Zero(), p1 = Vec3::Zero();
+    Vec3 lo = Vec3::Zero(), hi = Vec3::Zero();  // world bounds at the end pose (m)
+  };
+  std::vector<Collider> colliders_;
+  void poseColliders(double t0, double h);
+  // Imposes the colliders on a node (world position x) of velocity v; mus, muk: the node's
+  // material friction (a collider's friction= replaces it).
+  void collideNode(const Vec3& x, float v[3], float h, float mus, float muk) const;
+  void pushOutOfColliders(std::size_t i);
+  float lastH_ = 0.0f;  // s, the current substep
   std::vector<std::uint8_t> held_;        // 1: a node a fixed or carried body holds
   std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
   // Sorting: dynamic particles by block, and the blocks that have any, by colour.

@@ -34,6 +34,7 @@ SolverSupport supportOf(SolverKind solver) {
       s.initialMotion = true;
       s.fixedBodies = true;
       s.domainGrid = true;
+      s.meshColliders = true;  // distance fields on the grid (mpm/collider_sdf.h)
       break;
   }
   return s;
@@ -105,6 +106,7 @@ std::unique_ptr<Solver> makeMpm(const Prepared& p) {
                          " m/s), more than 1000: lower dt or the material's E");
   }
   for (const std::string& w : world->warnings()) std::cerr << "warning: " << sc.path << ":" << sc.substepsLine << ": " << w << "\n";
+  if (!sc.colliders.empty()) world->setColliders(sc.colliders, p.colliderMeshes);
   return world;
 }
 

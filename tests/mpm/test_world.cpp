@@ -563,3 +563,116 @@ TEST(MpmWorld, MaterialAtTheDomainEdgeIsReportedWithTheWallAndTheFirstParticle) 
     EXPECT_TRUE(w.runNotes().empty());
   }
 }
+
+// --- mesh colliders (issue 9): distance fields imposed on the grid --------------------------
+
+namespace {
+
+// An axis-aligned box as a closed triangle mesh (12 triangles, counter-clockwise seen from outside).
+TriangleSoup boxSoup(const Vec3& lo, const Vec3& hi) {
+  TriangleSoup s;
+  for (int k = 0; k < 8; ++k)
+    s.vertices.emplace_back((k & 1) ? hi.x() : lo.x(), (k & 2) ? hi.y() : lo.y(), (k & 4) ? hi.z() : lo.z());
+  s.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                 {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  s.closed = true;
+  return s;
+}
+
+// A horizontal square sheet at height y: open, two triangles.
+TriangleSoup sheetSoup(double x0, double x1, double y, double z0, double z1) {
+  TriangleSoup s;
+  s.vertices = {Vec3(x0, y, z0), Vec3(x1, y, z0), Vec3(x0, y, z1), Vec3(x1, y, z1)};
+  s.triangles = {{0, 2, 1}, {1, 2, 3}};
+  s.closed = false;
+  return s;
+}
+
+MeshCollider colliderDesc(const std::string& name) {
+  MeshCollider c;
+  c.name = name;
+  return c;
+}
+
+// An 8^3 elastic block (h = 1 cm) dropped from y = startY onto whatever the colliders make, for
+// `seconds`: its centre height and lowest particle at the end, and the lowest any particle got.
+struct Drop {
+  double centre = 0.0, lowest = 0.0, lowestEver = 1e9;
+};
+Drop dropBlock(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes, double seconds,
+               double startY) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.465, startY, 0.465), 8, 8, 8, h, 0);
+  MpmParams q = unitDomain(h, 0);
+  MpmWorld w(p, bodies, {elastic(1e5)}, q);
+  if (!descs.empty()) w.setColliders(descs, meshes);
+  Drop d;
+  const auto lowestNow = [&] {
+    double lowest = 1e9;
+    for (float y : w.particles().y) lowest = std::min(lowest, double(y));
+    return lowest;
+  };
+  const int steps = int(std::lround(seconds / q.dt));
+  for (int s = 0; s < steps; ++s) {
+    EXPECT_TRUE(w.step()) << w.guard().message();
+    d.lowestEver = std::min(d.lowestEver, lowestNow());
+  }
+  d.centre = comY(w, 0);
+  d.lowest = lowestNow();
+  return d;
+}
+
+}  // namespace
+
+// A block dropped on a closed box collider (a table, top at y = 0.4) from 0.6 m never goes
+// through its top (the boundary acts on nodes inside the field, and projection puts back a
+// particle found inside: lowest ever within 5 mm of the top); set down 1 cm above it, it rests
+// there: its bottom on the top within the reach of the grid's boundary (a particle's stencil
+// reaches 1.5 dx = 3 cm, so the bottom rests 0-2.5 cm above), its centre 3.5 cm above its
+// bottom (not squashed). Control: without the collider the block falls past y = 0.3 in 0.3 s.
+TEST(MpmWorld, ABlockRestsOnAClosedMeshColliderAndFallsThroughWithoutIt) {
+  const std::vector<MeshCollider> table = {colliderDesc("table")};
+  const std::vector<TriangleSoup> mesh = {boxSoup(Vec3(0.3, 0.0, 0.3), Vec3(0.7, 0.4, 0.7))};
+  EXPECT_GT(dropBlock(table, mesh, 1.0, 0.6).lowestEver, 0.395);
+  const Drop rest = dropBlock(table, mesh, 0.6, 0.41);
+  EXPECT_GT(rest.lowest, 0.398);
+  EXPECT_LT(rest.lowest, 0.425);
+  EXPECT_NEAR(rest.centre - rest.lowest, 0.035, 0.005);
+  EXPECT_LT(dropBlock({}, {}, 0.3, 0.6).lowest, 0.3);
+}
+
+// An open sheet has no inside: it is a shell 1.5 dx thick (its upper surface 1.5 cm above
+// y = 0.4 here). Dropped from 0.6 m the block never reaches the sheet's plane; set down on it,
+// it rests on the shell (bottom 0.415 + 0-2.5 cm).
+TEST(MpmWorld, ABlockRestsOnAnOpenSheetCollider) {
+  const std::vector<MeshCollider> sheet = {colliderDesc("sheet")};
+  const std::vector<TriangleSoup> mesh = {sheetSoup(0.3, 0.7, 0.4, 0.3, 0.7)};
+  EXPECT_GT(dropBlock(sheet, mesh, 1.0, 0.6).lowestEver, 0.405);
+  const Drop rest = dropBlock(sheet, mesh, 0.6, 0.43);
+  EXPECT_GT(rest.lowest, 0.41);
+  EXPECT_LT(rest.lowest, 0.44);
+  EXPECT_NEAR(rest.centre - rest.lowest, 0.035, 0.005);
+}
+
+// A keyframed collider moves what rests on it: a box whose top rises from 0.2 to 0.5 m over
+// 1 s (0.3 m/s) lifts the block set on it by the same 0.3 m (bottom on the top within the
+// boundary's reach, 0-2.5 cm), and the collider's velocity enters the boundary, so the block
+// rides up with it (at 0.5 s already half-way) instead of sinking into the rising top.
+TEST(MpmWorld, AKeyframedColliderLiftsTheBlockOnIt) {
+  MeshCollider lift = colliderDesc("lift");
+  ColliderKeyframe k0, k1;
+  k0.t = 0.0;
+  k1.t = 1.0;
+  k1.position = Vec3(0.0, 0.3, 0.0);
+  lift.keyframes = {k0, k1};
+  const std::vector<TriangleSoup> mesh = {boxSoup(Vec3(0.3, 0.0, 0.3), Vec3(0.7, 0.2, 0.7))};
+  const Drop half = dropBlock({lift}, mesh, 0.5, 0.21);
+  EXPECT_GT(half.lowest, 0.35 - 0.002);
+  EXPECT_LT(half.lowest, 0.35 + 0.025);
+  const Drop top = dropBlock({lift}, mesh, 1.3, 0.21);
+  EXPECT_GT(top.lowest, 0.5 - 0.002);
+  EXPECT_LT(top.lowest, 0.5 + 0.025);
+  EXPECT_NEAR(top.centre - top.lowest, 0.035, 0.005);
+}
