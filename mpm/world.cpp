@@ -422,6 +422,10 @@ int MpmWorld::substepsForNextStep() const {
     const float v2 = parts_.vx[i] * parts_.vx[i] + parts_.vy[i] * parts_.vy[i] + parts_.vz[i] * parts_.vz[i];
     vmax2 = std::max(vmax2, v2);
   }
+  // A carried body (a tool) holds the nodes it touches at its own velocity, so material there
+  // moves at that speed: it counts like a particle's.
+  for (std::size_t body = 0; body < mode_.size(); ++body)
+    if (mode_[body] == BodyMode::kKinematic) vmax2 = std::max(vmax2, float(carry_[body].squaredNorm()));
   // The fastest particle may speed up by |g| dt within the step.
   const double vmax = std::sqrt(double(vmax2)) + params_.gravity.norm() * params_.dt;
   double h = b.h;

@@ -35,6 +35,7 @@ SolverSupport supportOf(SolverKind solver) {
       s.fixedBodies = true;
       s.domainGrid = true;
       s.meshColliders = true;  // distance fields on the grid (mpm/collider_sdf.h)
+      s.toolStrokes = true;    // kinematic bodies: their particles hold the nodes of their stencils
       break;
   }
   return s;
@@ -105,7 +106,9 @@ std::unique_ptr<Solver> makeMpm(const Prepared& p) {
                          std::to_string(b.h) + " s, c_p = " + std::to_string(b.waveSpeed) +
                          " m/s), more than 1000: lower dt or the material's E");
   }
-  for (const std::string& w : world->warnings()) std::cerr << "warning: " << sc.path << ":" << sc.substepsLine << ": " << w << "\n";
+  // The scene's 'substeps' line, or the file alone where it has none (the default of 4 applies).
+  const std::string where = sc.path + (sc.substepsLine > 0 ? ":" + std::to_string(sc.substepsLine) : std::string());
+  for (const std::string& w : world->warnings()) std::cerr << "warning: " << where << ": " << w << "\n";
   if (!sc.colliders.empty()) world->setColliders(sc.colliders, p.colliderMeshes);
   return world;
 }

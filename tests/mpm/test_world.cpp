@@ -676,3 +676,58 @@ TEST(MpmWorld, AKeyframedColliderLiftsTheBlockOnIt) {
   EXPECT_LT(top.lowest, 0.5 + 0.025);
   EXPECT_NEAR(top.centre - top.lowest, 0.035, 0.005);
 }
+
+// A tool (a carried body driven step by step, as tool strokes are) pushes material and is not
+// pushed back: a plate moving at 0.5 m/s along +x for 0.6 s reaches every target exactly, and
+// the block in its way (4 cm ahead; the plate's held nodes reach 1.5 dx = 3 cm beyond its
+// particles, so contact starts after about 0.02 m of travel) ends up moving at the plate's
+// speed (within 0.1 m/s) and pushed by the plate's travel less that gap: 0.3 - 0.02 m, within
+// 3 cm (the gap is known to one grid cell).
+TEST(MpmWorld, ACarriedToolPushesABlockAtItsOwnSpeedAndIsNotPushedBack) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.4, 0.005, 0.45), 8, 8, 8, h, 0);
+  Material m = elastic(1e5);
+  MpmWorld w(p, bodies, {m}, unitDomain(h, 0));
+  ParticleArrays plate;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 10; ++j)
+      for (int k = 0; k < 12; ++k) plate.push(float(0.33 + i * h), float(0.005 + j * h), float(0.435 + k * h), 9, 0);
+  const int tool = w.addBody(plate, BodyRange{}, /*kinematic=*/true);
+  const double x0 = w.pose(0).centre.x();
+  Vec3 target = w.pose(tool).centre;
+  const double speed = 0.5, dt = w.dt();
+  const int steps = int(std::lround(0.6 / dt));
+  for (int s = 0; s < steps; ++s) {
+    target.x() += speed * dt;
+    w.setKinematicTarget(tool, target);
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    ASSERT_LT((w.pose(tool).centre - target).norm(), 1e-5);
+  }
+  EXPECT_NEAR(w.velocity(0).x(), speed, 0.1);
+  EXPECT_NEAR(w.pose(0).centre.x() - x0, speed * 0.6 - 0.02, 0.03);
+}
+
+// `substeps auto` follows a carried body's speed too: a tool holds the nodes it touches at its
+// own velocity, so material there moves that fast. A tool carried 0.25 m in one step of 1/60 s
+// (15 m/s) needs at least dt v / (C dx) substeps by the velocity bound (C = velocityCourant);
+// before, only dynamic particles counted, and the soft block of mpm_tool_sudden inverted within
+// four substeps.
+TEST(MpmWorld, SubstepsAutoFollowsACarriedToolsSpeed) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.4, 0.005, 0.45), 4, 4, 4, h, 0);
+  MpmParams q = unitDomain(h, 0);
+  MpmWorld w(p, bodies, {elastic(1e4)}, q);
+  const int still = w.substepsForNextStep();
+  ParticleArrays tool;
+  tool.push(0.2f, 0.05f, 0.5f, 9, 0);
+  const int b = w.addBody(tool, BodyRange{}, /*kinematic=*/true);
+  w.setKinematicTarget(b, w.pose(b).centre + Vec3(0.25, 0.0, 0.0));
+  const double v = 0.25 / q.dt;
+  const int needed = int(std::ceil(q.dt * v / (q.velocityCourant * w.dx())));
+  EXPECT_GE(w.substepsForNextStep(), needed);
+  EXPECT_LT(still, needed);  // the wave bound alone would allow fewer
+}
