@@ -25,11 +25,20 @@ struct ColliderSdf::Impl {
   float outside = 0.0f;  // the value outside the band (on the outside)
 };
 
-ColliderSdf::ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, double thickness)
+ColliderSdf::ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, double thickness, double maxBandVoxels)
     : impl_(std::make_unique<Impl>()) {
   if (mesh.triangles.empty() || mesh.vertices.empty()) throw RuntimeError("ColliderSdf: the mesh has no triangles");
-  if (!(voxel > 0.0) || !std::isfinite(voxel) || !(scale > 0.0) || !std::isfinite(scale) || !(thickness >= 0.0))
+  if (!(voxel > 0.0) || !std::isfinite(voxel) || !(scale > 0.0) || !std::isfinite(scale) || !(thickness >= 0.0) ||
+      !(maxBandVoxels >= 1.0))
     throw RuntimeError("ColliderSdf: voxel, scale and thickness must be finite, voxel and scale > 0");
+  for (const auto& t : mesh.triangles) {
+    const Vec3 a = scale * mesh.vertices[std::size_t(t[0])], b = scale * mesh.vertices[std::size_t(t[1])],
+               c = scale * mesh.vertices[std::size_t(t[2])];
+    area_ += 0.5 * (b - a).cross(c - a).norm();
+  }
+  // Band voxels ~ area / voxel^2 x (2 half-widths + the shell): grow the voxel until they fit.
+  const double across = 2.0 * kHalfWidth + 1.0;
+  if (area_ * across / (voxel * voxel) > maxBandVoxels) voxel = std::sqrt(area_ * across / maxBandVoxels);
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
   std::vector<openvdb::Vec3s> points;
@@ -61,6 +70,8 @@ ColliderSdf::ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, d
   lo_ -= Vec3::Constant(grow);
   hi_ += Vec3::Constant(grow);
 }
+
+double ColliderSdf::voxel() const { return impl_->voxel; }
 
 ColliderSdf::~ColliderSdf() = default;
 ColliderSdf::ColliderSdf(ColliderSdf&&) noexcept = default;

@@ -16,10 +16,16 @@ namespace physketch::mpm {
 
 class ColliderSdf {
  public:
-  // points: the mesh in the collider's frame, already scaled (m). voxel: the field's spacing
-  // (m); thickness: an open sheet's shell thickness (m). Throws RuntimeError on an empty mesh
-  // or a bad size.
-  ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, double thickness);
+  // mesh: in the collider's frame, times scale (m). voxel: the field's spacing (m); thickness:
+  // an open sheet's shell thickness (m). The narrow band holds about area / voxel^2 x 2 x 3
+  // voxels; where that exceeds maxBandVoxels (a 100 m^2 mesh at 5 mm would need 24 M, about
+  // 0.5 GB with the tree) the voxel grows until it fits: voxel() says which was used. Throws
+  // RuntimeError on an empty mesh or a bad size.
+  static constexpr double kMaxBandVoxels = 2e7;
+  ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, double thickness,
+              double maxBandVoxels = kMaxBandVoxels);
+  double voxel() const;
+  double area() const { return area_; }  // m^2, the scaled mesh's surface
   ~ColliderSdf();
   ColliderSdf(ColliderSdf&&) noexcept;
   ColliderSdf& operator=(ColliderSdf&&) noexcept;
@@ -36,6 +42,7 @@ class ColliderSdf {
   struct Impl;
   std::unique_ptr<Impl> impl_;
   Vec3 lo_ = Vec3::Zero(), hi_ = Vec3::Zero();
+  double area_ = 0.0;
 };
 
 }  // namespace physketch::mpm

@@ -705,12 +705,22 @@ GuardRecord MpmWorld::checkEnergy(int substeps) {
 
 // --- mesh colliders -----------------------------------------------------------------
 
-void MpmWorld::setColliders(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes) {
+std::vector<std::string> MpmWorld::setColliders(const std::vector<MeshCollider>& descs,
+                                                const std::vector<TriangleSoup>& meshes, double maxBandVoxels) {
   if (descs.size() != meshes.size()) throw RuntimeError("MpmWorld::setColliders: one mesh per collider");
   colliders_.clear();
-  for (std::size_t c = 0; c < descs.size(); ++c)
-    colliders_.push_back({descs[c], ColliderSdf(meshes[c], descs[c].scale, 0.5 * dx_, 1.5 * dx_)});
+  std::vector<std::string> notes(descs.size());
+  for (std::size_t c = 0; c < descs.size(); ++c) {
+    colliders_.push_back({descs[c], ColliderSdf(meshes[c], descs[c].scale, 0.5 * dx_, 1.5 * dx_, maxBandVoxels)});
+    const ColliderSdf& f = colliders_.back().sdf;
+    if (f.voxel() > 0.5 * dx_ * (1.0 + 1e-9))
+      notes[c] = ("collider '" + descs[c].name + "': its surface of " + num(f.area()) +
+                          " m^2 would need more than " + num(maxBandVoxels) +
+                          " distance-field voxels at dx/2 = " + num(0.5 * dx_) + " m; the field uses " +
+                          num(f.voxel()) + " m voxels instead (coarser contact; a smaller or cropped mesh keeps dx/2)");
+  }
   energy_.reset();
+  return notes;
 }
 
 // Poses at t0 and t0 + h, and the world box the end pose's field covers.

@@ -115,7 +115,10 @@ class MpmWorld final : public Solver {
   // distance field (mpm/collider_sdf.h, voxel dx/2) that grid_update imposes on the nodes inside
   // it (separate, with Coulomb friction, relative to the collider's motion) and projection on
   // the particles inside it (pushed out along the normal). An open sheet is a shell 1.5 dx thick.
-  void setColliders(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes);
+  // Returns, per collider, a warning where its field had to be coarser than dx/2 (a mesh too
+  // large for maxBandVoxels at dx/2), else an empty string.
+  std::vector<std::string> setColliders(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes,
+                                        double maxBandVoxels = ColliderSdf::kMaxBandVoxels);
   int colliderCount() const { return int(colliders_.size()); }
 
   const MpmParams& params() const { return params_; }

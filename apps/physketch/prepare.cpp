@@ -109,7 +109,11 @@ std::unique_ptr<Solver> makeMpm(const Prepared& p) {
   // The scene's 'substeps' line, or the file alone where it has none (the default of 4 applies).
   const std::string where = sc.path + (sc.substepsLine > 0 ? ":" + std::to_string(sc.substepsLine) : std::string());
   for (const std::string& w : world->warnings()) std::cerr << "warning: " << where << ": " << w << "\n";
-  if (!sc.colliders.empty()) world->setColliders(sc.colliders, p.colliderMeshes);
+  if (!sc.colliders.empty()) {
+    const std::vector<std::string> notes = world->setColliders(sc.colliders, p.colliderMeshes);
+    for (std::size_t c = 0; c < notes.size(); ++c)
+      if (!notes[c].empty()) std::cerr << "warning: " << sc.path << ":" << sc.colliders[c].line << ": " << notes[c] << "\n";
+  }
   return world;
 }
 

@@ -731,3 +731,30 @@ TEST(MpmWorld, SubstepsAutoFollowsACarriedToolsSpeed) {
   EXPECT_GE(w.substepsForNextStep(), needed);
   EXPECT_LT(still, needed);  // the wave bound alone would allow fewer
 }
+
+// A collider mesh far larger than the domain does not exhaust memory: its distance field's
+// voxel grows until the narrow band fits the budget (ColliderSdf::kMaxBandVoxels = 2e7 by
+// default, 0.5 GB at most; 1e6 here to keep the test fast): a 10 m x 10 m sheet, which at
+// dx/2 = 1 cm would need 7e6 band voxels, gets sqrt(100 m^2 x 7 / 1e6) = 2.6 cm voxels,
+// setColliders says so, and the block still rests on it (bottom above 0.38 m after 0.5 s).
+TEST(MpmWorld, AHugeColliderMeshGetsACoarserFieldAndAWarningNotAnAllocationFailure) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.465, 0.43, 0.465), 8, 8, 8, h, 0);
+  MpmParams q = unitDomain(h, 0);
+  MpmWorld w(p, bodies, {elastic(1e5)}, q);
+  const std::vector<std::string> none = w.setColliders({colliderDesc("sheet")}, {sheetSoup(0.3, 0.7, 0.4, 0.3, 0.7)}, 1e6);
+  EXPECT_TRUE(none[0].empty()) << none[0];
+  const std::vector<std::string> notes = w.setColliders({colliderDesc("plain")}, {sheetSoup(-5, 5, 0.4, -5, 5)}, 1e6);
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("collider 'plain'"), std::string::npos) << notes[0];
+  EXPECT_NE(notes[0].find("voxels instead"), std::string::npos) << notes[0];
+  const ColliderSdf big(sheetSoup(-5, 5, 0.4, -5, 5), 1.0, 0.01, 0.03, 1e6);
+  EXPECT_NEAR(big.voxel(), std::sqrt(100.0 * 7.0 / 1e6), 1e-9);
+  EXPECT_NEAR(big.area(), 100.0, 1e-9);
+  for (int s = 0; s < 30; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  double lowest = 1e9;
+  for (float y : w.particles().y) lowest = std::min(lowest, double(y));
+  EXPECT_GT(lowest, 0.38);
+}
