@@ -53,6 +53,34 @@ inline void applyWall(float v[3], int axis, float side, WallKind kind, float mus
   }
 }
 
+// A carried body's one-sided boundary on a node velocity v: relative to the body's velocity
+// (hx, hy, hz), the part along the normal n (not unit; away from the body) that moves into the
+// body is removed, with Coulomb friction on the rest; material moving away is left alone (a
+// tool pushes, never pulls: PhyVR's Algorithm 1 does this for its tools). A zero normal (the
+// node inside the body) takes the body's velocity.
+inline void pushOnly(float v[3], float hx, float hy, float hz, const float n[3], float mus, float muk) {
+  const float hv[3] = {hx, hy, hz};
+  const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  if (!(len > 1e-6f)) {
+    for (int a = 0; a < 3; ++a) v[a] = hv[a];
+    return;
+  }
+  float rel[3], vn = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    rel[a] = v[a] - hv[a];
+    vn += rel[a] * n[a] / len;
+  }
+  if (vn >= 0.0f) return;
+  float t2 = 0.0f;
+  for (int a = 0; a < 3; ++a) {
+    rel[a] -= vn * n[a] / len;
+    t2 += rel[a] * rel[a];
+  }
+  const float t = std::sqrt(t2);
+  const float scale = t <= mus * (-vn) ? 0.0f : std::max(0.0f, 1.0f - muk * (-vn) / std::max(t, 1e-30f));
+  for (int a = 0; a < 3; ++a) v[a] = hv[a] + scale * rel[a];
+}
+
 // The lowest node of a particle's 3-node stencil along one axis: floor(x/dx - 1/2), clamped
 // so that base + 2 is still a node of the grid (nodes 0..n-1): no write ever leaves the grid.
 inline int stencilBase(float fromOrigin, float invDx, int n) {

@@ -238,8 +238,9 @@ class MpmWorld final : public Solver {
   void collideNode(const Vec3& x, float v[3], float h, float mus, float muk) const;
   void pushOutOfColliders(std::size_t i);
   float lastH_ = 0.0f;  // s, the current substep
-  std::vector<std::uint8_t> held_;        // 1: a node a fixed or carried body holds
+  std::vector<std::uint8_t> held_;        // 1: a node a fixed body holds (sticky); 2: a carried body (one-sided)
   std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
+  std::vector<float> hn_;                 // per node 3: a carried body's outward normal (not unit)
   // Sorting: dynamic particles by block, and the blocks that have any, by colour.
   std::vector<std::int32_t> order_, blockStart_, blockKey_;
   std::vector<std::int32_t> colourBlocks_[8];

@@ -758,3 +758,29 @@ TEST(MpmWorld, AHugeColliderMeshGetsACoarserFieldAndAWarningNotAnAllocationFailu
   for (float y : w.particles().y) lowest = std::min(lowest, double(y));
   EXPECT_GT(lowest, 0.38);
 }
+
+// A tool pushes and never pulls (PhyVR's one-sided tool boundary): a plate set against a block's
+// face and carried away from it at 0.5 m/s for 0.3 s leaves the block where it was (its centre
+// moves less than 5 mm; a sticky plate drags it along by about 0.15 m), while the same plate
+// carried into the block pushes it (the test above).
+TEST(MpmWorld, ACarriedToolMovingAwayDoesNotDragTheMaterialItTouched) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.4, 0.005, 0.45), 8, 8, 8, h, 0);
+  MpmWorld w(p, bodies, {elastic(1e5)}, unitDomain(h, 0));
+  ParticleArrays plate;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 10; ++j)
+      for (int k = 0; k < 12; ++k) plate.push(float(0.37 + i * h), float(0.005 + j * h), float(0.435 + k * h), 9, 0);
+  const int tool = w.addBody(plate, BodyRange{}, /*kinematic=*/true);
+  for (int s = 0; s < 10; ++s) ASSERT_TRUE(w.step()) << w.guard().message();  // settle against the plate
+  const double x0 = w.pose(0).centre.x();
+  Vec3 target = w.pose(tool).centre;
+  for (int s = 0; s < 18; ++s) {
+    target.x() -= 0.5 * w.dt();
+    w.setKinematicTarget(tool, target);
+    ASSERT_TRUE(w.step()) << w.guard().message();
+  }
+  EXPECT_NEAR(w.pose(0).centre.x(), x0, 0.005);
+}
