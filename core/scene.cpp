@@ -229,6 +229,10 @@ SceneDesc build(const RecordFile& file) {
       FieldReader f(file, r, {"k"});
       s.scale = f.inRange(0, 1e-3, 1e3);
       s.scaleLine = r.line;
+    } else if (kw == "cfl") {
+      FieldReader f(file, r, {"C"});
+      s.cfl = f.inRange(0, 1e-3, 1.0);
+      s.cflLine = r.line;
     } else if (kw == "grid_dx") {
       FieldReader f(file, r, {"spacings"});
       s.gridDx = f.inRange(0, 1.0, 4.0);
@@ -284,7 +288,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "walls grid_dx scale ground duration fps material collider keyframe expect camera image output)");
+                                                  "walls grid_dx cfl scale ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");

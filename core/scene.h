@@ -80,6 +80,10 @@ struct SceneDesc {
   int wallsLine = 0;          // line of the 'walls' record, 0 = the default
   double gridDx = 2.0;
   int gridDxLine = 0;         // line of the 'grid_dx' record, 0 = the default
+  // solver mpm: the Courant number C of `substeps auto` (`cfl`): h <= C dx / c_p and
+  // h <= C dx / |v|max; 0.5 by default, in (0, 1].
+  double cfl = 0.5;
+  int cflLine = 0;
   // solver mpm: real-world scale k = simulated size / real size (PhysGen3D §A.4, `scale`),
   // applied when the scene is parsed: g' = k g and, holding each body's mass fixed, density'
   // = density / k^3, stresses (E, bulk modulus, yield stress, sand cohesion) / k, dynamic

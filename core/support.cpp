@@ -1,5 +1,7 @@
 #include "core/support.h"
 
+#include <utility>
+
 #include <stdexcept>
 
 #include "core/error.h"
@@ -80,11 +82,15 @@ void checkSupport(const SceneDesc& scene, const SketchUses& uses, const SolverSu
     throw InputError(scene.path, c.line, "record",
                      "collider '" + c.name + "': " + solverText(scene) + " does not simulate mesh colliders yet");
   }
-  if (!support.domainGrid && (scene.wallsLine > 0 || scene.gridDxLine > 0 || scene.scaleLine > 0)) {
-    const bool walls = scene.wallsLine > 0, grid = !walls && scene.gridDxLine > 0;
-    throw InputError(scene.path, walls ? scene.wallsLine : grid ? scene.gridDxLine : scene.scaleLine, "record",
-                     std::string(walls ? "walls" : grid ? "grid_dx" : "scale") + ": " + solverText(scene) +
-                         " has no domain walls or background grid (the record is for solver mpm)");
+  if (!support.domainGrid) {
+    // The records only a background grid gives meaning to, the first one given.
+    const std::pair<int, const char*> gridRecords[] = {
+        {scene.wallsLine, "walls"}, {scene.gridDxLine, "grid_dx"}, {scene.scaleLine, "scale"}, {scene.cflLine, "cfl"}};
+    for (const auto& [line, name] : gridRecords)
+      if (line > 0)
+        throw InputError(scene.path, line, "record",
+                         std::string(name) + ": " + solverText(scene) +
+                             " has no domain walls or background grid (the record is for solver mpm)");
   }
   checkFeature(uses.toolStroke, support.toolStrokes, scene, "tool strokes");
   checkFeature(uses.velocity, support.initialMotion, scene, "initial velocities (vel=, spin=)");

@@ -86,6 +86,7 @@ MpmParams paramsFromScene(const SceneDesc& scene, double spacing) {
   p.domainSize = scene.workspaceSize;
   p.domainMin = scene.workspaceCenter - Vec3::Constant(0.5 * scene.workspaceSize);
   p.dxPerSpacing = scene.gridDx;
+  p.waveCourant = p.velocityCourant = scene.cfl;
   for (int k = 0; k < 6; ++k)
     p.walls[k] = scene.walls[k] == SceneDesc::Wall::kSticky ? WallKind::kSticky
                  : scene.walls[k] == SceneDesc::Wall::kSlip ? WallKind::kSlip

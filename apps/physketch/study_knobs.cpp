@@ -25,6 +25,8 @@ constexpr KnobSpec kKnobs[] = {
     {"dt", 1e-7, 0.1, false, "s per solver step (scene record 'dt'); 1/fps must stay a whole number of steps"},
     {"voxel", 1e-6, 1000.0 / sketch::kGridSize, false,
      "voxel size = particle spacing (m); the workspace edge becomes 151 voxels, centred as in the scene"},
+    {"grid_dx", 1.0, 4.0, false, "solver mpm: grid spacing in particle spacings (scene record 'grid_dx')"},
+    {"cfl", 1e-3, 1.0, false, "solver mpm with 'substeps auto': the Courant number C (scene record 'cfl')"},
 };
 
 // Knobs the issue names that arrive with later work: a clear refusal, never "unknown".
@@ -33,8 +35,7 @@ struct Reserved {
   const char* why;
 };
 constexpr Reserved kReserved[] = {
-    {"grid", "MPM grid resolution: not available yet (it arrives with the MPM solver)"},
-    {"cfl", "MPM CFL number: not available yet (it arrives with the MPM solver)"},
+    {"grid", "MPM grid resolution: write grid_dx (grid spacing in particle spacings) or voxel"},
     {"mesh_resolution", "meshing resolution: not available yet (study measures the simulated state, not frames)"},
     {"smoothing", "mesh smoothing: not available yet (study measures the simulated state, not frames)"},
 };
@@ -51,7 +52,7 @@ const KnobSpec& knobSpec(const std::string& name, const std::string& where) {
   for (const auto& r : kReserved)
     if (name == r.name) throw InputError(where, 0, name, std::string("knob '") + name + "' (" + r.why + ")");
   throw InputError(where, 0, name.empty() ? "knob" : name,
-                   "unknown knob '" + name + "' (known: " + knownKnobs() + "; later: grid, cfl, mesh_resolution, smoothing)");
+                   "unknown knob '" + name + "' (known: " + knownKnobs() + "; later: mesh_resolution, smoothing)");
 }
 
 double parseValue(const KnobSpec& k, const std::string& text, const std::string& where) {
@@ -166,6 +167,14 @@ void applySetting(const Setting& s, SceneDesc& scene, const std::string& option)
     if (knob == "iterations") scene.iterations = static_cast<int>(v);
     else if (knob == "substeps") scene.substeps = static_cast<int>(v);
     else if (knob == "voxel") scene.workspaceSize = v * sketch::kGridSize;
+    else if (knob == "grid_dx" || knob == "cfl") {
+      // MPM's: under pbd they would change nothing, and a study of nothing is an error.
+      if (scene.solver != SolverKind::kMpm)
+        throw InputError(where, 0, knob, "knob '" + knob + "' is solver mpm's; the scene runs solver " + toString(scene.solver));
+      if (knob == "cfl" && !scene.substepsAuto)
+        throw InputError(where, 0, knob, "knob 'cfl' acts through 'substeps auto'; the scene fixes substeps");
+      (knob == "cfl" ? scene.cfl : scene.gridDx) = v;
+    }
     else if (knob == "dt") {
       // Frames land on step boundaries (as the scene file checks for its own dt).
       const double ratio = 1.0 / (scene.fps * v);

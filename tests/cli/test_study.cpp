@@ -164,8 +164,9 @@ TEST(StudyCli, BadVaryValuesAreClearErrors) {
       {"--vary substeps=nan", "not a finite number"},
       {"--vary substeps=2,2", "value '2' given twice"},
       {"--vary substeps=1 --vary substeps=2", "knob varied twice"},
-      {"--vary grid=64,128", "knob 'grid' (MPM grid resolution: not available yet"},
-      {"--vary cfl=0.5", "not available yet"},
+      {"--vary grid=64,128", "knob 'grid' (MPM grid resolution: write grid_dx"},
+      {"--vary grid_dx=1.5,2", "knob 'grid_dx' is solver mpm's; the scene runs solver pbd"},
+      {"--vary cfl=0.5", "knob 'cfl' is solver mpm's"},
       {"--vary smoothing=1", "not available yet"},
       {"--vary substeps", "expected KNOB=V1,V2"},
       {"--vary dt=0.02", "1/fps must be a whole multiple of dt"},
@@ -454,5 +455,37 @@ TEST(StudyBudget, RunBudgetReportsTheCalibratedChoice) {
   EXPECT_NE(r.err.find("m.scene:3: field 'solver'"), std::string::npos) << r.err;
   r = runCli("run '" + (dir / "a.scene").string() + "' --budget -1 --out '" + (dir / "o3").string() + "'", dir);
   EXPECT_EQ(r.code, 1);
+  fs::remove_all(dir);
+}
+
+// The MPM knobs (issue 11): cfl (the Courant number of 'substeps auto') and grid_dx. In free
+// fall the centre of mass follows symplectic Euler whatever the grid (B-spline transfers pass a
+// uniform velocity through exactly), so its error is first order in the substep h, and
+// 'substeps auto' sets h = dt / ceil(dt c_p / (C dx)): halving C, or halving dx, halves h (28,
+// 14, 56 and 28 substeps here, exact doublings). The errors must follow: ratio 2 within 3 %.
+TEST(StudyCli, MpmKnobsCflAndGridDxMoveTheFreefallErrorAsTheSubstepDoes) {
+  const fs::path dir = freshDir("mpmknobs");
+  std::string text = slurp(scene("mpm_drop.scene"));
+  const std::string rel = "strokes drop.strokes", dur = "duration 0.5";
+  ASSERT_NE(text.find(rel), std::string::npos);
+  ASSERT_NE(text.find(dur), std::string::npos);
+  text.replace(text.find(rel), rel.size(), "strokes " + scene("drop.strokes"));
+  text.replace(text.find(dur), dur.size(), "duration 0.2");
+  std::ofstream(dir / "m.scene") << text;
+  const fs::path out = dir / "out";
+  const Result r = runCli("study '" + (dir / "m.scene").string() + "' --vary cfl=0.5,0.25 --vary grid_dx=1.5,3 --out '" +
+                              out.string() + "' --threads 1",
+                          dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::map<std::pair<std::string, std::string>, double> e;
+  for (const auto& row : readCsv(out / "study.csv")) {
+    EXPECT_EQ(row.at("status"), "ok");
+    e[{row.at("cfl"), row.at("grid_dx")}] = std::stod(row.at("error_m"));
+  }
+  ASSERT_EQ(e.size(), 4u);
+  const auto at = [&](const char* cfl, const char* grid) { return e[std::make_pair(std::string(cfl), std::string(grid))]; };
+  EXPECT_NEAR(at("0.5", "1.5") / at("0.25", "1.5"), 2.0, 0.06);
+  EXPECT_NEAR(at("0.5", "3") / at("0.25", "3"), 2.0, 0.06);
+  EXPECT_NEAR(at("0.5", "3") / at("0.5", "1.5"), 2.0, 0.06);
   fs::remove_all(dir);
 }

@@ -727,6 +727,12 @@ TEST(Scene, WallsGiveEveryWallAKindAndSidesOverrideIt) {
   EXPECT_EQ(sceneError("walls\n").field(), "kind");
   EXPECT_EQ(sceneError("grid_dx 0.5\n").field(), "spacings");
   EXPECT_EQ(sceneError("grid_dx nan\n").field(), "spacings");
+  // cfl: the Courant number of 'substeps auto', in (0, 1].
+  EXPECT_DOUBLE_EQ(parseScene(std::string(kGood) + "cfl 0.25\n", "dir/x.scene").cfl, 0.25);
+  EXPECT_DOUBLE_EQ(s.cfl, 0.5);
+  EXPECT_EQ(sceneError("cfl 0\n").field(), "C");
+  EXPECT_EQ(sceneError("cfl 1.5\n").field(), "C");
+  EXPECT_EQ(sceneError("cfl inf\n").field(), "C");
 }
 
 TEST(Support, WallsAndGridDxAreForSolverMpm) {
@@ -737,6 +743,10 @@ TEST(Support, WallsAndGridDxAreForSolverMpm) {
   const InputError e = supportError(scene, usesOfMaterials({{"wood", 2}}), pbd);
   EXPECT_EQ(e.line(), 10);
   EXPECT_NE(std::string(e.what()).find("walls: solver pbd (the default) has no domain walls"), std::string::npos) << e.what();
+  const SceneDesc cfl = parseScene(std::string(kGood) + "cfl 0.3\n", "dir/x.scene");
+  const InputError c = supportError(cfl, usesOfMaterials({{"wood", 2}}), pbd);
+  EXPECT_EQ(c.line(), 10);
+  EXPECT_NE(std::string(c.what()).find("cfl: solver pbd (the default) has no domain walls"), std::string::npos) << c.what();
 }
 
 // scale k (PhysGen3D §A.4): g' = k g; mass held, so density' = density / k^3; E' = E / k (the
