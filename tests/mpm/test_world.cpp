@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <random>
 
@@ -677,6 +678,31 @@ TEST(MpmWorld, AKeyframedColliderLiftsTheBlockOnIt) {
   EXPECT_NEAR(top.centre - top.lowest, 0.035, 0.005);
 }
 
+namespace {
+
+// An 8^3 elastic block (h = 1 cm) on the ground at x 0.4-0.47, and a 3 x 10 x 12 plate of
+// particles carried as a tool whose first layer is at x = plateX.
+struct BlockAndPlate {
+  std::unique_ptr<MpmWorld> w;
+  int tool = -1;
+};
+BlockAndPlate blockAndPlate(double plateX) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.4, 0.005, 0.45), 8, 8, 8, h, 0);
+  BlockAndPlate s;
+  s.w = std::make_unique<MpmWorld>(p, bodies, std::vector<Material>{elastic(1e5)}, unitDomain(h, 0));
+  ParticleArrays plate;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 10; ++j)
+      for (int k = 0; k < 12; ++k) plate.push(float(plateX + i * h), float(0.005 + j * h), float(0.435 + k * h), 9, 0);
+  s.tool = s.w->addBody(plate, BodyRange{}, /*kinematic=*/true);
+  return s;
+}
+
+}  // namespace
+
 // A tool (a carried body driven step by step, as tool strokes are) pushes material and is not
 // pushed back: a plate moving at 0.5 m/s along +x for 0.6 s reaches every target exactly, and
 // the block in its way (4 cm ahead; the plate's held nodes reach 1.5 dx = 3 cm beyond its
@@ -684,17 +710,9 @@ TEST(MpmWorld, AKeyframedColliderLiftsTheBlockOnIt) {
 // speed (within 0.1 m/s) and pushed by the plate's travel less that gap: 0.3 - 0.02 m, within
 // 3 cm (the gap is known to one grid cell).
 TEST(MpmWorld, ACarriedToolPushesABlockAtItsOwnSpeedAndIsNotPushedBack) {
-  const double h = 0.01;
-  ParticleArrays p;
-  std::vector<BodyRange> bodies;
-  addBox(p, bodies, Vec3(0.4, 0.005, 0.45), 8, 8, 8, h, 0);
-  Material m = elastic(1e5);
-  MpmWorld w(p, bodies, {m}, unitDomain(h, 0));
-  ParticleArrays plate;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 10; ++j)
-      for (int k = 0; k < 12; ++k) plate.push(float(0.33 + i * h), float(0.005 + j * h), float(0.435 + k * h), 9, 0);
-  const int tool = w.addBody(plate, BodyRange{}, /*kinematic=*/true);
+  BlockAndPlate setup = blockAndPlate(0.33);
+  MpmWorld& w = *setup.w;
+  const int tool = setup.tool;
   const double x0 = w.pose(0).centre.x();
   Vec3 target = w.pose(tool).centre;
   const double speed = 0.5, dt = w.dt();
@@ -764,16 +782,9 @@ TEST(MpmWorld, AHugeColliderMeshGetsACoarserFieldAndAWarningNotAnAllocationFailu
 // moves less than 5 mm; a sticky plate drags it along by about 0.15 m), while the same plate
 // carried into the block pushes it (the test above).
 TEST(MpmWorld, ACarriedToolMovingAwayDoesNotDragTheMaterialItTouched) {
-  const double h = 0.01;
-  ParticleArrays p;
-  std::vector<BodyRange> bodies;
-  addBox(p, bodies, Vec3(0.4, 0.005, 0.45), 8, 8, 8, h, 0);
-  MpmWorld w(p, bodies, {elastic(1e5)}, unitDomain(h, 0));
-  ParticleArrays plate;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 10; ++j)
-      for (int k = 0; k < 12; ++k) plate.push(float(0.37 + i * h), float(0.005 + j * h), float(0.435 + k * h), 9, 0);
-  const int tool = w.addBody(plate, BodyRange{}, /*kinematic=*/true);
+  BlockAndPlate setup = blockAndPlate(0.37);
+  MpmWorld& w = *setup.w;
+  const int tool = setup.tool;
   for (int s = 0; s < 10; ++s) ASSERT_TRUE(w.step()) << w.guard().message();  // settle against the plate
   const double x0 = w.pose(0).centre.x();
   Vec3 target = w.pose(tool).centre;
