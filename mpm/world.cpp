@@ -518,8 +518,8 @@ std::vector<PlanEntry> MpmWorld::planAll() const {
     const StepBound b = waveBound();
     runs = "substeps auto = " + (s > 0 ? std::to_string(s) : std::string("more than 1000")) + " now";
     if (b.material >= 0)
-      runs += " (h <= " + num(b.h) + " s from material " + materials_[std::size_t(b.material)].name + ", c_p = " +
-              num(b.waveSpeed) + " m/s)";
+      runs += " (h <= C dx / c_p = " + num(b.h) + " s from material " + materials_[std::size_t(b.material)].name +
+              ", C = " + num(params_.waveCourant) + ", c_p = " + num(b.waveSpeed) + " m/s)";
   }
   for (int k = 0; k < int(MpmPass::kCount); ++k) {
     const PassSpec& spec = kMpmPasses[k];
