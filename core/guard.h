@@ -11,7 +11,9 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
+#include <vector>
 
 #include "core/math.h"
 #include "core/particles.h"
@@ -53,6 +55,20 @@ struct GuardRecord {
 // Deterministic: the same state gives the same record for any thread count.
 GuardRecord checkParticles(const ParticleArrays& p, double maxSpeed);
 
+// The settings a guard record's advice names, with this run's values.
+struct KnobState {
+  int substeps = 1;        // the substeps of the step that tripped (what 'substeps auto' chose, if auto)
+  int iterations = 0;      // solver iterations per substep; 0: the solver has none (MPM)
+  bool substepsAuto = false;
+  double cfl = 0.0;        // the Courant number 'substeps auto' uses
+};
+// "raise 'substeps' from 4 to at least 7": the knob that would fix the record, with values.
+// How much finer: a CFL record by its ratio value / bound (cells moved per substep), every
+// other kind by a factor 2. Solvers with iterations are told substeps first (more substeps
+// damp what more iterations do not, docs/accuracy.md), except for fluid compression, which
+// the density iterations fix. Appended to the record's cause by the solver when it trips.
+std::string knobAdvice(const GuardRecord& r, const KnobState& k);
+
 // Energy growth in a closed system, for every solver. The mechanical energy of the dynamic
 // particles, E = sum m (v^2 / 2 - g . x), can only fall in a closed system (no work from
 // outside: no carried or tool body moving, nothing added, removed or given a velocity) whose
@@ -64,13 +80,35 @@ GuardRecord checkParticles(const ParticleArrays& p, double maxSpeed);
 // may at most double what could have moved anything, plus a floor of M (0.5 m/s)^2 / 2 + M |g|
 // 2 h (h: the particle spacing) for push-out of a sketch's contacts at rest and zero gravity.
 // Reference: the first check after construction or after the solver's last outside event.
+// The terms of E over a set of dynamic particles (or bodies: a solver may sum a rigid body's
+// terms from its centre-of-mass motion instead of its particles).
+struct EnergySums {
+  double kinetic = 0.0;    // J, sum m v^2 / 2
+  double potential = 0.0;  // J, sum m h, h = -g . x (J/kg)
+  double mass = 0.0;       // kg
+  double lowest = std::numeric_limits<double>::infinity();  // J/kg, the lowest h of any of them
+  void add(const EnergySums& o) {
+    kinetic += o.kinetic;
+    potential += o.potential;
+    mass += o.mass;
+    lowest = lowest < o.lowest ? lowest : o.lowest;
+  }
+};
+// Over every dynamic particle, or over the dynamic ones among ids. One vectorized pass; the
+// same state gives the same sums for any thread count.
+EnergySums energySums(const ParticleArrays& p, const Vec3& gravity);
+EnergySums energySums(const ParticleArrays& p, const Vec3& gravity, const std::vector<std::int32_t>& ids);
+
 class EnergyWatch {
  public:
   // Forget the reference (an outside event: the next check takes a new one).
   void reset() { armed_ = false; }
   // closed: no body moves by prescription now. Returns a tripped record (kind kEnergyGrowth,
-  // value E, bound, the particle with the most kinetic energy, hint) or an empty one.
-  GuardRecord check(const ParticleArrays& p, const Vec3& gravity, double spacing, bool closed, const std::string& hint);
+  // value E, bound, the particle with the most kinetic energy; the caller adds the hint, which
+  // names its own knobs) or an empty one. Costs one vectorized sum over the particles.
+  GuardRecord check(const ParticleArrays& p, const Vec3& gravity, double spacing, bool closed);
+  // The same from sums the solver made (p is read only to name the offender when it trips).
+  GuardRecord check(const EnergySums& sums, const ParticleArrays& p, const Vec3& gravity, double spacing, bool closed);
   bool armed() const { return armed_; }
   double reference() const { return ref_; }
   double bound() const { return ref_ + allowed_; }

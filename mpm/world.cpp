@@ -573,7 +573,7 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
       const float J = fluid ? plastic_[i] : F_[i].determinant();
       if (!(J > 0.0f)) {
         fill(i, GuardKind::kInverted, J, 0.0,
-             "The deformation gradient inverted (J <= 0): write 'substeps auto' or raise 'substeps', or lower 'dt'.");
+             "The deformation gradient inverted (J <= 0).");
         return r;
       }
     }
@@ -587,8 +587,7 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
                         double(parts_.vz[i]) * parts_.vz[i];
       if (v2 > vmax * vmax) {
         fill(i, GuardKind::kCfl, std::sqrt(v2), vmax,
-             "A particle moves more than one grid cell per substep (speed above dx/h): write 'substeps auto' or raise "
-             "'substeps'.");
+             "A particle moves more than one grid cell per substep (speed above dx/h, Hu et al. 2018 §5).");
         return r;
       }
     }
@@ -649,7 +648,7 @@ bool MpmWorld::step() {
   lastSubsteps_ = substeps;
   if (validate_) {
     if (runStep(substeps, true) && work_[std::size_t(MpmPass::kGuard)]) {
-      GuardRecord r = checkEnergy(substeps);  // a whole-step check: no pass of its own to name
+      GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
       if (r.tripped()) {
         r.pass = "guard";
         r.step = steps_;
@@ -664,7 +663,7 @@ bool MpmWorld::step() {
       {
         ScopedPass t(profile_, MpmPass::kGuard);
         r = check(MpmPass::kGuard);
-        if (!r.tripped()) r = checkEnergy(substeps);
+        if (!r.tripped()) r = checkEnergy();
       }
       if (r.tripped()) {
         // Replay the step from its start with a check after every pass, so the record names
@@ -690,18 +689,23 @@ bool MpmWorld::step() {
   }
   if (guard_.particle >= 0)
     guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+  KnobState knobs;
+  knobs.substeps = substeps;
+  knobs.substepsAuto = params_.substeps == 0;
+  knobs.cfl = params_.waveCourant;
+  guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
   return false;
 }
 
-// Energy growth while the system is closed (no carried body, no moving collider). The hint names the substep
+// Energy growth while the system is closed (no carried body, no moving collider). step() adds the substep
 // count to try.
-GuardRecord MpmWorld::checkEnergy(int substeps) {
+GuardRecord MpmWorld::checkEnergy() {
   bool closed = true;
   for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
   for (const Collider& c : colliders_) closed &= c.desc.keyframes.empty();  // a moving collider does work
-  const std::string hint = "Energy grew in a closed system (nothing moved it from outside): raise 'substeps' from " +
-                           std::to_string(substeps) + " to at least " + std::to_string(2 * substeps) + ", or lower 'dt'.";
-  return energy_.check(parts_, params_.gravity, params_.spacing, closed, hint);
+  GuardRecord r = energy_.check(parts_, params_.gravity, params_.spacing, closed);
+  if (r.tripped()) r.hint = "Energy grew in a closed system (nothing moved it from outside).";
+  return r;
 }
 
 // --- mesh colliders -----------------------------------------------------------------

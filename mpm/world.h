@@ -181,7 +181,7 @@ class MpmWorld final : public Solver {
   template <class F>
   bool runPass(MpmPass pass, int substep, bool check, F&& f);
   GuardRecord check(MpmPass pass) const;
-  GuardRecord checkEnergy(int substeps);
+  GuardRecord checkEnergy();
 
   void sortByBlock();
   void p2g(float h);

@@ -866,6 +866,10 @@ bool PbdWorld::step() {
   }
   if (guard_.particle >= 0)
     guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+  KnobState knobs;
+  knobs.substeps = params_.substeps;
+  knobs.iterations = params_.iterations;
+  guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
   return false;
 }
 
@@ -877,10 +881,31 @@ GuardRecord PbdWorld::checkEnergy() {
   for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
   if (colliders_)
     for (std::size_t c = 0; c < colliders_->size(); ++c) closed &= !colliders_->moving(c);
-  const std::string hint = "Energy grew in a closed system (nothing moved it from outside): raise 'substeps' from " +
-                           std::to_string(params_.substeps) + " to at least " + std::to_string(2 * params_.substeps) +
-                           " (more substeps damp what more iterations do not), or lower 'dt'.";
-  return energy_.check(parts_, params_.gravity, 2.0 * params_.particleRadius, closed, hint);
+  // Rigid bodies from their centre-of-mass motion (exact for a rigid body: sum m |v + w x r|^2 / 2 =
+  // M v^2 / 2 + w . I w / 2), so that the check costs O(bodies) for them, not a pass over their
+  // particles; their lowest point from the centre and the body's reach (a bound: it can only
+  // raise the energy allowed, by at most M |g| reach). Particle-level bodies from their particles.
+  EnergySums sums;
+  if (closed) {
+    const double gn = params_.gravity.norm();
+    for (std::size_t b = 0; b < mode_.size(); ++b) {
+      if (mode_[b] != BodyMode::kDynamic || !isRigid(b) || invMass_[b] <= 0.0) continue;
+      const Motion& mo = motion_[b];
+      const double m = 1.0 / invMass_[b];
+      const Mat3 R = mo.q.toRotationMatrix();
+      const double h = -params_.gravity.dot(mo.c);
+      EnergySums body;
+      body.kinetic = 0.5 * m * mo.v.squaredNorm() + 0.5 * mo.w.dot(R * inertiaRest_[b] * R.transpose() * mo.w);
+      body.potential = m * h;
+      body.mass = m;
+      body.lowest = h - reach_[b] * gn;
+      sums.add(body);
+    }
+    if (!loose_.empty()) sums.add(energySums(parts_, params_.gravity, loose_));
+  }
+  GuardRecord r = energy_.check(sums, parts_, params_.gravity, 2.0 * params_.particleRadius, closed);
+  if (r.tripped()) r.hint = "Energy grew in a closed system (nothing moved it from outside).";
+  return r;
 }
 
 // The particle state the bodies imply (or, for write_particles, the particle arrays
@@ -933,18 +958,18 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
       };
       if (!p.allFinite() || !v.allFinite()) {
         fill(GuardKind::kNaN, std::nan(""), 0.0,
-             "A non-finite value usually comes from a degenerate constraint; lower 'dt' or raise 'substeps'.");
+             "A non-finite value usually comes from a degenerate constraint.");
         return r;
       }
       if (m != BodyMode::kDynamic || pinned_[k]) continue;  // the input moves it: only NaN is the solver's
       if (bodiesOnly && v.squaredNorm() > maxSpeed2) {
         fill(GuardKind::kExplosion, v.norm(), params_.maxSpeed,
-             "Speed above the bound: raise 'substeps' or 'iterations', or lower 'dt'.");
+             "Speed above the bound.");
         return r;
       }
       if (penetration && floorY - p.y() > bound) {
         fill(GuardKind::kPenetration, floorY - p.y(), bound,
-             "Particle deep in the ground: raise 'iterations' or 'substeps'.");
+             "Particle deep in the ground.");
         return r;
       }
     }

@@ -1093,7 +1093,7 @@ GuardRecord PbdWorld::checkCompression() const {
   r.stroke = parts_.stroke[i];
   r.value = e.meanCompression;
   r.bound = params_.maxCompression;
-  r.hint = "The fluid is compressed beyond the bound: raise 'iterations' or 'substeps', or lower 'dt'.";
+  r.hint = "The fluid is compressed beyond the bound.";
   return r;
 }
 
