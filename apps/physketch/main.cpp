@@ -62,8 +62,8 @@ int main(int argc, char** argv) {
                      "(report.json: frames.smoothing); 0 = off")
       ->check(CLI::Range(0, 100));
   runCmd->add_option("--budget", run.budgetMs,
-                     "Pick substeps and iterations (pbd) so that the solver takes about MS milliseconds per frame on "
-                     "this machine, from a short calibration of the scene's first frames; prints the error expected "
+                     "Pick substeps and iterations (pbd), or the Courant number of 'substeps auto' (mpm), so that the "
+                     "solver takes about MS milliseconds per frame on this machine, from a short calibration of the scene's first frames; prints the error expected "
                      "(report.json: budget; docs/accuracy.md)")
       ->check(CLI::PositiveNumber);
 

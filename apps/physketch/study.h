@@ -152,8 +152,10 @@ Trajectory calibrationRun(const std::string& scenePath, const Setting& setting, 
 // Calibrates a PBD scene for a solver time per frame: for iterations 1, 2 and 4, runs the
 // scene's first K frames (a fifth of them, at least 5) with substeps 1, 2, 4, ... until a
 // setting is over the budget, then the substep count interpolated between the last two to fill
-// it; the errors against a finer run (twice the most substeps tried, 4 iterations). Throws
-// InputError for a non-PBD scene or a budget that is not a positive number.
+// it; the errors against a finer run (twice the most substeps tried, 4 iterations). An MPM
+// scene with 'substeps auto': the Courant number C = 1, 1/2, 1/4, ... the same way (time about
+// 1/C), errors against half the smallest C tried. Throws InputError for an MPM scene with fixed
+// substeps or a budget that is not a positive number.
 BudgetChoice calibrateBudget(const std::string& scenePath, double budgetMs, int threads, bool quiet);
 
 // Plot size of study.png (pixels).

@@ -448,13 +448,62 @@ TEST(StudyBudget, RunBudgetReportsTheCalibratedChoice) {
   ASSERT_GE(k, 0);
   EXPECT_EQ(chosen, table[std::size_t(k)].setting[0].first);
 
-  std::ofstream(dir / "m.scene") << "physketch-scene 1\nstrokes s.strokes\nsolver mpm\nduration 0.3\n"
+  // Solver mpm: the knob is the Courant number of 'substeps auto', which a fixed count rules out.
+  std::ofstream(dir / "m.scene") << "physketch-scene 1\nstrokes s.strokes\nsolver mpm\nsubsteps 4\nduration 0.3\n"
                                     "material stone elastic preset=hard\noutput report\n";
   r = runCli("run '" + (dir / "m.scene").string() + "' --budget 2 --out '" + (dir / "o2").string() + "'", dir);
   EXPECT_EQ(r.code, 1);
-  EXPECT_NE(r.err.find("m.scene:3: field 'solver'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("m.scene:4: field 'substeps'"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("substeps auto"), std::string::npos) << r.err;
   r = runCli("run '" + (dir / "a.scene").string() + "' --budget -1 --out '" + (dir / "o3").string() + "'", dir);
   EXPECT_EQ(r.code, 1);
+  fs::remove_all(dir);
+}
+
+// run --budget under solver mpm picks the Courant number C of 'substeps auto': the candidates are
+// C = 1, 1/2, 1/4, ... (halving until one is over the budget), their solver time per frame
+// grows as C falls (each halving about doubles the substeps), the choice is the calibrated one,
+// and the reference is finer than every candidate.
+TEST(StudyBudget, MpmBudgetPicksTheCourantNumber) {
+  const fs::path dir = freshDir("budgetmpm");
+  std::ofstream(dir / "s.strokes") << "physketch-strokes 1\nprimitive box stone 0  0 0.4 0  0.06 0.06 0.06 body=box\nplay 0\n";
+  std::ofstream(dir / "m.scene") << "physketch-scene 1\nstrokes s.strokes\nsolver mpm\nsubsteps auto\nduration 0.2\n"
+                                    "material stone elastic preset=soft\noutput report\n";
+  // Calibrate once to learn the cost at C = 1, then ask for about three times that.
+  Result r = runCli("run '" + (dir / "m.scene").string() + "' --budget 0.001 --threads 1 --out '" +
+                        (dir / "o0").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json first = nlohmann::json::parse(slurp(dir / "o0" / "report.json")).at("budget");
+  EXPECT_FALSE(first.at("fits").get<bool>());
+  EXPECT_EQ(first.at("setting").get<std::string>(), "cfl=1");  // nothing fits: the fastest
+  const double budgetMs = 3.0 * first.at("candidates").at(0).at("ms_per_frame").get<double>();
+  r = runCli("run '" + (dir / "m.scene").string() + "' --budget " + std::to_string(budgetMs) + " --threads 1 --out '" +
+                 (dir / "o").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json budget = nlohmann::json::parse(slurp(dir / "o" / "report.json")).at("budget");
+  std::vector<BudgetCandidate> table;
+  double smallest = 1.0;
+  for (const nlohmann::json& c : budget.at("candidates")) {
+    BudgetCandidate b;
+    const std::string setting = c.at("setting").get<std::string>();
+    ASSERT_EQ(setting.rfind("cfl=", 0), 0u) << setting;
+    smallest = std::min(smallest, std::stod(setting.substr(4)));
+    b.setting = {{setting, 0.0}};
+    b.msPerFrame = c.at("ms_per_frame").get<double>();
+    b.error = c.at("error_m").is_null() ? NAN : c.at("error_m").get<double>();
+    b.status = c.at("status").get<std::string>();
+    table.push_back(b);
+  }
+  ASSERT_GE(table.size(), 2u);
+  EXPECT_EQ(table[0].setting[0].first, "cfl=1");
+  EXPECT_EQ(table[1].setting[0].first, "cfl=0.5");
+  EXPECT_GT(table[1].msPerFrame, 1.3 * table[0].msPerFrame);  // twice the substeps; timing noise allowed
+  bool fits = false;
+  const std::ptrdiff_t k = chooseWithinBudget(table, budgetMs, fits);
+  ASSERT_GE(k, 0);
+  EXPECT_EQ(budget.at("setting").get<std::string>(), table[std::size_t(k)].setting[0].first);
+  const std::string ref = budget.at("reference").get<std::string>();
+  EXPECT_LT(std::stod(ref.substr(4)), smallest) << ref;
   fs::remove_all(dir);
 }
 
