@@ -96,25 +96,35 @@ void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshColl
   it->keyframes.push_back(k);
 }
 
-// expect freefall | expect rest | expect height BODY Y (docs/formats.md, "Expected answers").
+// expect freefall | expect rest | expect height BODY Y | expect dam_break A | expect runout
+// (docs/formats.md, "Expected answers").
 Expectation parseExpect(const RecordFile& file, const Record& r, const std::vector<Expectation>& existing) {
-  FieldReader f(file, r, {"kind", "body", "y"}, 1);
+  const bool dam = r.tokens.size() > 1 && r.tokens[1] == "dam_break";
+  FieldReader f(file, r, {"kind", dam ? "a" : "body", "y"}, 1);
   Expectation e;
   e.line = r.line;
   const std::string& kind = f.word(0);
-  const std::size_t want = kind == "height" ? 3 : 1;
+  const std::size_t want = kind == "height" ? 3 : kind == "dam_break" ? 2 : 1;
   if (kind == "freefall") e.kind = Expectation::Kind::kFreefall;
   else if (kind == "rest") e.kind = Expectation::Kind::kRest;
   else if (kind == "height") e.kind = Expectation::Kind::kHeight;
-  else f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height)");
-  if (f.count() < want) f.fail(f.count(), "expect height needs BODY and Y (m): expect height NAME Y");
+  else if (kind == "dam_break") e.kind = Expectation::Kind::kDamBreak;
+  else if (kind == "runout") e.kind = Expectation::Kind::kRunout;
+  else f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout)");
+  if (f.count() < want)
+    f.fail(f.count(), kind == "height" ? "expect height needs BODY and Y (m): expect height NAME Y"
+                                       : "expect dam_break needs the column's width A (m): expect dam_break A");
   if (f.count() > want)
     throw InputError(file.path, r.line, "#" + std::to_string(want + 1),
                      "extra field '" + f.word(want) + "' (expect " + kind + " takes " +
-                         (want == 1 ? "no further field)" : "BODY and Y only)"));
+                         (want == 1 ? "no further field)" : want == 2 ? "A only)" : "BODY and Y only)"));
   if (e.kind == Expectation::Kind::kHeight) {
     e.body = SceneDesc::expectedBodyName(f.word(1));
     e.value = f.inRange(2, -1e6, 1e6);
+  }
+  if (e.kind == Expectation::Kind::kDamBreak) {
+    e.value = f.inRange(1, 0.0, 1e6);
+    if (!(e.value > 0.0)) f.fail(1, "the column's width A must be above 0 m");
   }
   for (const auto& o : existing) {
     const bool same = o.kind == e.kind && (e.kind != Expectation::Kind::kHeight || o.body == e.body);
@@ -339,6 +349,8 @@ const char* toString(Expectation::Kind kind) {
     case Expectation::Kind::kFreefall: return "freefall";
     case Expectation::Kind::kRest: return "rest";
     case Expectation::Kind::kHeight: return "height";
+    case Expectation::Kind::kDamBreak: return "dam_break";
+    case Expectation::Kind::kRunout: return "runout";
   }
   return "?";
 }

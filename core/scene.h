@@ -48,10 +48,10 @@ struct MeshCollider {
 // run's error against (docs/formats.md, "Expected answers"; docs/accuracy.md, the norms).
 // `physketch run` ignores it.
 struct Expectation {
-  enum class Kind { kFreefall, kRest, kHeight };
+  enum class Kind { kFreefall, kRest, kHeight, kDamBreak, kRunout };
   Kind kind = Kind::kFreefall;
   std::string body;   // kHeight: the body's name (body=NAME, or "stroke N" written stroke_N)
-  double value = 0.0; // kHeight: the final height of its centre of mass (m)
+  double value = 0.0; // kHeight: the final height of its centre of mass (m); kDamBreak: the column's width a (m)
   int line = 0;
 };
 const char* toString(Expectation::Kind kind);

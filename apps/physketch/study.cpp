@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -36,7 +37,8 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-constexpr int kPartVersion = 1;
+// 2: trajectories carry the front and the t = 0 extent (expect dam_break, runout).
+constexpr int kPartVersion = 2;
 
 // --- one run ------------------------------------------------------------------------
 
@@ -59,18 +61,31 @@ void observe(const Solver& solver, const std::vector<Vec3>& x0, Trajectory& tr) 
   tr.centres.push_back(std::move(centres));
   tr.t.push_back(solver.time());
   const ParticleArrays& p = solver.particles();
+  double front = -std::numeric_limits<double>::infinity();
   for (std::size_t i = 0; i < p.size(); ++i) {
     if (!solver.alive(static_cast<std::int32_t>(i))) continue;
     const Vec3 x(p.x[i], p.y[i], p.z[i]);
     if (i < x0.size()) tr.maxDisplacement = std::max(tr.maxDisplacement, (x - x0[i]).norm());
     tr.maxSpeed = std::max(tr.maxSpeed, Vec3(p.vx[i], p.vy[i], p.vz[i]).norm());
+    if (phase::dynamic(p.phase[i])) front = std::max(front, x.x());
   }
+  tr.front.push_back(front);
 }
 
 // What the norms need at t = 0: velocity, bounding-sphere reach, mode and name per body.
 void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr) {
   const ParticleArrays& p = solver.particles();
   tr.spacing = sk.mapping.voxelSize();
+  // The extent of the dynamic particles at t = 0 (a dam-break or granular column's box).
+  const double inf = std::numeric_limits<double>::infinity();
+  tr.lo0 = Vec3::Constant(inf);
+  tr.hi0 = Vec3::Constant(-inf);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!solver.alive(static_cast<std::int32_t>(i)) || !phase::dynamic(p.phase[i])) continue;
+    const Vec3 x(p.x[i], p.y[i], p.z[i]);
+    tr.lo0 = tr.lo0.cwiseMin(x);
+    tr.hi0 = tr.hi0.cwiseMax(x);
+  }
   for (int b = 0; b < solver.bodyCount(); ++b) {
     const Vec3 c = solver.pose(b).centre;
     double reach = 0.0;
@@ -86,6 +101,8 @@ void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr
 }
 
 json vec(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
+// JSON has no infinity: an extent over no particle is written as null.
+json finiteVec(const Vec3& v) { return v.allFinite() ? vec(v) : json(nullptr); }
 Vec3 vec(const json& j) { return Vec3(j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()); }
 
 json trajectoryJson(const Trajectory& tr) {
@@ -99,7 +116,8 @@ json trajectoryJson(const Trajectory& tr) {
   for (const auto& v : tr.velocity0) v0.push_back(vec(v));
   return {{"t", tr.t},           {"centres", centres},   {"velocity0", v0},
           {"reach", tr.reach},   {"dynamic0", tr.dynamic0}, {"names", tr.names},
-          {"max_displacement_m", tr.maxDisplacement}, {"max_speed_mps", tr.maxSpeed}, {"spacing_m", tr.spacing}};
+          {"max_displacement_m", tr.maxDisplacement}, {"max_speed_mps", tr.maxSpeed}, {"spacing_m", tr.spacing},
+          {"front_x", tr.front}, {"lo0", finiteVec(tr.lo0)}, {"hi0", finiteVec(tr.hi0)}};
 }
 
 Trajectory trajectoryFrom(const json& j) {
@@ -117,6 +135,9 @@ Trajectory trajectoryFrom(const json& j) {
   tr.maxDisplacement = j.at("max_displacement_m").get<double>();
   tr.maxSpeed = j.at("max_speed_mps").get<double>();
   tr.spacing = j.at("spacing_m").get<double>();
+  for (const auto& f : j.at("front_x")) tr.front.push_back(f.is_null() ? -std::numeric_limits<double>::infinity() : f.get<double>());
+  tr.lo0 = j.at("lo0").is_null() ? Vec3::Constant(std::numeric_limits<double>::infinity()) : vec(j.at("lo0"));
+  tr.hi0 = j.at("hi0").is_null() ? Vec3::Constant(-std::numeric_limits<double>::infinity()) : vec(j.at("hi0"));
   return tr;
 }
 
@@ -339,6 +360,13 @@ std::string normText(bool analytic, const SceneDesc* scene, const std::string& r
         case Expectation::Kind::kHeight:
           s += "expect height " + e.body + " " + fmt("%g", e.value) + ": |final centre height - " + fmt("%g", e.value) + "| (m)";
           break;
+        case Expectation::Kind::kDamBreak:
+          s += "expect dam_break " + fmt("%g", e.value) + ": a x RMS over Martin & Moyce 1952's rows with T <= 3 of "
+               "Z(T) - Z_published, Z = front distance from the back wall / a, T = t sqrt(2 g / a) (m)";
+          break;
+        case Expectation::Kind::kRunout:
+          s += "expect runout: |final run-out - Lube et al. 2005's run-out for the column's aspect ratio| (m)";
+          break;
       }
     }
   return s + (s.find(';') != std::string::npos ? "; the error is the largest of these" : "");
@@ -511,7 +539,8 @@ int collect(const StudyOptions& opt) {
     }
     json part = readJsonFile(partPath);
     if (!part.contains("physketch_study_part") || part["physketch_study_part"] != kPartVersion)
-      throw InputError(partPath.string(), 0, "", "not a physketch study part (version 1)");
+      throw InputError(partPath.string(), 0, "", "not a physketch study part of version " + std::to_string(kPartVersion) +
+                                                       " (made by another physketch? run its setting again)");
     if (settingText(settingFrom(part.at("setting"))) != entry.at("setting").get<std::string>())
       throw InputError(partPath.string(), 0, "setting", "holds setting " + settingText(settingFrom(part.at("setting"))) +
                                                             ", the plan says " + entry.at("setting").get<std::string>());

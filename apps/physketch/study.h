@@ -60,6 +60,8 @@ struct Trajectory {
   double maxDisplacement = 0.0;           // m: largest particle displacement from t = 0 over the run
   double maxSpeed = 0.0;                  // m/s: largest particle speed over the run (frames)
   double spacing = 0.0;                   // m: the particle spacing (voxel size)
+  std::vector<double> front;              // m, per frame: the largest x of any dynamic particle (centre)
+  Vec3 lo0 = Vec3::Zero(), hi0 = Vec3::Zero();  // m: the dynamic particles' centres' extent at t = 0
 };
 
 // The frame window of free fall of each body (docs/accuracy.md): frames f >= 1 before the
@@ -74,6 +76,20 @@ double freefallError(const Trajectory& tr, const Vec3& gravity, double groundY, 
                      int expectLine);
 // |c_y(T) - y| (m) of the named body at the last frame. Throws InputError for an unknown body.
 double heightError(const Trajectory& tr, const Expectation& e, const std::string& scenePath);
+// Martin & Moyce 1952's surge front (../shared/data/martin-moyce-1952-front.csv): rows (T, Z).
+const std::vector<std::pair<double, double>>& martinMoyceFront();
+// expect dam_break A: a x the RMS over the published rows with T <= min(3, the run's last T) of
+// Z_run(T) - Z, Z_run linear in T between frames; Z = (front + h/2 - (x0_min - h/2)) / a (the
+// back wall is the column's face at t = 0), T = t sqrt(2 |g| / a). Throws InputError naming
+// the record when gravity does not point down y, or the frames are too sparse (a frame step above
+// 0.25 in T) or too few (under 3 published rows covered).
+double damBreakError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath);
+// Lube et al. 2005's run-out of a 2-D granular column of aspect ratio a = H0 / L0 (lengths
+// from the extent at t = 0 plus one spacing): dL / L0 = 1.2 a for a <= 1.8, 1.9 a^(2/3) for
+// a >= 2.8, linear in a between the two.
+double lubeRunout(double aspect);
+// expect runout: |(front_last + h/2 - (x0_min - h/2) - L0) - L0 lubeRunout(H0 / L0)| (m).
+double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath);
 // The scene's error: the largest of its expect records' errors (all in m).
 double analyticError(const Trajectory& tr, const SceneDesc& scene);
 // RMS over frames 1.. and the bodies dynamic at t = 0 in the reference (present in both) of

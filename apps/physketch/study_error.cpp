@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
+#include <string>
 
 #include "apps/physketch/study.h"
 #include "core/error.h"
@@ -80,6 +82,92 @@ double heightError(const Trajectory& tr, const Expectation& e, const std::string
   throw InputError(scenePath, e.line, "body", "no body named '" + e.body + "' (bodies: " + known + ")");
 }
 
+const std::vector<std::pair<double, double>>& martinMoyceFront() {
+  // Martin & Moyce 1952 (Phil. Trans. R. Soc. A 244:312-324), n^2 = 2: T = t sqrt(2 g / a),
+  // Z = front distance from the back wall / a. Transcribed in ../shared/data; a test checks
+  // this copy against tests/pbd/data/martin-moyce-1952-front.csv.
+  static const std::vector<std::pair<double, double>> rows = {
+      {0.00, 1.00}, {0.41, 1.11}, {0.84, 1.22}, {1.19, 1.44}, {1.43, 1.67}, {1.63, 1.89},
+      {1.82, 2.11}, {1.97, 2.33}, {2.20, 2.56}, {2.32, 2.78}, {2.50, 3.00}, {2.64, 3.22},
+      {2.82, 3.44}, {2.96, 3.67}, {3.11, 3.89}, {3.33, 4.11}};
+  return rows;
+}
+
+namespace {
+
+std::string num(double v) {
+  std::ostringstream os;
+  os.precision(3);
+  os << v;
+  return os.str();
+}
+
+// Gravity must point down y for the dam-break and run-out laws; returns |g|.
+double downwardGravity(const Vec3& gravity, const Expectation& e, const std::string& scenePath) {
+  const double g = gravity.norm();
+  if (!(g > 0.0) || gravity.y() > -0.999 * g)
+    throw InputError(scenePath, e.line, "kind",
+                     std::string("expect ") + toString(e.kind) + " needs gravity pointing down y (the scene's is " +
+                         num(gravity.x()) + " " + num(gravity.y()) + " " + num(gravity.z()) + ")");
+  return g;
+}
+
+bool hasParticles(const Trajectory& tr) { return tr.lo0.allFinite() && tr.hi0.allFinite() && !tr.front.empty(); }
+
+}  // namespace
+
+double damBreakError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath) {
+  const double g = downwardGravity(gravity, e, scenePath), a = e.value, h = tr.spacing;
+  if (!hasParticles(tr)) throw InputError(scenePath, e.line, "kind", "expect dam_break: no dynamic particle");
+  const double wall = tr.lo0.x() - 0.5 * h, scale = std::sqrt(2.0 * g / a);
+  std::vector<double> T, Z;
+  for (std::size_t f = 0; f < tr.t.size() && f < tr.front.size(); ++f) {
+    T.push_back(tr.t[f] * scale);
+    Z.push_back((tr.front[f] + 0.5 * h - wall) / a);
+  }
+  for (std::size_t f = 1; f < T.size(); ++f)
+    if (T[f] - T[f - 1] > 0.25)
+      throw InputError(scenePath, e.line, "kind",
+                       "expect dam_break: frames " + num(T[f] - T[f - 1]) +
+                           " apart in T are too sparse to follow the front; raise 'fps' to at least " +
+                           num(std::ceil(scale / 0.25)));
+  double sum = 0.0;
+  int n = 0;
+  for (const auto& [t, z] : martinMoyceFront()) {
+    if (t > 3.0 || T.empty() || t > T.back()) continue;
+    const auto it = std::lower_bound(T.begin(), T.end(), t);
+    const std::size_t j = std::size_t(std::max<std::ptrdiff_t>(1, it - T.begin()));
+    const double w = T[j] > T[j - 1] ? (t - T[j - 1]) / (T[j] - T[j - 1]) : 0.0;
+    const double zr = Z[j - 1] + w * (Z[j] - Z[j - 1]);
+    sum += (zr - z) * (zr - z);
+    ++n;
+  }
+  if (n < 3)
+    throw InputError(scenePath, e.line, "kind",
+                     "expect dam_break: the run covers " + std::to_string(n) +
+                         " of Martin & Moyce's rows (at least 3 needed): make 'duration' at least " +
+                         num(3.0 / scale) + " s (T = 3)");
+  return a * std::sqrt(sum / n);
+}
+
+double lubeRunout(double aspect) {
+  const auto low = [](double x) { return 1.2 * x; };
+  const auto high = [](double x) { return 1.9 * std::pow(x, 2.0 / 3.0); };
+  if (aspect <= 1.8) return low(aspect);
+  if (aspect >= 2.8) return high(aspect);
+  const double w = (aspect - 1.8) / (2.8 - 1.8);
+  return (1.0 - w) * low(1.8) + w * high(2.8);
+}
+
+double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath) {
+  downwardGravity(gravity, e, scenePath);
+  if (!hasParticles(tr)) throw InputError(scenePath, e.line, "kind", "expect runout: no dynamic particle");
+  const double h = tr.spacing;
+  const double l0 = tr.hi0.x() - tr.lo0.x() + h, h0 = tr.hi0.y() - tr.lo0.y() + h;
+  const double runout = tr.front.back() + 0.5 * h - (tr.lo0.x() - 0.5 * h) - l0;
+  return std::abs(runout - l0 * lubeRunout(h0 / l0));
+}
+
 double analyticError(const Trajectory& tr, const SceneDesc& scene) {
   double worst = 0.0;
   for (const Expectation& e : scene.expectations) {
@@ -88,6 +176,8 @@ double analyticError(const Trajectory& tr, const SceneDesc& scene) {
       case Expectation::Kind::kFreefall: err = freefallError(tr, scene.gravity, scene.groundY, scene.path, e.line); break;
       case Expectation::Kind::kRest: err = tr.maxDisplacement; break;
       case Expectation::Kind::kHeight: err = heightError(tr, e, scene.path); break;
+      case Expectation::Kind::kDamBreak: err = damBreakError(tr, e, scene.gravity, scene.path); break;
+      case Expectation::Kind::kRunout: err = runoutError(tr, e, scene.gravity, scene.path); break;
     }
     if (std::isnan(err)) return err;
     worst = std::max(worst, err);

@@ -370,6 +370,104 @@ TEST(StudyNorms, FineErrorIsTheRmsCentreDistanceOverDynamicBodiesAndFrames) {
   EXPECT_TRUE(std::isnan(fineError(run, ref)));
 }
 
+// The published table the dam-break norm carries is the one in the repository's data file.
+TEST(StudyNorms, TheDamBreakTableIsMartinAndMoycesFile) {
+  std::ifstream csv(std::string(PHYSKETCH_SOURCE_DIR) + "/tests/pbd/data/martin-moyce-1952-front.csv");
+  ASSERT_TRUE(csv);
+  std::vector<std::pair<double, double>> rows;
+  std::string line;
+  while (std::getline(csv, line)) {
+    double t = 0, z = 0;
+    if (!line.empty() && line[0] != '#' && std::sscanf(line.c_str(), "%lf,%lf", &t, &z) == 2) rows.emplace_back(t, z);
+  }
+  EXPECT_EQ(rows, martinMoyceFront());
+}
+
+namespace {
+// A trajectory whose front is Martin & Moyce's Z(T) + offset at the published T values and at
+// the midpoints between them (so that linear interpolation between frames is exact at every
+// published row), for a column of width a against a back wall at x = 0 (spacing h).
+Trajectory damBreakRun(double a, double h, double offset, double g = 9.81) {
+  Trajectory tr;
+  tr.spacing = h;
+  tr.lo0 = Vec3(0.5 * h, 0.5 * h, 0.0);
+  tr.hi0 = Vec3(a - 0.5 * h, 2 * a - 0.5 * h, 1.0);
+  const double scale = std::sqrt(2.0 * g / a);
+  const auto& mm = martinMoyceFront();
+  for (std::size_t k = 0; k < mm.size(); ++k) {
+    const auto add = [&](double T, double Z) {
+      tr.t.push_back(T / scale);
+      tr.front.push_back((Z + offset) * a - 0.5 * h);  // front centre: the face is h/2 further
+    };
+    add(mm[k].first, mm[k].second);
+    if (k + 1 < mm.size())
+      add(0.5 * (mm[k].first + mm[k + 1].first), 0.5 * (mm[k].second + mm[k + 1].second));
+  }
+  return tr;
+}
+}  // namespace
+
+// expect dam_break A: a constant offset d in Z gives exactly a d (RMS of a constant); the
+// published front itself gives 0; sparse frames, a short run and sideways gravity are errors
+// naming the record.
+TEST(StudyNorms, DamBreakErrorIsTheFrontsRmsAgainstMartinAndMoyce) {
+  Expectation e;
+  e.kind = Expectation::Kind::kDamBreak;
+  e.value = 0.1;
+  e.line = 7;
+  const Vec3 g(0.0, -9.81, 0.0);
+  EXPECT_NEAR(damBreakError(damBreakRun(0.1, 0.005, 0.0), e, g, "d.scene"), 0.0, 1e-12);
+  EXPECT_NEAR(damBreakError(damBreakRun(0.1, 0.005, 0.2), e, g, "d.scene"), 0.1 * 0.2, 1e-12);
+  EXPECT_NEAR(damBreakError(damBreakRun(0.1, 0.005, -0.3), e, g, "d.scene"), 0.1 * 0.3, 1e-12);
+  // Only rows with T <= 3 count: beyond it (rows 3.11, 3.33) a large offset changes nothing.
+  Trajectory late = damBreakRun(0.1, 0.005, 0.0);
+  const double scale = std::sqrt(2.0 * 9.81 / 0.1);
+  for (std::size_t f = 0; f < late.t.size(); ++f)
+    if (late.t[f] * scale > 3.0 + 1e-9) late.front[f] += 1.0;
+  EXPECT_NEAR(damBreakError(late, e, g, "d.scene"), 0.0, 1e-12);  // the last row counted, 2.96, is a frame
+  Trajectory sparse = damBreakRun(0.1, 0.005, 0.0);
+  sparse.t.erase(sparse.t.begin() + 1, sparse.t.begin() + 4);
+  sparse.front.erase(sparse.front.begin() + 1, sparse.front.begin() + 4);
+  try {
+    damBreakError(sparse, e, g, "d.scene");
+    ADD_FAILURE() << "sparse frames accepted";
+  } catch (const InputError& x) {
+    EXPECT_EQ(x.line(), 7);
+    EXPECT_NE(std::string(x.what()).find("raise 'fps'"), std::string::npos) << x.what();
+  }
+  Trajectory shortRun = damBreakRun(0.1, 0.005, 0.0);
+  shortRun.t.resize(3);
+  shortRun.front.resize(3);
+  try {
+    damBreakError(shortRun, e, g, "d.scene");
+    ADD_FAILURE() << "a run covering 2 rows accepted";
+  } catch (const InputError& x) {
+    EXPECT_NE(std::string(x.what()).find("duration"), std::string::npos) << x.what();
+  }
+  EXPECT_THROW(damBreakError(damBreakRun(0.1, 0.005, 0.0), e, Vec3(9.81, 0, 0), "d.scene"), InputError);
+}
+
+// Lube et al. 2005's law at hand-computed points, and the run-out norm on a column of
+// L0 = H0 = 0.1 m (aspect 1: the law says 0.12 m) whose front ends 0.15 m past it: 0.03 m.
+TEST(StudyNorms, RunoutErrorFollowsLubesLaw) {
+  EXPECT_NEAR(lubeRunout(1.0), 1.2, 1e-12);
+  EXPECT_NEAR(lubeRunout(1.8), 2.16, 1e-12);
+  EXPECT_NEAR(lubeRunout(4.0), 1.9 * std::cbrt(16.0), 1e-12);
+  EXPECT_NEAR(lubeRunout(2.3), 0.5 * (2.16 + 1.9 * std::cbrt(2.8 * 2.8)), 1e-12);
+  Expectation e;
+  e.kind = Expectation::Kind::kRunout;
+  Trajectory tr;
+  const double h = 0.01;
+  tr.spacing = h;
+  tr.lo0 = Vec3(-0.5 + 0.5 * h, 0.5 * h, 0.0);  // particle centres of a 0.1 m box from x = -0.5
+  tr.hi0 = Vec3(-0.4 - 0.5 * h, 0.1 - 0.5 * h, 1.0);
+  tr.t = {0.0, 1.0};
+  tr.front = {tr.hi0.x(), -0.4 + 0.15 - 0.5 * h};
+  EXPECT_NEAR(runoutError(tr, e, Vec3(0, -9.81, 0), "r.scene"), 0.03, 1e-12);
+  tr.front.back() = -0.4 + 0.12 - 0.5 * h;
+  EXPECT_NEAR(runoutError(tr, e, Vec3(0, -9.81, 0), "r.scene"), 0.0, 1e-12);
+}
+
 TEST(StudyCli, RestAndHeightErrorsMatchClosedForms) {
   const fs::path dir = freshDir("rest");
   // A block lying on the ground stays: only float rounding of its positions (~0.1 m: 1e-8) moves it.

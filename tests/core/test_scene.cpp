@@ -678,6 +678,11 @@ TEST(Scene, ExpectRecordsParse) {
   EXPECT_DOUBLE_EQ(s.expectations[2].value, -0.5);
   EXPECT_TRUE(parseScene(kGood, "dir/x.scene").expectations.empty());
   EXPECT_EQ(parseScene(std::string(kGood) + "expect rest\n", "x.scene").expectations[0].kind, Expectation::Kind::kRest);
+  const SceneDesc d = parseScene(std::string(kGood) + "expect dam_break 0.1\nexpect runout\n", "x.scene");
+  ASSERT_EQ(d.expectations.size(), 2u);
+  EXPECT_EQ(d.expectations[0].kind, Expectation::Kind::kDamBreak);
+  EXPECT_DOUBLE_EQ(d.expectations[0].value, 0.1);
+  EXPECT_EQ(d.expectations[1].kind, Expectation::Kind::kRunout);
 }
 
 TEST(Scene, EveryBadExpectNamesLineAndField) {
@@ -697,6 +702,21 @@ TEST(Scene, EveryBadExpectNamesLineAndField) {
   EXPECT_EQ(e.field(), "y");
   e = sceneError("expect freefall 3\n");
   EXPECT_EQ(e.field(), "#2");
+  e = sceneError("expect dam_break\n");
+  EXPECT_EQ(e.field(), "a");
+  EXPECT_NE(std::string(e.what()).find("width A"), std::string::npos) << e.what();
+  e = sceneError("expect dam_break 0\n");
+  EXPECT_EQ(e.field(), "a");
+  e = sceneError("expect dam_break -0.1\n");
+  EXPECT_EQ(e.field(), "a");
+  e = sceneError("expect dam_break nan\n");
+  EXPECT_EQ(e.field(), "a");
+  e = sceneError("expect dam_break 0.1 2\n");
+  EXPECT_EQ(e.field(), "#3");
+  e = sceneError("expect runout 1\n");
+  EXPECT_EQ(e.field(), "#2");
+  e = sceneError("expect runout\nexpect runout\n");
+  EXPECT_EQ(e.line(), 11);
   e = sceneError("expect height top 0.2 1\n");
   EXPECT_EQ(e.field(), "#4");
   e = sceneError("expect rest\nexpect rest\n");
