@@ -96,7 +96,8 @@ void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshColl
   it->keyframes.push_back(k);
 }
 
-// expect freefall | expect rest | expect height BODY Y | expect dam_break A | expect runout
+// expect freefall | expect rest | expect height BODY Y | expect dam_break A | expect runout |
+// expect hydrostatic
 // (docs/formats.md, "Expected answers").
 Expectation parseExpect(const RecordFile& file, const Record& r, const std::vector<Expectation>& existing) {
   const bool dam = r.tokens.size() > 1 && r.tokens[1] == "dam_break";
@@ -110,7 +111,8 @@ Expectation parseExpect(const RecordFile& file, const Record& r, const std::vect
   else if (kind == "height") e.kind = Expectation::Kind::kHeight;
   else if (kind == "dam_break") e.kind = Expectation::Kind::kDamBreak;
   else if (kind == "runout") e.kind = Expectation::Kind::kRunout;
-  else f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout)");
+  else if (kind == "hydrostatic") e.kind = Expectation::Kind::kHydrostatic;
+  else f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout, hydrostatic)");
   if (f.count() < want)
     f.fail(f.count(), kind == "height" ? "expect height needs BODY and Y (m): expect height NAME Y"
                                        : "expect dam_break needs the column's width A (m): expect dam_break A");
@@ -351,6 +353,7 @@ const char* toString(Expectation::Kind kind) {
     case Expectation::Kind::kHeight: return "height";
     case Expectation::Kind::kDamBreak: return "dam_break";
     case Expectation::Kind::kRunout: return "runout";
+    case Expectation::Kind::kHydrostatic: return "hydrostatic";
   }
   return "?";
 }

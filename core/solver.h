@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -51,6 +52,10 @@ class Solver {
   // stopped at the domain's walls), one sentence each: the CLI prints them as warnings and
   // writes them into report.json.
   virtual std::vector<std::string> runNotes() const { return {}; }
+  // The pressure (Pa) at particle i where the solver keeps one as state (MPM fluid: its
+  // equation of state at the particle's J); NaN elsewhere (PBD's fluids hold density as a
+  // constraint, not a pressure).
+  virtual double pressure(std::int32_t /*i*/) const { return std::numeric_limits<double>::quiet_NaN(); }
 
   // --- changes while the simulation runs (sketching after play) -------------
   // Appends a body made of `particles` (positions at rest, stroke and material set; a rope's

@@ -544,6 +544,16 @@ std::vector<PlanEntry> MpmWorld::plan() const {
   return out;
 }
 
+// The Tait equation of state of a fluid particle (plasticity.h, fluidKirchhoff): p = K / gamma
+// (J^-gamma - 1), J the particle's volume ratio.
+double MpmWorld::pressure(std::int32_t i) const {
+  const auto k = std::size_t(i);
+  if (k >= parts_.size() || !phase::dynamic(parts_.phase[k])) return std::numeric_limits<double>::quiet_NaN();
+  const auto& m = models_[std::size_t(parts_.material[k])];
+  if (m.kind != MaterialKind::kFluid) return std::numeric_limits<double>::quiet_NaN();
+  return double(m.bulk) / double(m.gamma) * (std::pow(double(plastic_[k]), -double(m.gamma)) - 1.0);
+}
+
 // --- the step and its guard ----------------------------------------------------------
 
 struct MpmWorld::Saved {

@@ -147,6 +147,7 @@ class MpmWorld final : public Solver {
   };
   const EdgeHit& firstAtEdge() const { return firstEdge_; }
   std::vector<std::string> runNotes() const override;
+  double pressure(std::int32_t i) const override;
   // Total mass (kg) and momentum (kg m/s) on the grid after the last P2G, and of the particles now.
   double gridMass() const;
   Vec3 gridMomentum() const;

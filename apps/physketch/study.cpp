@@ -37,7 +37,7 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// 2: trajectories carry the front and the t = 0 extent (expect dam_break, runout).
+// 2: trajectories carry the front, the t = 0 extent and the hydrostatic error (expect dam_break, runout, hydrostatic).
 constexpr int kPartVersion = 2;
 
 // --- one run ------------------------------------------------------------------------
@@ -55,7 +55,7 @@ std::string machine() {
 
 // The state a study needs from the run at one frame: centres of every body, and the
 // largest particle displacement from t = 0 and speed (for expect rest).
-void observe(const Solver& solver, const std::vector<Vec3>& x0, Trajectory& tr) {
+void observe(const Solver& solver, const std::vector<Vec3>& x0, const SceneDesc& scene, Trajectory& tr) {
   std::vector<Vec3> centres;
   for (int b = 0; b < solver.bodyCount(); ++b) centres.push_back(solver.pose(b).centre);
   tr.centres.push_back(std::move(centres));
@@ -70,6 +70,9 @@ void observe(const Solver& solver, const std::vector<Vec3>& x0, Trajectory& tr) 
     if (phase::dynamic(p.phase[i])) front = std::max(front, x.x());
   }
   tr.front.push_back(front);
+  const bool hydrostatic = std::any_of(scene.expectations.begin(), scene.expectations.end(),
+                                       [](const Expectation& e) { return e.kind == Expectation::Kind::kHydrostatic; });
+  if (hydrostatic) tr.hydrostatic.push_back(hydrostaticError(solver, scene, tr.spacing));
 }
 
 // What the norms need at t = 0: velocity, bounding-sphere reach, mode and name per body.
@@ -103,6 +106,11 @@ void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr
 json vec(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
 // JSON has no infinity: an extent over no particle is written as null.
 json finiteVec(const Vec3& v) { return v.allFinite() ? vec(v) : json(nullptr); }
+json finiteList(const std::vector<double>& v) {
+  json a = json::array();
+  for (double x : v) a.push_back(std::isfinite(x) ? json(x) : json(nullptr));
+  return a;
+}
 Vec3 vec(const json& j) { return Vec3(j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()); }
 
 json trajectoryJson(const Trajectory& tr) {
@@ -117,7 +125,8 @@ json trajectoryJson(const Trajectory& tr) {
   return {{"t", tr.t},           {"centres", centres},   {"velocity0", v0},
           {"reach", tr.reach},   {"dynamic0", tr.dynamic0}, {"names", tr.names},
           {"max_displacement_m", tr.maxDisplacement}, {"max_speed_mps", tr.maxSpeed}, {"spacing_m", tr.spacing},
-          {"front_x", tr.front}, {"lo0", finiteVec(tr.lo0)}, {"hi0", finiteVec(tr.hi0)}};
+          {"front_x", tr.front}, {"lo0", finiteVec(tr.lo0)}, {"hi0", finiteVec(tr.hi0)},
+          {"hydrostatic_m", finiteList(tr.hydrostatic)}};
 }
 
 Trajectory trajectoryFrom(const json& j) {
@@ -137,6 +146,8 @@ Trajectory trajectoryFrom(const json& j) {
   tr.spacing = j.at("spacing_m").get<double>();
   for (const auto& f : j.at("front_x")) tr.front.push_back(f.is_null() ? -std::numeric_limits<double>::infinity() : f.get<double>());
   tr.lo0 = j.at("lo0").is_null() ? Vec3::Constant(std::numeric_limits<double>::infinity()) : vec(j.at("lo0"));
+  for (const auto& x : j.at("hydrostatic_m"))
+    tr.hydrostatic.push_back(x.is_null() ? std::numeric_limits<double>::quiet_NaN() : x.get<double>());
   tr.hi0 = j.at("hi0").is_null() ? Vec3::Constant(-std::numeric_limits<double>::infinity()) : vec(j.at("hi0"));
   return tr;
 }
@@ -199,7 +210,7 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
         const ParticleArrays& ps = solver->particles();
         for (std::size_t i = 0; i < ps.size(); ++i) x0.emplace_back(ps.x[i], ps.y[i], ps.z[i]);
         observeStart(*solver, *p.sketch, tr);
-        observe(*solver, x0, tr);
+        observe(*solver, x0, sc, tr);
       }
       double simulated = 0.0;  // s of wall time in steps only: observing is not the solver's cost
       for (int f = 1; f < frames && !solver->guard().tripped(); ++f) {
@@ -209,7 +220,7 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
           if (!solver->step()) break;
         }
         simulated += nowSeconds() - t0;
-        if (record && !solver->guard().tripped()) observe(*solver, x0, tr);
+        if (record && !solver->guard().tripped()) observe(*solver, x0, sc, tr);
       }
       if (solver->guard().tripped()) status = "unstable: " + solver->guard().message();
       msPerFrame.push_back(frames > 1 ? 1000.0 * simulated / (frames - 1) : 0.0);
@@ -366,6 +377,10 @@ std::string normText(bool analytic, const SceneDesc* scene, const std::string& r
           break;
         case Expectation::Kind::kRunout:
           s += "expect runout: |final run-out - Lube et al. 2005's run-out for the column's aspect ratio| (m)";
+          break;
+        case Expectation::Kind::kHydrostatic:
+          s += "expect hydrostatic: RMS over fluid particles at the last frame of (p - p_hydrostatic(depth)) / (rho0 g), "
+               "Tait's equation of state integrated down the column (m of head)";
           break;
       }
     }

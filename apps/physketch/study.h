@@ -14,6 +14,7 @@
 
 #include "core/math.h"
 #include "core/scene.h"
+#include "core/solver.h"
 
 namespace physketch::app {
 
@@ -62,7 +63,18 @@ struct Trajectory {
   double spacing = 0.0;                   // m: the particle spacing (voxel size)
   std::vector<double> front;              // m, per frame: the largest x of any dynamic particle (centre)
   Vec3 lo0 = Vec3::Zero(), hi0 = Vec3::Zero();  // m: the dynamic particles' centres' extent at t = 0
+  std::vector<double> hydrostatic;        // m, per frame, when the scene expects it: hydrostaticError
 };
+
+// Tait's equation of state integrated down a column at rest: the pressure (Pa) at depth d (m)
+// below the free surface of a fluid of rest density rho0, bulk modulus K and exponent gamma
+// (p = K / gamma ((rho / rho0)^gamma - 1)) under gravity g: dp/dd = rho g, which gives
+// p = K / gamma ((1 + (gamma - 1) rho0 g d / K)^(gamma / (gamma - 1)) - 1) (gamma = 1: K (e^(rho0 g d / K) - 1)).
+double hydrostaticPressure(double d, double rho0, double g, double bulk, double gamma);
+// expect hydrostatic, at one frame: RMS over the fluid particles that have a pressure (MPM
+// fluid) of (p - hydrostaticPressure(y_top - y)) / (rho0 g), in metres of head; y_top is the
+// highest such particle's y plus h/2, rho0 = mass / h^3. NaN when no particle has a pressure.
+double hydrostaticError(const Solver& solver, const SceneDesc& scene, double spacing);
 
 // The frame window of free fall of each body (docs/accuracy.md): frames f >= 1 before the
 // body's bounding sphere (radius `reach`), moving on its analytic parabola, first comes within
@@ -90,6 +102,9 @@ double damBreakError(const Trajectory& tr, const Expectation& e, const Vec3& gra
 double lubeRunout(double aspect);
 // expect runout: |(front_last + h/2 - (x0_min - h/2) - L0) - L0 lubeRunout(H0 / L0)| (m).
 double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath);
+// expect hydrostatic: the last frame's hydrostaticError. Throws InputError naming the record
+// when no particle has a pressure (no fluid, or solver pbd) or gravity is zero.
+double hydrostaticRunError(const Trajectory& tr, const Expectation& e, const SceneDesc& scene);
 // The scene's error: the largest of its expect records' errors (all in m).
 double analyticError(const Trajectory& tr, const SceneDesc& scene);
 // RMS over frames 1.. and the bodies dynamic at t = 0 in the reference (present in both) of

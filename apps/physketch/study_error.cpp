@@ -8,6 +8,7 @@
 
 #include "apps/physketch/study.h"
 #include "core/error.h"
+#include "core/solver.h"
 
 namespace physketch::app {
 namespace {
@@ -168,6 +169,45 @@ double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravi
   return std::abs(runout - l0 * lubeRunout(h0 / l0));
 }
 
+double hydrostaticPressure(double d, double rho0, double g, double bulk, double gamma) {
+  const double x = rho0 * g * d / bulk;
+  if (std::abs(gamma - 1.0) < 1e-9) return bulk * std::expm1(x);
+  return bulk / gamma * (std::pow(1.0 + (gamma - 1.0) * x, gamma / (gamma - 1.0)) - 1.0);
+}
+
+double hydrostaticError(const Solver& solver, const SceneDesc& scene, double spacing) {
+  const ParticleArrays& p = solver.particles();
+  const double g = scene.gravity.norm(), h3 = spacing * spacing * spacing;
+  double top = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (std::isfinite(solver.pressure(std::int32_t(i)))) top = std::max(top, double(p.y[i]));
+  if (!std::isfinite(top) || !(g > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+  top += 0.5 * spacing;
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double pr = solver.pressure(std::int32_t(i));
+    if (!std::isfinite(pr)) continue;
+    const Material& m = scene.materials[std::size_t(p.material[i])];
+    const double rho0 = double(p.mass[i]) / h3;
+    const double exact = hydrostaticPressure(top - double(p.y[i]), rho0, g, m.fluid.bulkModulus, m.fluid.gamma);
+    const double head = (pr - exact) / (rho0 * g);
+    sum += head * head;
+    ++n;
+  }
+  return std::sqrt(sum / double(n));
+}
+
+double hydrostaticRunError(const Trajectory& tr, const Expectation& e, const SceneDesc& scene) {
+  if (!(scene.gravity.norm() > 0.0))
+    throw InputError(scene.path, e.line, "kind", "expect hydrostatic needs gravity");
+  if (tr.hydrostatic.empty() || !std::isfinite(tr.hydrostatic.back()))
+    throw InputError(scene.path, e.line, "kind",
+                     "expect hydrostatic: no particle has a pressure at the last frame (it needs a fluid material "
+                     "under solver mpm, which keeps pressure as state; solver pbd does not)");
+  return tr.hydrostatic.back();
+}
+
 double analyticError(const Trajectory& tr, const SceneDesc& scene) {
   double worst = 0.0;
   for (const Expectation& e : scene.expectations) {
@@ -178,6 +218,7 @@ double analyticError(const Trajectory& tr, const SceneDesc& scene) {
       case Expectation::Kind::kHeight: err = heightError(tr, e, scene.path); break;
       case Expectation::Kind::kDamBreak: err = damBreakError(tr, e, scene.gravity, scene.path); break;
       case Expectation::Kind::kRunout: err = runoutError(tr, e, scene.gravity, scene.path); break;
+      case Expectation::Kind::kHydrostatic: err = hydrostaticRunError(tr, e, scene); break;
     }
     if (std::isnan(err)) return err;
     worst = std::max(worst, err);
