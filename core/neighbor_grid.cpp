@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "core/parallel.h"
+#include "core/profile.h"
 
 namespace physketch {
 namespace {
@@ -617,6 +618,11 @@ void NeighborGrid::buildNeighborLists(float radius, int width, NeighborLists& ou
   });
   out.overflowed = 0, out.maxCount = 0;
   for (const ListStats& s : stats) out.overflowed += s.overflowed, out.maxCount = std::max(out.maxCount, s.maxCount);
+}
+
+std::size_t NeighborGrid::heldBytes() const {
+  return physketch::heldBytes(order_, rank_, cellStart_, cellKey_, cellOfRank_, xs_, ys_, zs_, rows_, keys_, keysTmp_,
+                              idsTmp_, hist_, keyStart_);
 }
 
 }  // namespace physketch

@@ -137,6 +137,9 @@ class NeighborGrid {
   // Throws RuntimeError for a kernel the CPU does not have.
   void buildNeighborLists(float radius, int width, NeighborLists& out, Kernel kernel = Kernel::kAuto) const;
 
+  // Bytes its arrays hold (capacity), scratch included.
+  std::size_t heldBytes() const;
+
  private:
   void setKeySpace(const std::int64_t lo[3], const std::int64_t hi[3]);
   void sortKeys(const float* x, const float* y, const float* z);

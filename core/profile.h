@@ -4,6 +4,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -31,7 +32,14 @@ struct PlanEntry {
   std::string does;        // from the PassSpec
   std::string reason;      // why it is on (which bodies, materials or options need it), or why it is off
   std::string touches;     // what it works on ("31655 particles in 3 bodies"); empty when off
+  std::size_t heldBytes = 0;  // what the pass's own buffers hold now (their capacity), kept between steps
 };
+
+// Bytes the containers hold (capacity x element size), for PlanEntry::heldBytes.
+template <class... C>
+std::size_t heldBytes(const C&... c) {
+  return (std::size_t(0) + ... + (c.capacity() * sizeof(typename C::value_type)));
+}
 
 // Per-pass wall time and call counts, owned by the world that runs the passes (never a global).
 class Profile {

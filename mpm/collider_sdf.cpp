@@ -111,4 +111,6 @@ bool ColliderSdf::sample(const Vec3& local, double& phi, Vec3& gradient) const {
   return true;
 }
 
+std::size_t ColliderSdf::bytes() const { return impl_ && impl_->grid ? std::size_t(impl_->grid->memUsage()) : 0; }
+
 }  // namespace physketch::mpm

@@ -26,6 +26,7 @@ class ColliderSdf {
               double maxBandVoxels = kMaxBandVoxels);
   double voxel() const;
   double area() const { return area_; }  // m^2, the scaled mesh's surface
+  std::size_t bytes() const;             // what the field holds (OpenVDB's memUsage)
   ~ColliderSdf();
   ColliderSdf(ColliderSdf&&) noexcept;
   ColliderSdf& operator=(ColliderSdf&&) noexcept;

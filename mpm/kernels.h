@@ -25,15 +25,21 @@ inline void bsplineWeights(float f, float w[3]) {
   w[2] = 0.5f * (f - 0.5f) * (f - 0.5f);
 }
 
-// Coulomb friction on a node velocity whose normal part vn < 0 was removed: the tangential
-// part t stops when |t| <= mus |vn| (static), else loses muk |vn| of its length (dynamic).
+// Coulomb's law for a contact whose normal speed vn < 0 was removed: the factor on the
+// tangential velocity of length t >= 0. It stops when t <= mus |vn| (static), else loses
+// muk |vn| of its length (dynamic). t = 0 is static, so nothing divides by it. The one
+// friction law of walls, ground, tools and mesh colliders.
+template <class S>
+S coulombScale(S t, S vn, S mus, S muk) {
+  return t <= mus * (-vn) ? S(0) : std::max(S(0), S(1) - muk * (-vn) / t);
+}
+
+// Coulomb friction on a node velocity whose normal part vn < 0 along `axis` was removed.
 inline void applyFriction(float v[3], int axis, float vn, float mus, float muk) {
   float t2 = 0.0f;
   for (int a = 0; a < 3; ++a)
     if (a != axis) t2 += v[a] * v[a];
-  if (t2 <= 0.0f) return;
-  const float t = std::sqrt(t2);
-  const float scale = t <= mus * (-vn) ? 0.0f : std::max(0.0f, 1.0f - muk * (-vn) / t);
+  const float scale = coulombScale(std::sqrt(t2), vn, mus, muk);
   for (int a = 0; a < 3; ++a)
     if (a != axis) v[a] *= scale;
 }
@@ -76,8 +82,7 @@ inline void pushOnly(float v[3], float hx, float hy, float hz, const float n[3],
     rel[a] -= vn * n[a] / len;
     t2 += rel[a] * rel[a];
   }
-  const float t = std::sqrt(t2);
-  const float scale = t <= mus * (-vn) ? 0.0f : std::max(0.0f, 1.0f - muk * (-vn) / std::max(t, 1e-30f));
+  const float scale = coulombScale(std::sqrt(t2), vn, mus, muk);
   for (int a = 0; a < 3; ++a) v[a] = hv[a] + scale * rel[a];
 }
 

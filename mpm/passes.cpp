@@ -294,9 +294,14 @@ void MpmWorld::g2p(float h) {
 // id in the first substep with any) is kept for the run's report.
 void MpmWorld::projection(int substep) {
   const std::size_t chunks = (order_.size() + kChunk - 1) / kChunk;
-  std::vector<std::int64_t> counts(chunks, 0);
-  std::vector<std::int32_t> first(chunks, -1);
-  std::vector<std::int8_t> firstSide(chunks, -1);
+  // Per chunk: particles at the edge, the first and its wall (kept between substeps: no
+  // allocation per substep once they have grown).
+  std::vector<std::int64_t>& counts = edgeCounts_;
+  std::vector<std::int32_t>& first = edgeFirst_;
+  std::vector<std::int8_t>& firstSide = edgeSide_;
+  counts.assign(chunks, 0);
+  first.assign(chunks, -1);
+  firstSide.assign(chunks, -1);
   const float margin = 1.5f * float(dx_);
   float edgeLo[3], edgeHi[3];
   for (int a = 0; a < 3; ++a) {
@@ -347,21 +352,17 @@ void MpmWorld::projection(int substep) {
 // A particle inside a collider goes back to its surface along the normal and loses its
 // velocity into it, relative to the collider (PhyVR's anti-penetration for its tools).
 void MpmWorld::pushOutOfColliders(std::size_t i) {
+  Collider::Probe p;
   for (const Collider& c : colliders_) {
     const Vec3 x(parts_.x[i], parts_.y[i], parts_.z[i]);
-    if ((x.array() < c.lo.array()).any() || (x.array() > c.hi.array()).any()) continue;
-    const Vec3 local = c.R1.transpose() * (x - c.p1);
-    double phi = 0.0;
-    Vec3 grad;
-    if (!c.sdf.sample(local, phi, grad) || phi >= 0.0) continue;
-    const double g = grad.norm();
-    if (g < 1e-6) continue;  // deep inside, no direction out: the grid moves it with the collider
-    const Vec3 n = c.R1 * (grad / g);
-    const Vec3 to = x - phi * n;
+    // Deep inside, no direction out: the grid moves it with the collider.
+    if (!c.probe(x, p) || !p.hasNormal) continue;
+    const Vec3& n = p.normal;
+    const Vec3 to = x - p.phi * n;
     parts_.x[i] = float(to.x());
     parts_.y[i] = float(to.y());
     parts_.z[i] = float(to.z());
-    const Vec3 vc = (to - (c.R0 * local + c.p0)) / std::max(double(lastH_), 1e-12);
+    const Vec3 vc = c.velocityAt(to, p.local, std::max(double(lastH_), 1e-12));
     const Vec3 rel = Vec3(parts_.vx[i], parts_.vy[i], parts_.vz[i]) - vc;
     const double vn = rel.dot(n);
     if (vn < 0.0) {

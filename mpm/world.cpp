@@ -532,6 +532,7 @@ std::vector<PlanEntry> MpmWorld::planAll() const {
     e.perStep = e.on ? (spec.cadence == Cadence::kPerSubstep ? s : 1) : 0;
     e.reason = reason(MpmPass(k), e.on);
     if (e.on) e.touches = touches(MpmPass(k));
+    e.heldBytes = passBytes(MpmPass(k));
     out.push_back(std::move(e));
   }
   return out;
@@ -552,6 +553,27 @@ double MpmWorld::pressure(std::int32_t i) const {
   const auto& m = models_[std::size_t(parts_.material[k])];
   if (m.kind != MaterialKind::kFluid) return std::numeric_limits<double>::quiet_NaN();
   return double(m.bulk) / double(m.gamma) * (std::pow(double(plastic_[k]), -double(m.gamma)) - 1.0);
+}
+
+// The buffers each pass owns, kept between steps (capacity): P2G the grid and the particle
+// sort it scatters in; the grid update the held (tool) nodes and the colliders' distance
+// fields; G2P the particle state it writes (C, F and the plastic scalar: J for a fluid).
+std::size_t MpmWorld::passBytes(MpmPass pass) const {
+  switch (pass) {
+    case MpmPass::kP2G: {
+      std::size_t b = heldBytes(grid_, gfs_, gfk_, order_, blockStart_, blockKey_, activeNodeBlocks_, nodeBlockMark_);
+      for (const auto& c : colourBlocks_) b += heldBytes(c);
+      return b;
+    }
+    case MpmPass::kGridUpdate: {
+      std::size_t b = heldBytes(held_, hx_, hy_, hz_, hn_);
+      for (const Collider& c : colliders_) b += c.sdf.bytes();
+      return b;
+    }
+    case MpmPass::kG2P: return heldBytes(C_, F_, plastic_);
+    case MpmPass::kProjection: return heldBytes(edgeCounts_, edgeFirst_, edgeSide_);
+    default: return 0;
+  }
 }
 
 // --- the step and its guard ----------------------------------------------------------
@@ -756,28 +778,33 @@ void MpmWorld::poseColliders(double t0, double h) {
   }
 }
 
+bool MpmWorld::Collider::probe(const Vec3& x, Probe& out) const {
+  if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) return false;
+  out.local = R1.transpose() * (x - p1);
+  Vec3 grad;
+  if (!sdf.sample(out.local, out.phi, grad) || out.phi >= 0.0) return false;
+  const double g = grad.norm();
+  out.hasNormal = g >= 1e-6;  // deep inside a solid the field is flat: no direction out
+  out.normal = out.hasNormal ? Vec3(R1 * (grad / g)) : Vec3::Zero();
+  return true;
+}
+
 void MpmWorld::collideNode(const Vec3& x, float v[3], float h, float mus, float muk) const {
+  Collider::Probe p;
   for (const Collider& c : colliders_) {
-    if ((x.array() < c.lo.array()).any() || (x.array() > c.hi.array()).any()) continue;
-    const Vec3 local = c.R1.transpose() * (x - c.p1);
-    double phi = 0.0;
-    Vec3 grad;
-    if (!c.sdf.sample(local, phi, grad) || phi >= 0.0) continue;
-    // The collider's velocity at x: where its material point now at x was at the substep's start.
-    const Vec3 vc = (x - (c.R0 * local + c.p0)) / double(h);
+    if (!c.probe(x, p)) continue;
+    const Vec3 vc = c.velocityAt(x, p.local, double(h));
     Vec3 rel = Vec3(v[0], v[1], v[2]) - vc;
-    const double g = grad.norm();
-    if (g < 1e-6) {
+    if (!p.hasNormal) {
       rel.setZero();  // deep inside: no normal to slide along, so the node moves with the collider
     } else {
-      const Vec3 n = c.R1 * (grad / g);
+      const Vec3& n = p.normal;
       const double vn = rel.dot(n);
       if (vn < 0.0) {
         rel -= vn * n;
         const double fs = c.desc.friction ? *c.desc.friction : double(mus);
         const double fk = c.desc.friction ? *c.desc.friction : double(muk);
-        const double t = rel.norm();
-        rel *= t <= fs * (-vn) ? 0.0 : std::max(0.0, 1.0 - fk * (-vn) / t);
+        rel *= coulombScale(rel.norm(), vn, fs, fk);
       }
     }
     const Vec3 out = rel + vc;

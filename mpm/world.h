@@ -191,6 +191,7 @@ class MpmWorld final : public Solver {
   void projection(int substep);
   void plasticity();
   Eigen::Matrix3f kirchhoff(std::size_t i) const;
+  std::size_t passBytes(MpmPass pass) const;
 
   MpmParams params_;
   ParticleArrays parts_;
@@ -231,6 +232,18 @@ class MpmWorld final : public Solver {
     Mat3 R0 = Mat3::Identity(), R1 = Mat3::Identity();
     Vec3 p0 = Vec3::Zero(), p1 = Vec3::Zero();
     Vec3 lo = Vec3::Zero(), hi = Vec3::Zero();  // world bounds at the end pose (m)
+    // A world point x inside the collider at the end pose (phi < 0): its point in the
+    // collider's frame, its depth phi (m), and the unit outward normal in the world where the
+    // field has a gradient (hasNormal). False outside (or outside its bounds).
+    struct Probe {
+      Vec3 local = Vec3::Zero(), normal = Vec3::Zero();
+      double phi = 0.0;
+      bool hasNormal = false;
+    };
+    bool probe(const Vec3& x, Probe& out) const;
+    // The collider's velocity at a world point now at x whose local point is `local`: where
+    // that material point was at the substep's start, over the substep h.
+    Vec3 velocityAt(const Vec3& x, const Vec3& local, double h) const { return (x - (R0 * local + p0)) / h; }
   };
   std::vector<Collider> colliders_;
   void poseColliders(double t0, double h);
@@ -251,6 +264,9 @@ class MpmWorld final : public Solver {
   std::int64_t steps_ = 0;
   std::int64_t atEdge_ = 0;
   EdgeHit firstEdge_;
+  std::vector<std::int64_t> edgeCounts_;  // projection's per-chunk scratch
+  std::vector<std::int32_t> edgeFirst_;
+  std::vector<std::int8_t> edgeSide_;
   int lastSubsteps_ = 0;
   bool validate_ = false;
   std::vector<bool> work_;

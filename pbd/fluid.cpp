@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "core/profile.h"
 #include "pbd/fluid_kernels.h"
 
 namespace physketch::pbd {
@@ -453,6 +454,15 @@ DensityError FluidSolver::densityError() const {
     out.meanAbs = float(abs / double(out.fluidCount));
   }
   return out;
+}
+
+std::size_t FluidSolver::neighborBytes() const {
+  return grid_.heldBytes() + heldBytes(lists_.index, lists_.count);
+}
+
+std::size_t FluidSolver::solverBytes() const {
+  return heldBytes(wallB_, wallDB_, rec_, dx_, dy_, dz_, comp_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
+                   omega_[1], omega_[2]);
 }
 
 }  // namespace physketch::pbd

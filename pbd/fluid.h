@@ -139,6 +139,10 @@ class FluidSolver {
   std::size_t count() const { return n_; }
   const NeighborGrid& grid() const { return grid_; }
   const NeighborLists& lists() const { return lists_; }
+  // Bytes held between substeps: the neighbour structure (grid and lists) and the rest
+  // (records, corrections, blocked lists, velocity passes).
+  std::size_t neighborBytes() const;
+  std::size_t solverBytes() const;
 
  private:
   void checkInput(const FluidInput& in) const;

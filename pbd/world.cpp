@@ -110,10 +110,6 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   ry_.assign(n, 0.0f);
   rz_.assign(n, 0.0f);
   design_.assign(n, 0);
-  px_ = parts_.x, py_ = parts_.y, pz_ = parts_.z;
-  invMassP_.assign(n, 0.0f);
-  pinned_.assign(n, 0);
-  groundApproach_.assign(n, 0.0f);
   const double spacing = 2.0 * params_.particleRadius;
   for (std::size_t i = 0; i < n; ++i) {
     const auto m = static_cast<std::size_t>(parts_.material[i]);
@@ -130,7 +126,10 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     if (ids.empty()) throw RuntimeError("PbdWorld: body " + std::to_string(members_.size()) + " has no particles");
     const MaterialKind kind = kindOf(parts_.material[std::size_t(ids.front())]);
     appendBody(std::move(ids), br.init, br.init.fixed ? BodyMode::kFixed : BodyMode::kDynamic, kind);
-    if (kind != MaterialKind::kRigid) setupParticleBody(members_.size() - 1, br);
+    if (kind != MaterialKind::kRigid) {
+      ensureParticleLevel();
+      setupParticleBody(members_.size() - 1, br);
+    }
   }
   // Strands attach to what they touch once every body exists (a rope drawn from a fixed
   // beam to a bucket hangs from the beam and carries the bucket).
@@ -142,7 +141,19 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   writeParticles();
 }
 
-// Appends one slot to every per-body array; mass properties are filled by refreshMassProperties.
+// The per-particle arrays of the particle-level passes (predicted positions, inverse masses,
+// pins, ground approach), made when the first soft, rope, cloth or fluid body is: a scene of
+// rigid bodies holds none of them (issue 11: nothing allocated for a pass that is off).
+void PbdWorld::ensureParticleLevel() {
+  if (particleLevel_) return;
+  const std::size_t n = parts_.size();
+  px_ = parts_.x, py_ = parts_.y, pz_ = parts_.z;
+  invMassP_.assign(n, 0.0f);
+  pinned_.assign(n, 0);
+  groundApproach_.assign(n, 0.0f);
+  particleLevel_ = true;
+}
+
 MaterialKind PbdWorld::kindOf(std::int16_t material) const {
   const SolverModel model = solverModel(materials_.at(static_cast<std::size_t>(material)).kind, SolverKind::kPbd);
   if (!model.simulated)
@@ -151,6 +162,7 @@ MaterialKind PbdWorld::kindOf(std::int16_t material) const {
   return model.runsAs;
 }
 
+// Appends one slot to every per-body array; mass properties are filled by refreshMassProperties.
 std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
                                    BodyMode mode, MaterialKind kind) {
   members_.push_back(std::move(members));
@@ -264,10 +276,12 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
     ry_.push_back(0.0f);
     rz_.push_back(0.0f);
     design_.push_back(0);
-    px_.push_back(p.x[i]), py_.push_back(p.y[i]), pz_.push_back(p.z[i]);
-    invMassP_.push_back(0.0f);
-    pinned_.push_back(0);
-    groundApproach_.push_back(0.0f);
+    if (particleLevel_) {
+      px_.push_back(p.x[i]), py_.push_back(p.y[i]), pz_.push_back(p.z[i]);
+      invMassP_.push_back(0.0f);
+      pinned_.push_back(0);
+      groundApproach_.push_back(0.0f);
+    }
     ids.push_back(id);
   }
   const BodyMode mode = kinematic ? BodyMode::kKinematic : init.fixed ? BodyMode::kFixed : BodyMode::kDynamic;
@@ -276,6 +290,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
   energy_.reset();
   const std::size_t b = members_.size() - 1;
   if (kind != MaterialKind::kRigid) {
+    ensureParticleLevel();
     BodyRange range = shape;
     range.first = members_[b].front();
     range.count = static_cast<std::int32_t>(members_[b].size());
@@ -297,7 +312,7 @@ void PbdWorld::setMode(int body, BodyMode mode) {
   const std::uint32_t flags = mode == BodyMode::kDynamic ? 0u : phase::kPrescribed;
   const std::uint32_t fluid = kind_[b] == MaterialKind::kFluid ? phase::kFluid : 0u;
   for (std::int32_t i : members_[b])
-    parts_.phase[std::size_t(i)] = phase::make(group, flags | fluid | (pinned_[std::size_t(i)] ? phase::kPrescribed : 0u));
+    parts_.phase[std::size_t(i)] = phase::make(group, flags | fluid | (pinnedAt(std::size_t(i)) ? phase::kPrescribed : 0u));
   if (!isRigid(b)) refreshInverseMasses(b);
   Motion& mo = motion_[b];
   mo.kinStart = mo.kinTarget = mo.c;
@@ -709,9 +724,59 @@ std::vector<PlanEntry> PbdWorld::planAll() const {
     e.perStep = e.on ? calls : 0;
     e.reason = reason(PbdPass(k), e.on);
     if (e.on) e.touches = touches(PbdPass(k));
+    e.heldBytes = passBytes(PbdPass(k));
     out.push_back(std::move(e));
   }
   return out;
+}
+
+// The buffers each pass owns, kept between steps (capacity). The state every pass shares
+// (particle arrays, body poses) is no pass's; scratch a pass frees before it returns (a contact
+// search's local NeighborGrid) is not counted.
+std::size_t PbdWorld::passBytes(PbdPass pass) const {
+  const auto& bp = contacts_.bodyPlane;
+  const auto& pp = contacts_.bodyPair;
+  const auto surface = [](const ParticleSurfaceContacts& c) { return heldBytes(c.i, c.surface, c.point, c.normal); };
+  switch (pass) {
+    case PbdPass::kPredict: return heldBytes(px_, py_, pz_, invMassP_, pinned_, loose_);
+    case PbdPass::kFindContacts: {
+      std::size_t b = heldBytes(groundCache_);
+      for (const GroundCache& g : groundCache_) b += heldBytes(g.candidates);
+      return b;
+    }
+    case PbdPass::kRigidContact:
+      return heldBytes(bp.body, bp.plane, bp.first, bp.count, bp.candidates, bp.touched, bp.point, bp.approachSpeed);
+    case PbdPass::kBodyContact: return heldBytes(pp.a, pp.b, pp.first, pp.count, pp.pa, pp.pb);
+    case PbdPass::kFindNeighbors: return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j);
+    case PbdPass::kParticleContact: return surface(contacts_.particlePlane);
+    case PbdPass::kFluidNeighbors: return fluid_ ? fluid_->neighborBytes() : 0;
+    case PbdPass::kDensity: return (fluid_ ? fluid_->solverBytes() : 0) + heldBytes(fluidIds_, fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_, fflag_);
+    case PbdPass::kClusterMatch: {
+      const SoftClusters& c = clusters_;
+      // (offset starts as {0}, one entry, before any cluster: not the pass's.)
+      std::size_t b = (c.members.size() > 0 ? heldBytes(c.members.offset) : 0) +
+                      heldBytes(c.members.index, c.members.stiffness, c.qx, c.qy, c.qz, c.lambda,
+                                c.compliance, c.rotation, c.body, c.restCentre, c.extent, dp_, clusterCells_);
+      for (const auto& colour : clusterCells_) {
+        b += heldBytes(colour);
+        for (const auto& cell : colour) b += heldBytes(cell);
+      }
+      return b;
+    }
+    case PbdPass::kPlasticity: return heldBytes(clusters_.yield, clusters_.creep);
+    case PbdPass::kDistance:
+      return heldBytes(distances_.i, distances_.j, distances_.rest, distances_.compliance, distances_.lambda,
+                       distances_.colour, distanceVia_, attachments_, tethers_);
+    case PbdPass::kFindColliders: {
+      std::size_t b = heldBytes(looseHits_, bodyHits_);
+      for (const auto& h : bodyHits_) b += heldBytes(h.particle, h.contact);
+      return b;
+    }
+    case PbdPass::kColliderContact: return surface(contacts_.particleMesh);
+    case PbdPass::kParticleUpdate: return heldBytes(groundApproach_);
+    case PbdPass::kWriteParticles: return heldBytes(rx_, ry_, rz_);
+    default: return 0;
+  }
 }
 
 std::vector<PlanEntry> PbdWorld::plan() const {
@@ -937,7 +1002,7 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
         // Particle-level: mid-step, the predicted positions are the state.
         p = bodiesOnly ? Vec3(px_[k], py_[k], pz_[k]) : Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
         v = Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
-        if (pinned_[k]) v = Vec3::Zero();
+        if (pinnedAt(k)) v = Vec3::Zero();
       } else if (bodiesOnly) {
         const Vec3 r0 = R * Vec3(rx_[k], ry_[k], rz_[k]);
         p = r0 + mo.c;
@@ -961,7 +1026,7 @@ GuardRecord PbdWorld::checkImplied(bool bodiesOnly, bool penetration) const {
              "A non-finite value usually comes from a degenerate constraint.");
         return r;
       }
-      if (m != BodyMode::kDynamic || pinned_[k]) continue;  // the input moves it: only NaN is the solver's
+      if (m != BodyMode::kDynamic || pinnedAt(k)) continue;  // the input moves it: only NaN is the solver's
       if (bodiesOnly && v.squaredNorm() > maxSpeed2) {
         fill(GuardKind::kExplosion, v.norm(), params_.maxSpeed,
              "Speed above the bound.");

@@ -177,6 +177,7 @@ class PbdWorld final : public Solver {
   bool bodiesMayTouch() const;
   std::string reason(PbdPass pass, bool on) const;
   std::string touches(PbdPass pass) const;
+  std::size_t passBytes(PbdPass pass) const;
   bool runStep(bool checkEachPass);
   template <class F>
   bool runPass(PbdPass pass, int substep, bool check, F&& f);
@@ -307,6 +308,9 @@ class PbdWorld final : public Solver {
   };
   std::vector<Tether> tethers_;
   std::vector<float> groundApproach_;
+  bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level
+  void ensureParticleLevel();
+  bool pinnedAt(std::size_t k) const { return particleLevel_ && pinned_[k]; }
   // Fluids: the PBF kernel (pbd/fluid.h), made when the first fluid body is, and the
   // particles it works on this substep (fluid first, then solids in range), by kernel id.
   std::unique_ptr<FluidSolver> fluid_;

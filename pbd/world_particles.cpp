@@ -68,6 +68,7 @@ void PbdWorld::setupParticleBody(std::size_t b, const BodyRange& range) {
 }
 
 void PbdWorld::refreshInverseMasses(std::size_t b) {
+  if (!particleLevel_) return;  // rigid bodies only: no particle-level inverse masses to keep
   const bool dyn = mode_[b] == BodyMode::kDynamic && !isRigid(b);
   for (std::int32_t i : members_[b]) {
     const auto k = std::size_t(i);

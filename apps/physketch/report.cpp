@@ -93,13 +93,18 @@ json runtimeJson(const sketch::Sketch& sk, const RuntimeDriver& runtime) {
   return rt;
 }
 
-json passesJson(const Profile& solver, const Profile* render, int written) {
+json passesJson(const Profile& solver, const Profile* render, int written, const std::vector<PlanEntry>& held) {
   const double perFrame = written > 1 ? 1.0 / (written - 1) : 0.0;  // frame 0 is the sketch: no steps
   json passes = json::array();
-  for (const auto& e : solver.entries())
-    if (e.calls > 0)  // passes the scene did not need never ran: leave them out
+  for (const auto& e : solver.entries()) {
+    std::size_t bytes = 0;
+    for (const PlanEntry& h : held)
+      if (h.name == e.name) bytes = h.heldBytes;
+    // Passes the scene did not need never ran: leave them out, unless they hold memory.
+    if (e.calls > 0 || bytes > 0)
       passes.push_back({{"pass", e.name}, {"calls", e.calls}, {"total_ms", e.seconds * 1e3},
-                        {"ms_per_frame", e.seconds * 1e3 * perFrame}});
+                        {"ms_per_frame", e.seconds * 1e3 * perFrame}, {"held_bytes", bytes}});
+  }
   if (render) {
     const double perWritten = written > 0 ? 1.0 / written : 0.0;
     for (const auto& e : render->entries())

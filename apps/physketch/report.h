@@ -28,7 +28,9 @@ nlohmann::json guardJson(const GuardRecord& g);
 nlohmann::json posesJson(const Solver& solver);
 nlohmann::json runtimeJson(const sketch::Sketch& sk, const RuntimeDriver& runtime);
 // Time per pass: the solver's (per simulated frame) and the renderer's (per written frame).
-nlohmann::json passesJson(const Profile& solver, const Profile* render, int framesWritten);
+// held: the solver's planAll() at the end of the run, for each pass's held_bytes.
+nlohmann::json passesJson(const Profile& solver, const Profile* render, int framesWritten,
+                          const std::vector<PlanEntry>& held);
 
 // Bytes the run will hold per particle in the PBD solver and the sketch, plus the 151^3 grid.
 double memoryEstimateMiB(std::size_t particles);

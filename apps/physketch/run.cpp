@@ -205,7 +205,20 @@ int lintScene(const std::string& scenePath) {
 namespace {
 
 // ms per frame of each pass in a finished run's report.json (physketch plan --after DIR).
-std::map<std::string, double> measuredMs(const std::string& dir) {
+// "0 B", "812 B", "56.3 KiB", "6.59 MiB".
+std::string bytesText(std::size_t b) {
+  char buf[32];
+  if (b < 1024) std::snprintf(buf, sizeof buf, "%zu B", b);
+  else if (b < 1024 * 1024) std::snprintf(buf, sizeof buf, "%.3g KiB", double(b) / 1024.0);
+  else std::snprintf(buf, sizeof buf, "%.3g MiB", double(b) / (1024.0 * 1024.0));
+  return buf;
+}
+
+// Per pass of a finished run: ms per frame, and the bytes it held at the end (-1: not recorded).
+struct Measured {
+  double ms = 0.0, heldBytes = -1.0;
+};
+std::map<std::string, Measured> measuredMs(const std::string& dir) {
   const fs::path path = fs::path(dir) / "report.json";
   std::ifstream in(path);
   if (!in) throw InputError(path.string(), 0, "", "cannot open the report of a run (physketch run SCENE --out DIR writes it)");
@@ -215,11 +228,14 @@ std::map<std::string, double> measuredMs(const std::string& dir) {
   } catch (const json::exception& e) {
     throw InputError(path.string(), 0, "", std::string("not a physketch report: ") + e.what());
   }
-  std::map<std::string, double> ms;
+  std::map<std::string, Measured> ms;
   if (rep.contains("passes") && rep["passes"].is_array())
     for (const auto& p : rep["passes"])
-      if (p.contains("pass") && p.contains("ms_per_frame") && p["ms_per_frame"].is_number())
-        ms[p["pass"].get<std::string>()] = p["ms_per_frame"].get<double>();
+      if (p.contains("pass") && p.contains("ms_per_frame") && p["ms_per_frame"].is_number()) {
+        Measured& m = ms[p["pass"].get<std::string>()];
+        m.ms = p["ms_per_frame"].get<double>();
+        if (p.contains("held_bytes") && p["held_bytes"].is_number()) m.heldBytes = p["held_bytes"].get<double>();
+      }
   return ms;
 }
 
@@ -230,27 +246,39 @@ int printPlan(const PlanOptions& opt) {
     const Prepared p = prepare(opt.scene);
     const std::unique_ptr<Solver> solver = makeSolver(p);
     const SceneDesc& sc = p.scene;
-    const std::map<std::string, double> ms = opt.afterDir.empty() ? std::map<std::string, double>{} : measuredMs(opt.afterDir);
+    const std::map<std::string, Measured> ms = opt.afterDir.empty() ? std::map<std::string, Measured>{} : measuredMs(opt.afterDir);
     std::cout << "scene " << sc.path << ": " << p.sketch->particles.size() << " particles, " << solver->bodyCount()
-              << " bodies; solver " << solver->name() << ", dt " << sc.dt << " s, " << (sc.substepsAuto ? std::string("auto") : std::to_string(sc.substeps)) << " substeps, "
-              << sc.iterations << " iterations\n";
+              << " bodies; solver " << solver->name() << ", dt " << sc.dt << " s, " << (sc.substepsAuto ? std::string("auto") : std::to_string(sc.substeps)) << " substeps"
+              << (sc.solver == SolverKind::kPbd ? ", " + std::to_string(sc.iterations) + " iterations" : std::string()) << "\n";
     if (sc.scale != 1.0) printScale(sc);
     std::cout << (opt.all ? "every pass of the step, at play:\n" : "per step, at play:\n");
     for (const auto& pass : opt.all ? solver->planAll() : solver->plan()) {
       std::cout << "  " << (opt.all ? (pass.on ? "on   " : "off  ") : "") << pass.name;
       if (pass.on) {
         std::cout << "  (" << pass.runs << "; " << pass.reason << ")";
-        if (opt.all) std::cout << "\n        touches " << pass.touches << "; " << pass.does;
+        if (opt.all)
+          std::cout << "\n        touches " << pass.touches << "; " << pass.does << "; holds " << bytesText(pass.heldBytes)
+                    << " at play";
       } else {
-        std::cout << "  (" << pass.reason << "; nothing allocated)";
+        // What an off pass holds is measured, not assumed: nothing, for a pass that never ran.
+        std::cout << "  (" << pass.reason << "; "
+                  << (pass.heldBytes == 0 ? std::string("nothing allocated") : "holds " + bytesText(pass.heldBytes)) << ")";
       }
-      if (const auto it = ms.find(pass.name); it != ms.end()) std::printf("  measured %.3f ms/frame", it->second);
+      if (const auto it = ms.find(pass.name); it != ms.end()) {
+        std::printf("  measured %.3f ms/frame", it->second.ms);
+        if (it->second.heldBytes >= 0) std::cout << ", held " << bytesText(std::size_t(it->second.heldBytes)) << " at the end";
+      }
       std::cout << "\n";
       std::cout.flush();
     }
     for (const auto& [name, v] : ms)
-      if (name.rfind("render.", 0) == 0) std::printf("  %s  measured %.3f ms/frame\n", name.c_str(), v);
-    std::cout << "per frame: " << sc.stepsPerFrame() << " steps, then mesh transform, draw, png\n";
+      if (name.rfind("render.", 0) == 0) std::printf("  %s  measured %.3f ms/frame\n", name.c_str(), v.ms);
+    // What a frame adds after its steps follows the scene's outputs (the run's --export and
+    // --video options add their own writers; `physketch run --help`).
+    std::cout << "per frame: " << sc.stepsPerFrame() << " steps, then "
+              << (sc.writeFrames ? "mesh transform, draw, png (an off-screen GL context)"
+                                 : "no meshes and no GL context (output has no 'frames')")
+              << (sc.writeReport ? "; the report records the bodies' poses" : "") << "\n";
     if (!p.sketch->runtime.empty()) {
       // Strokes after play change the plan while the simulation runs: say which pass
       // they switch on, when and why.
@@ -415,7 +443,8 @@ int runScene(const RunOptions& opt) {
                      {"substeps_auto", sc.substepsAuto},
                      {"iterations", sc.iterations}, {"steps", solver->stepCount()}, {"simulated_s", solver->time()},
                      {"validate", opt.validate}, {"plan", planJson(solver->plan())}};
-    rep["passes"] = passesJson(solver->profile(), frameWriter ? &frameWriter->profile() : nullptr, written);
+    rep["passes"] = passesJson(solver->profile(), frameWriter ? &frameWriter->profile() : nullptr, written,
+                               solver->planAll());
     rep["frames"] = {{"written", written},
                      {"requested", frames},
                      {"fps", sc.fps},

@@ -410,9 +410,30 @@ TEST(Cli, PlanAllListsThePassesThatAreOffWithWhyAndPlanAfterAddsMeasuredTimes) {
   EXPECT_NE(text.find("off  kinematic  (no body is held"), std::string::npos) << text;
   EXPECT_NE(text.find("off  restitution  (no dynamic rigid body's material has restitution > 0"), std::string::npos)
       << text;
-  // A scene of rigid bodies pays for no particle-level pass (soft, rope, cloth, fluid).
-  for (const char* off : {"predict", "find_neighbors", "particle_contact", "cluster_match", "distance"})
-    EXPECT_NE(text.find(std::string("off  ") + off + "  ("), std::string::npos) << off;
+  // A scene of rigid bodies pays for no particle-level pass (soft, rope, cloth, fluid), and holds
+  // nothing for one: what each pass holds is measured (its buffers' capacity).
+  const auto lineOf = [&text](const std::string& start) {
+    const std::size_t at = text.find(start);
+    return at == std::string::npos ? std::string() : text.substr(at, text.find('\n', at) - at);
+  };
+  for (const char* off : {"predict", "find_neighbors", "particle_contact", "cluster_match", "distance", "density",
+                          "fluid_neighbors", "particle_update"}) {
+    const std::string line = lineOf(std::string("off  ") + off + "  (");
+    EXPECT_NE(line.find("nothing allocated"), std::string::npos) << off << ": " << line;
+  }
+  // The rest offsets write_particles reads: 3 floats per particle (31655), 371 KiB.
+  EXPECT_NE(text.find("holds 371 KiB at play"), std::string::npos) << text;
+  const auto report = readJson(dir / "o" / "report.json");
+  for (const auto& pass : report["passes"]) {
+    if (pass["pass"].get<std::string>().rfind("render.", 0) == 0) continue;
+    EXPECT_TRUE(pass.contains("held_bytes")) << pass;
+    if (pass["held_bytes"].get<double>() > 0) {
+      EXPECT_GT(pass["calls"].get<double>(), 0) << pass;
+    }
+    if (pass["pass"] == "write_particles") {
+      EXPECT_GE(pass["held_bytes"].get<double>(), 12.0 * 31655) << pass;
+    }
+  }
   EXPECT_NE(text.find("on   rigid_contact"), std::string::npos) << text;
   EXPECT_NE(text.find("touches 31655 particles in 3 bodies"), std::string::npos) << text;
   EXPECT_NE(text.find("measured"), std::string::npos) << text;
