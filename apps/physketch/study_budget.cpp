@@ -39,6 +39,19 @@ BudgetChoice choose(BudgetChoice& out, double budgetMs) {
   return out;
 }
 
+// Runs out.reference and measures every stable candidate's error against it (the fine norm).
+void measureErrors(BudgetChoice& out, const std::vector<Trajectory>& runs, const std::string& scenePath, int threads,
+                   int maxFrames) {
+  double refMs = 0.0;
+  std::string refStatus;
+  const Trajectory ref = calibrationRun(scenePath, out.reference, threads, maxFrames, refMs, refStatus);
+  if (refStatus != "ok")
+    throw RuntimeError("--budget: the reference run (" + settingText(out.reference) + ") was stopped: " + refStatus);
+  for (std::size_t k = 0; k < out.candidates.size(); ++k)
+    out.candidates[k].error = out.candidates[k].status == "ok" ? fineError(runs[k], ref)
+                                                                : std::numeric_limits<double>::quiet_NaN();
+}
+
 // The smallest Courant number the study knob 'cfl' accepts (study_knobs.cpp).
 constexpr double kMinCfl = 1e-3;
 
@@ -82,14 +95,7 @@ void calibrateMpm(BudgetChoice& out, const std::string& scenePath, double budget
     lo = cfl, msLo = c.msPerFrame;
   }
   out.reference = {{"cfl", std::max(kMinCfl, 0.5 * smallest)}};
-  double refMs = 0.0;
-  std::string refStatus;
-  const Trajectory ref = calibrationRun(scenePath, out.reference, threads, maxFrames, refMs, refStatus);
-  if (refStatus != "ok")
-    throw RuntimeError("--budget: the reference run (" + settingText(out.reference) + ") was stopped: " + refStatus);
-  for (std::size_t k = 0; k < out.candidates.size(); ++k)
-    out.candidates[k].error = out.candidates[k].status == "ok" ? fineError(runs[k], ref)
-                                                                : std::numeric_limits<double>::quiet_NaN();
+  measureErrors(out, runs, scenePath, threads, maxFrames);
 }
 
 }  // namespace
@@ -145,14 +151,7 @@ BudgetChoice calibrateBudget(const std::string& scenePath, double budgetMs, int 
   }
   // The reference: finer than every candidate.
   out.reference = makeSetting(std::min(2 * mostSubsteps, 1000), 4);
-  double refMs = 0.0;
-  std::string refStatus;
-  const Trajectory ref = calibrationRun(scenePath, out.reference, threads, maxFrames, refMs, refStatus);
-  if (refStatus != "ok")
-    throw RuntimeError("--budget: the reference run (" + settingText(out.reference) + ") was stopped: " + refStatus);
-  for (std::size_t k = 0; k < out.candidates.size(); ++k)
-    out.candidates[k].error = out.candidates[k].status == "ok" ? fineError(runs[k], ref)
-                                                                : std::numeric_limits<double>::quiet_NaN();
+  measureErrors(out, runs, scenePath, threads, maxFrames);
   return choose(out, budgetMs);
 }
 
