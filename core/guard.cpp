@@ -170,6 +170,14 @@ EnergySums energySums(const ParticleArrays& p, const Vec3& gravity, const std::v
   return sumEnergy(p, gravity, ids.size(), [&ids](std::size_t k) { return std::size_t(ids[k]); });
 }
 
+void EnergyWatch::arm(const EnergySums& s, const Vec3& gravity, double spacing) {
+  if (s.mass <= 0.0 || !std::isfinite(s.kinetic + s.potential)) return;  // nothing to watch yet
+  armed_ = true;
+  ref_ = s.kinetic + s.potential;
+  const double available = s.kinetic + (s.potential - s.mass * s.lowest);
+  allowed_ = available + 0.5 * s.mass * 0.25 + s.mass * gravity.norm() * 2.0 * spacing;
+}
+
 GuardRecord EnergyWatch::check(const ParticleArrays& p, const Vec3& gravity, double spacing, bool closed) {
   if (!closed) return check(EnergySums{}, p, gravity, spacing, false);  // no sum needed
   return check(energySums(p, gravity), p, gravity, spacing, true);
@@ -185,10 +193,7 @@ GuardRecord EnergyWatch::check(const EnergySums& s, const ParticleArrays& p, con
   if (s.mass <= 0.0 || !std::isfinite(s.kinetic + s.potential)) return r;  // nothing to watch, or NaN: the NaN check's
   const double energy = s.kinetic + s.potential;
   if (!armed_) {
-    armed_ = true;
-    ref_ = energy;
-    const double available = s.kinetic + (s.potential - s.mass * s.lowest);
-    allowed_ = available + 0.5 * s.mass * 0.25 + s.mass * gravity.norm() * 2.0 * spacing;
+    arm(s, gravity, spacing);
     return r;
   }
   if (energy <= ref_ + allowed_) return r;

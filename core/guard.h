@@ -103,6 +103,10 @@ class EnergyWatch {
  public:
   // Forget the reference (an outside event: the next check takes a new one).
   void reset() { armed_ = false; }
+  // Take the reference now, from sums of the current state: a solver arms at the start of the
+  // first step after an event, so that growth within that step is caught too (a check that
+  // finds the watch disarmed takes its reference after the step instead).
+  void arm(const EnergySums& sums, const Vec3& gravity, double spacing);
   // closed: no body moves by prescription now. Returns a tripped record (kind kEnergyGrowth,
   // value E, bound, the particle with the most kinetic energy; the caller adds the hint, which
   // names its own knobs) or an empty one. Costs one vectorized sum over the particles.

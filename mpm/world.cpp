@@ -678,6 +678,10 @@ bool MpmWorld::step() {
     return false;
   }
   lastSubsteps_ = substeps;
+  // After an outside event the energy reference is taken here, before the step, so that
+  // growth within the step is caught.
+  if (work_[std::size_t(MpmPass::kGuard)] && !energy_.armed() && energyClosed())
+    energy_.arm(energySums(parts_, params_.gravity), params_.gravity, params_.spacing);
   if (validate_) {
     if (runStep(substeps, true) && work_[std::size_t(MpmPass::kGuard)]) {
       GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
@@ -731,11 +735,15 @@ bool MpmWorld::step() {
 
 // Energy growth while the system is closed (no carried body, no moving collider). step() adds the substep
 // count to try.
-GuardRecord MpmWorld::checkEnergy() {
+bool MpmWorld::energyClosed() const {
   bool closed = true;
   for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
   for (const Collider& c : colliders_) closed &= c.desc.keyframes.empty();  // a moving collider does work
-  GuardRecord r = energy_.check(parts_, params_.gravity, params_.spacing, closed);
+  return closed;
+}
+
+GuardRecord MpmWorld::checkEnergy() {
+  GuardRecord r = energy_.check(parts_, params_.gravity, params_.spacing, energyClosed());
   if (r.tripped()) r.hint = "Energy grew in a closed system (nothing moved it from outside).";
   return r;
 }

@@ -183,6 +183,7 @@ class MpmWorld final : public Solver {
   bool runPass(MpmPass pass, int substep, bool check, F&& f);
   GuardRecord check(MpmPass pass) const;
   GuardRecord checkEnergy();
+  bool energyClosed() const;
 
   void sortByBlock();
   void p2g(float h);

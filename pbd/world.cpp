@@ -878,6 +878,10 @@ bool PbdWorld::step() {
     std::sort(loose_.begin(), loose_.end());
     looseDirty_ = false;
   }
+  // After an outside event the energy reference is taken here, before the step, so that
+  // growth within the step is caught (loose_ is current: rebuilt above).
+  if (work_[std::size_t(PbdPass::kGuard)] && !energy_.armed() && energyClosed())
+    energy_.arm(energyNow(), params_.gravity, 2.0 * params_.particleRadius);
   if (validate_) {
     if (runStep(true) && work_[std::size_t(PbdPass::kGuard)]) {
       GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
@@ -941,34 +945,45 @@ bool PbdWorld::step() {
 // Energy growth while the system is closed: no carried body (tools included) and no collider
 // moving along keyframes. The hint names the substep count to try: substeps damp the growth
 // where iterations do not (docs/accuracy.md, Small Steps).
-GuardRecord PbdWorld::checkEnergy() {
+bool PbdWorld::energyClosed() const {
   bool closed = true;
   for (BodyMode m : mode_) closed &= m != BodyMode::kKinematic;
   if (colliders_)
     for (std::size_t c = 0; c < colliders_->size(); ++c) closed &= !colliders_->moving(c);
-  // Rigid bodies from their centre-of-mass motion (exact for a rigid body: sum m |v + w x r|^2 / 2 =
-  // M v^2 / 2 + w . I w / 2), so that the check costs O(bodies) for them, not a pass over their
-  // particles; their lowest point from the centre and the body's reach (a bound: it can only
-  // raise the energy allowed, by at most M |g| reach). Particle-level bodies from their particles.
+  return closed;
+}
+
+// Rigid bodies from their centre-of-mass motion (exact for a rigid body: sum m |v + w x r|^2 / 2 =
+// M v^2 / 2 + w . I w / 2), so that the check costs O(bodies) for them, not a pass over their
+// particles; their lowest point from the centre and the body's reach (a bound: it can only
+// raise the energy allowed, by at most M |g| reach). Particle-level bodies from their particles.
+EnergySums PbdWorld::energyNow() const {
   EnergySums sums;
-  if (closed) {
-    const double gn = params_.gravity.norm();
-    for (std::size_t b = 0; b < mode_.size(); ++b) {
-      if (mode_[b] != BodyMode::kDynamic || !isRigid(b) || invMass_[b] <= 0.0) continue;
-      const Motion& mo = motion_[b];
-      const double m = 1.0 / invMass_[b];
-      const Mat3 R = mo.q.toRotationMatrix();
-      const double h = -params_.gravity.dot(mo.c);
-      EnergySums body;
-      body.kinetic = 0.5 * m * mo.v.squaredNorm() + 0.5 * mo.w.dot(R * inertiaRest_[b] * R.transpose() * mo.w);
-      body.potential = m * h;
-      body.mass = m;
-      body.lowest = h - reach_[b] * gn;
-      sums.add(body);
-    }
-    if (!loose_.empty()) sums.add(energySums(parts_, params_.gravity, loose_));
+  const double gn = params_.gravity.norm();
+  for (std::size_t b = 0; b < mode_.size(); ++b) {
+    if (mode_[b] != BodyMode::kDynamic || !isRigid(b) || invMass_[b] <= 0.0) continue;
+    const Motion& mo = motion_[b];
+    const double m = 1.0 / invMass_[b];
+    const Mat3 R = mo.q.toRotationMatrix();
+    const double h = -params_.gravity.dot(mo.c);
+    EnergySums body;
+    body.kinetic = 0.5 * m * mo.v.squaredNorm() + 0.5 * mo.w.dot(R * inertiaRest_[b] * R.transpose() * mo.w);
+    body.potential = m * h;
+    body.mass = m;
+    body.lowest = h - reach_[b] * gn;
+    sums.add(body);
   }
-  GuardRecord r = energy_.check(sums, parts_, params_.gravity, 2.0 * params_.particleRadius, closed);
+  if (!loose_.empty()) sums.add(energySums(parts_, params_.gravity, loose_));
+  return sums;
+}
+
+// Energy growth while the system is closed: no carried body (tools included) and no collider
+// moving along keyframes. step() adds the knob to try: substeps damp the growth where
+// iterations do not (docs/accuracy.md, Small Steps).
+GuardRecord PbdWorld::checkEnergy() {
+  const bool closed = energyClosed();
+  GuardRecord r = energy_.check(closed ? energyNow() : EnergySums{}, parts_, params_.gravity,
+                                2.0 * params_.particleRadius, closed);
   if (r.tripped()) r.hint = "Energy grew in a closed system (nothing moved it from outside).";
   return r;
 }

@@ -184,6 +184,8 @@ class PbdWorld final : public Solver {
   GuardRecord checkImplied(bool bodiesOnly, bool penetration) const;
   GuardRecord checkCompression() const;
   GuardRecord checkEnergy();
+  bool energyClosed() const;
+  EnergySums energyNow() const;
 
   void integrate(double h);
   void kinematic(int substep);
