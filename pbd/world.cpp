@@ -35,7 +35,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution"},
     {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), when set"},
     {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
-    {"restitution", Cadence::kPerSubstep, "bodies that touched leave at e times their approach speed (Müller 2020 Eq. 34)"},
+    {"restitution", Cadence::kPerSubstep, "bodies that touched the ground or each other leave at e times their approach speed (Müller 2020 Eq. 34; a pair: the mean of their e)"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},
     {"guard", Cadence::kPerStep, "first NaN, explosion or ground penetration"},
 };
@@ -747,6 +747,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
     case PbdPass::kRigidContact:
       return heldBytes(bp.body, bp.plane, bp.first, bp.count, bp.candidates, bp.touched, bp.point, bp.approachSpeed);
     case PbdPass::kBodyContact: return heldBytes(pp.a, pp.b, pp.first, pp.count, pp.pa, pp.pb);
+    case PbdPass::kRestitution: return heldBytes(pairHits_);
     case PbdPass::kFindNeighbors: return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j);
     case PbdPass::kParticleContact: return surface(contacts_.particlePlane);
     case PbdPass::kFluidNeighbors: return fluid_ ? fluid_->neighborBytes() : 0;
@@ -866,6 +867,7 @@ bool PbdWorld::step() {
   // Contacts found in an earlier step must not outlive it: a pass that finds them may be off
   // now (a removed tool leaves one body: find_neighbors is off, particle_contact still on).
   contacts_.particlePair.clear();
+  pairHits_.clear();
   looseHits_.clear();
   bodyHits_.clear();
   active_.clear();
@@ -1249,6 +1251,8 @@ void PbdWorld::findBodyPairs() {
 void PbdWorld::bodyContact() {
   const BodyPairContacts& pairs = contacts_.bodyPair;
   const double touch = 2.0 * params_.particleRadius;
+  const bool bounce = work_[std::size_t(PbdPass::kRestitution)];
+  pairHits_.clear();
   for (int it = 0; it < params_.iterations; ++it)
     for (std::size_t c = 0; c < pairs.size(); ++c) {
       const auto a = std::size_t(pairs.a[c]), b = std::size_t(pairs.b[c]);
@@ -1328,6 +1332,12 @@ void PbdWorld::bodyContact() {
       const double wa = da ? generalizedInverseMass(pa, pc, n) : 0.0, wb = db ? generalizedInverseMass(pb, pc, n) : 0.0;
       if (wa + wb <= 0.0) continue;
       const double lambdaN = dmax / (wa + wb);
+      // For restitution: the pair's contact, and its normal speed before the solve (the
+      // velocities are the substep's predicted ones until update).
+      if (bounce && it == 0 && restitution_[a] + restitution_[b] > 0.0) {
+        const Vec3 va = ma.v + ma.w.cross(pc - ma.c), vb = mb.v + mb.w.cross(pc - mb.c);
+        pairHits_.push_back({pairs.a[c], pairs.b[c], pc, n, n.dot(va - vb)});
+      }
       // The contact point as a point of each body, to follow it through the normal correction.
       const Vec3 localA = pa.q.conjugate() * (pc - pa.c), localB = pb.q.conjugate() * (pc - pb.c);
       if (da) applyPointCorrection(pa, pc, n, lambdaN * wa);
@@ -1446,6 +1456,7 @@ void PbdWorld::rigidContact() {
 void PbdWorld::restitution(double h) {
   const BodyPlaneContacts& bp = contacts_.bodyPlane;
   const double slow = 2.0 * params_.gravity.norm() * h;
+  bodyRestitution(slow);
   forEach(bp.size(), [&](std::size_t c) {
     const auto b = std::size_t(bp.body[c]);
     if (!bp.touched[c] || restitution_[b] <= 0.0 || mode_[b] != BodyMode::kDynamic) return;
@@ -1463,6 +1474,39 @@ void PbdWorld::restitution(double h) {
     mo.v += (p * invMass_[b]) * n;
     mo.w += R * invInertiaRest_[b] * R.transpose() * r.cross(p * n);
   });
+}
+
+// Between two rigid bodies, the same law with the mean of their restitutions (as friction
+// takes the mean of theirs): the pair's contact point leaves at -e u relative to the other body,
+// through both bodies' generalized inverse masses. In pair order, serially: deterministic.
+void PbdWorld::bodyRestitution(double slow) {
+  for (const PairHit& hit : pairHits_) {
+    const auto a = std::size_t(hit.a), b = std::size_t(hit.b);
+    const double e = 0.5 * (restitution_[a] + restitution_[b]);
+    if (e <= 0.0 || hit.approach >= -slow) continue;
+    Motion &ma = motion_[a], &mb = motion_[b];
+    const bool da = mode_[a] == BodyMode::kDynamic, db = mode_[b] == BodyMode::kDynamic;
+    const Vec3& n = hit.normal;  // from b towards a
+    const Vec3 ra = hit.point - ma.c, rb = hit.point - mb.c;
+    const double vn = n.dot((ma.v + ma.w.cross(ra)) - (mb.v + mb.w.cross(rb)));
+    const double dv = -e * hit.approach - vn;
+    if (dv <= 0.0) continue;  // already leaving faster than that
+    const RigidPose pa{ma.c, ma.q, invMass_[a], invInertiaRest_[a]}, pb{mb.c, mb.q, invMass_[b], invInertiaRest_[b]};
+    const double wa = da ? generalizedInverseMass(pa, hit.point, n) : 0.0;
+    const double wb = db ? generalizedInverseMass(pb, hit.point, n) : 0.0;
+    if (wa + wb <= 0.0) continue;
+    const double p = dv / (wa + wb);  // impulse (N s), on a along n and on b against it
+    if (da) {
+      const Mat3 R = ma.q.toRotationMatrix();
+      ma.v += (p * invMass_[a]) * n;
+      ma.w += R * invInertiaRest_[a] * R.transpose() * ra.cross(p * n);
+    }
+    if (db) {
+      const Mat3 R = mb.q.toRotationMatrix();
+      mb.v -= (p * invMass_[b]) * n;
+      mb.w -= R * invInertiaRest_[b] * R.transpose() * rb.cross(p * n);
+    }
+  }
 }
 
 void PbdWorld::update(double h) {

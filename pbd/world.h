@@ -184,6 +184,14 @@ class PbdWorld final : public Solver {
   GuardRecord checkImplied(bool bodiesOnly, bool penetration) const;
   GuardRecord checkCompression() const;
   GuardRecord checkEnergy();
+  // Rigid body pairs that touched in this substep's body_contact (first sweep), for restitution.
+  struct PairHit {
+    std::int32_t a = 0, b = 0;
+    Vec3 point = Vec3::Zero(), normal = Vec3::Zero();  // normal from b towards a
+    double approach = 0.0;  // n . (v_a - v_b) at the point before the solve (m/s, < 0 approaching)
+  };
+  std::vector<PairHit> pairHits_;
+  void bodyRestitution(double slow);
   bool energyClosed() const;
   EnergySums energyNow() const;
 
