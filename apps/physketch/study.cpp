@@ -32,6 +32,15 @@
 #include "core/profile.h"
 
 namespace physketch::app {
+
+// printf-formats one number (study.h).
+std::string fmt(const char* f, double v) {
+  if (std::isnan(v)) return "nan";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -301,13 +310,6 @@ struct Row {
   std::string status;
   bool front = false;
 };
-
-std::string fmt(const char* f, double v) {
-  if (std::isnan(v)) return "nan";
-  char buf[64];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
-}
 
 // Rows in order of their knob values (the order --vary gave the knobs), so a direct run and a
 // collected one list them alike whatever order the parts came in.

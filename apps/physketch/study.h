@@ -88,6 +88,8 @@ double freefallError(const Trajectory& tr, const Vec3& gravity, double groundY, 
                      int expectLine);
 // |c_y(T) - y| (m) of the named body at the last frame. Throws InputError for an unknown body.
 double heightError(const Trajectory& tr, const Expectation& e, const std::string& scenePath);
+// printf-formats one number ("nan" for NaN), for tables and messages.
+std::string fmt(const char* format, double v);
 // Martin & Moyce 1952's surge front (../shared/data/martin-moyce-1952-front.csv): rows (T, Z).
 const std::vector<std::pair<double, double>>& martinMoyceFront();
 // expect dam_break A: a x the RMS over the published rows with T <= min(3, the run's last T) of

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <sstream>
 #include <string>
 
 #include "apps/physketch/study.h"
@@ -96,20 +95,13 @@ const std::vector<std::pair<double, double>>& martinMoyceFront() {
 
 namespace {
 
-std::string num(double v) {
-  std::ostringstream os;
-  os.precision(3);
-  os << v;
-  return os.str();
-}
-
 // Gravity must point down y for the dam-break and run-out laws; returns |g|.
 double downwardGravity(const Vec3& gravity, const Expectation& e, const std::string& scenePath) {
   const double g = gravity.norm();
   if (!(g > 0.0) || gravity.y() > -0.999 * g)
     throw InputError(scenePath, e.line, "kind",
                      std::string("expect ") + toString(e.kind) + " needs gravity pointing down y (the scene's is " +
-                         num(gravity.x()) + " " + num(gravity.y()) + " " + num(gravity.z()) + ")");
+                         fmt("%.3g", gravity.x()) + " " + fmt("%.3g", gravity.y()) + " " + fmt("%.3g", gravity.z()) + ")");
   return g;
 }
 
@@ -129,9 +121,9 @@ double damBreakError(const Trajectory& tr, const Expectation& e, const Vec3& gra
   for (std::size_t f = 1; f < T.size(); ++f)
     if (T[f] - T[f - 1] > 0.25)
       throw InputError(scenePath, e.line, "kind",
-                       "expect dam_break: frames " + num(T[f] - T[f - 1]) +
+                       "expect dam_break: frames " + fmt("%.3g", T[f] - T[f - 1]) +
                            " apart in T are too sparse to follow the front; raise 'fps' to at least " +
-                           num(std::ceil(scale / 0.25)));
+                           fmt("%.3g", std::ceil(scale / 0.25)));
   double sum = 0.0;
   int n = 0;
   for (const auto& [t, z] : martinMoyceFront()) {
@@ -147,7 +139,7 @@ double damBreakError(const Trajectory& tr, const Expectation& e, const Vec3& gra
     throw InputError(scenePath, e.line, "kind",
                      "expect dam_break: the run covers " + std::to_string(n) +
                          " of Martin & Moyce's rows (at least 3 needed): make 'duration' at least " +
-                         num(3.0 / scale) + " s (T = 3)");
+                         fmt("%.3g", 3.0 / scale) + " s (T = 3)");
   return a * std::sqrt(sum / n);
 }
 
