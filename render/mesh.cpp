@@ -28,6 +28,17 @@ void appendVec(std::string& out, const char* tag, const Vec3f& v) {
 
 }  // namespace
 
+double enclosedVolume(const TriangleMesh& mesh) {
+  double v = 0.0;
+  for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+    const Vec3 p0 = mesh.positions[mesh.indices[t]].cast<double>();
+    const Vec3 p1 = mesh.positions[mesh.indices[t + 1]].cast<double>();
+    const Vec3 p2 = mesh.positions[mesh.indices[t + 2]].cast<double>();
+    v += p0.dot(p1.cross(p2)) / 6.0;
+  }
+  return v;
+}
+
 void writeObj(const std::string& path, const TriangleMesh& mesh) {
   const std::size_t n = mesh.positions.size();
   if (!mesh.normals.empty() && mesh.normals.size() != n) {

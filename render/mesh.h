@@ -19,6 +19,11 @@ struct TriangleMesh {
   bool empty() const { return indices.empty(); }
 };
 
+// Volume enclosed by a closed mesh wound counter-clockwise seen from outside (divergence
+// theorem: the sum of the signed tetrahedra each triangle makes with the origin), m^3.
+// Negative for a mesh wound the other way.
+double enclosedVolume(const TriangleMesh& mesh);
+
 // Writes a mesh as Wavefront OBJ (positions, normals, faces). Throws RuntimeError.
 void writeObj(const std::string& path, const TriangleMesh& mesh);
 

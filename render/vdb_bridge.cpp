@@ -6,16 +6,23 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/LevelSetMeasure.h>
+#include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/TopologyToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <functional>
 #include <mutex>
 #include <set>
 #include <string>
 
+#include <tbb/parallel_for.h>
+
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "render/fluid_surface.h"
 #include "render/voxel_mesh.h"
 
 namespace physketch::render {
@@ -145,12 +152,12 @@ openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells
   return sdf;
 }
 
-TriangleMesh meshLevelSet(const openvdb::FloatGrid* sdf, double adaptivity) {
+TriangleMesh meshLevelSet(const openvdb::FloatGrid* sdf, double adaptivity, double isovalue = 0.0) {
   if (!sdf) return {};
   std::vector<openvdb::Vec3s> points;
   std::vector<openvdb::Vec3I> triangles;
   std::vector<openvdb::Vec4I> quads;
-  openvdb::tools::volumeToMesh(*sdf, points, triangles, quads, /*isovalue=*/0.0, adaptivity);
+  openvdb::tools::volumeToMesh(*sdf, points, triangles, quads, isovalue, adaptivity);
   return assemble(points, triangles, quads);
 }
 
@@ -205,6 +212,124 @@ TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSp
   return meshLevelSet(sdf.get(), options.surface.adaptivity);
 }
 
+TriangleMesh meshKernelField(const FluidKernels& kernels, double voxelSize, double iso, double targetVolume,
+                             double* isoUsed) {
+  const std::size_t n = kernels.centre.size();
+  if (kernels.inverseAxes.size() != n || kernels.weight.size() != n || kernels.interior.size() != n)
+    throw RuntimeError("meshKernelField: centre, inverseAxes, weight and interior differ in length");
+  if (!(voxelSize > 0.0) || !std::isfinite(voxelSize)) throw RuntimeError("meshKernelField: voxel size must be finite and > 0 m");
+  if (!(iso > 0.0) || !std::isfinite(iso)) throw RuntimeError("meshKernelField: iso must be finite and > 0");
+  if (!(targetVolume >= 0.0) || !std::isfinite(targetVolume)) throw RuntimeError("meshKernelField: target volume must be finite and >= 0");
+  if (isoUsed) *isoUsed = iso;
+  if (n == 0) return {};
+  initializeOpenVdbOnce();
+  // Each kernel's voxel box: the ellipsoid |M (x - c)| < 1 reaches |row e of M^-1| along
+  // axis e; an interior kernel fills the cube of +-fillRadius.
+  struct Box {
+    Vec3i lo, hi;
+  };
+  std::vector<Box> boxes(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3& c = kernels.centre[i];
+    const Mat3 A = kernels.inverseAxes[i].inverse();
+    if (!c.allFinite() || (c / voxelSize).cwiseAbs().maxCoeff() > 1e9 || !A.allFinite() ||
+        !std::isfinite(kernels.weight[i]))
+      throw RuntimeError("meshKernelField: kernel " + std::to_string(i) + " is not finite, degenerate or too far out");
+    const Vec3 ext = kernels.interior[i] ? Vec3::Constant(kernels.fillRadius) : Vec3(A.rowwise().norm());
+    boxes[i] = {((c - ext) / voxelSize).array().ceil().cast<int>(), ((c + ext) / voxelSize).array().floor().cast<int>()};
+  }
+  // Kernels in the order of their centre's 8^3 block (then index), so the accessor's cached leaf
+  // is usually the one written next. Every voxel sums its kernels in this order.
+  std::vector<std::array<std::int64_t, 4>> order(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3 c = kernels.centre[i] / voxelSize;
+    order[i] = {static_cast<std::int64_t>(std::floor(c.z() / 8.0)), static_cast<std::int64_t>(std::floor(c.y() / 8.0)),
+                static_cast<std::int64_t>(std::floor(c.x() / 8.0)), static_cast<std::int64_t>(i)};
+  }
+  std::sort(order.begin(), order.end());
+  int zMin = boxes[0].lo.z(), zMax = boxes[0].hi.z();
+  for (const Box& b : boxes) {
+    zMin = std::min(zMin, b.lo.z());
+    zMax = std::max(zMax, b.hi.z());
+  }
+  // Slabs of kSlab voxels in z, a multiple of a leaf's 8, so no two slabs share a leaf: each is
+  // summed into its own grid, in parallel, and the grids are merged by moving leaves. A voxel's
+  // value is the same whichever slab holds it (same kernels, same order), so the field does not
+  // depend on the thread count or on the slab width.
+  constexpr int kSlab = 32;
+  const int zFirst = static_cast<int>(std::floor(zMin / double(kSlab))) * kSlab;
+  const int slabs = (zMax - zFirst) / kSlab + 1;
+  const float inside = static_cast<float>(kernels.interiorField);
+  std::vector<openvdb::FloatGrid::Ptr> parts(static_cast<std::size_t>(slabs));
+  tbb::parallel_for(0, slabs, [&](int slab) {
+    const int z0 = zFirst + slab * kSlab, z1 = z0 + kSlab - 1;
+    // The field is stored as it is (background 0 outside, inside above iso): volumeToMesh then
+    // winds it opposite to a level set (inside below the isovalue), which is what assemble's
+    // reversal expects.
+    openvdb::FloatGrid::Ptr part = openvdb::FloatGrid::create(0.0f);
+    openvdb::FloatGrid::Accessor acc = part->getAccessor();
+    for (const auto& o : order) {
+      const std::size_t i = static_cast<std::size_t>(o[3]);
+      const Box& b = boxes[i];
+      if (kernels.interior[i] || b.hi.z() < z0 || b.lo.z() > z1) continue;
+      const Mat3& M = kernels.inverseAxes[i];
+      const Vec3& c = kernels.centre[i];
+      const double w = kernels.weight[i];
+      const int za = std::max(b.lo.z(), z0), zb = std::min(b.hi.z(), z1);
+      const Vec3 step = M.col(2) * voxelSize;
+      for (int x = b.lo.x(); x <= b.hi.x(); ++x)
+        for (int y = b.lo.y(); y <= b.hi.y(); ++y) {
+          Vec3 u = M * (voxelSize * Vec3(x, y, za) - c);
+          for (int z = za; z <= zb; ++z, u += step) {
+            const double r2 = u.squaredNorm();
+            if (r2 >= 1.0) continue;
+            const double t = 1.0 - r2;
+            const openvdb::Coord ijk(x, y, z);
+            acc.setValue(ijk, acc.getValue(ijk) + static_cast<float>(w * t * t * t));
+          }
+        }
+    }
+    // Interior kernels after every sum: each raises its cube to the interior field (a max, so
+    // the order among them does not matter).
+    for (const auto& o : order) {
+      const std::size_t i = static_cast<std::size_t>(o[3]);
+      const Box& b = boxes[i];
+      if (!kernels.interior[i] || b.hi.z() < z0 || b.lo.z() > z1) continue;
+      for (int x = b.lo.x(); x <= b.hi.x(); ++x)
+        for (int y = b.lo.y(); y <= b.hi.y(); ++y)
+          for (int z = std::max(b.lo.z(), z0); z <= std::min(b.hi.z(), z1); ++z) {
+            const openvdb::Coord ijk(x, y, z);
+            if (acc.getValue(ijk) < inside) acc.setValue(ijk, inside);
+          }
+    }
+    parts[static_cast<std::size_t>(slab)] = part;
+  });
+  openvdb::FloatGrid::Ptr grid = parts[0];
+  for (std::size_t s = 1; s < parts.size(); ++s) grid->tree().merge(parts[s]->tree());
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(voxelSize));
+  if (targetVolume > 0.0) {
+    // The level in [iso / 2, iso] whose inside holds targetVolume: each voxel centre inside
+    // stands for one voxel of volume (an unbiased count for a surface smooth on the voxel
+    // scale). The values are collected in the tree's fixed order and selected by rank, so the
+    // level is a pure function of the field.
+    std::vector<float> values;
+    for (auto it = grid->cbeginValueOn(); it; ++it)
+      if (*it > 0.5 * iso) values.push_back(*it);
+    const double voxel = voxelSize * voxelSize * voxelSize;
+    const std::size_t want = static_cast<std::size_t>(std::llround(targetVolume / voxel));
+    double level = 0.5 * iso;
+    if (want == 0) {
+      level = iso;
+    } else if (want <= values.size()) {
+      std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(want - 1), values.end(), std::greater<float>());
+      level = std::clamp(static_cast<double>(values[want - 1]), 0.5 * iso, iso);
+    }
+    iso = level;
+    if (isoUsed) *isoUsed = iso;
+  }
+  return meshLevelSet(grid.get(), 0.0, iso);
+}
+
 std::vector<std::uint64_t> writeLevelSetsVdb(const std::string& path, const std::vector<LevelSetGrid>& grids,
                                              double voxelSize, const Vec3& origin) {
   initializeOpenVdbOnce();
@@ -220,8 +345,24 @@ std::vector<std::uint64_t> writeLevelSetsVdb(const std::string& path, const std:
         !(std::abs(g.model.topLeftCorner<3, 3>().determinant()) > 0.0)) {
       throw RuntimeError(who + ": model must be a finite, invertible affine matrix");
     }
-    openvdb::FloatGrid::Ptr sdf =
-        levelSetOfCells(toCoords(g.cells), voxelSize, origin, g.surface, g.smoothIterations, nullptr);
+    openvdb::FloatGrid::Ptr sdf;
+    if (!g.mesh.empty()) {
+      if (!g.cells.empty() || g.model != Eigen::Matrix4d::Identity())
+        throw RuntimeError(who + ": a mesh grid takes no cells and no model");
+      openvdb::math::Transform::Ptr xform = openvdb::math::Transform::createLinearTransform(voxelSize);
+      xform->postTranslate(openvdb::Vec3d(origin.x(), origin.y(), origin.z()));
+      std::vector<openvdb::Vec3s> points;
+      points.reserve(g.mesh.positions.size());
+      for (const Vec3f& v : g.mesh.positions) points.emplace_back(v.x(), v.y(), v.z());
+      std::vector<openvdb::Vec3I> triangles;
+      for (std::size_t t = 0; t + 2 < g.mesh.indices.size(); t += 3)
+        triangles.emplace_back(g.mesh.indices[t], g.mesh.indices[t + 1], g.mesh.indices[t + 2]);
+      openvdb::util::NullInterrupter interrupt;
+      sdf = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupt, *xform, points, triangles,
+                                                               static_cast<float>(g.surface.halfWidth));
+    } else {
+      sdf = levelSetOfCells(toCoords(g.cells), voxelSize, origin, g.surface, g.smoothIterations, nullptr);
+    }
     if (!sdf) sdf = openvdb::createLevelSet<openvdb::FloatGrid>(voxelSize, double(g.surface.halfWidth));
     // index -> world: lattice scale and offset, then the body's pose. OpenVDB matrices act on
     // row vectors (p' = p M), the transpose of Eigen's column convention.

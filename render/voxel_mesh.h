@@ -78,6 +78,9 @@ struct LevelSetGrid {
   std::string name;      // the grid's name in the file (unique within it)
   std::string material;  // stored as the grid's string metadata "material"
   std::vector<Vec3i> cells;
+  // Instead of cells: a closed surface in world coordinates (a fluid's meshFluid), turned into the
+  // level set by OpenVDB's meshToLevelSet on the same lattice; model must stay the identity.
+  TriangleMesh mesh;
   Eigen::Matrix4d model = Eigen::Matrix4d::Identity();  // rigid: rotation + translation only
   VoxelMeshOptions surface;
   int smoothIterations = 0;  // as ParticleMeshOptions::smoothIterations
@@ -99,8 +102,11 @@ enum class SurfaceKind {
   kRigidRestMesh,
   // Re-meshed from the current particle positions every frame (meshParticles, then
   // OffscreenRenderer::updateMesh, drawn with the identity model matrix): for groups that
-  // deform (soft bodies, fluids, MPM).
+  // deform (soft bodies, cloth, ropes, MPM solids).
   kParticles,
+  // Re-meshed every frame from anisotropic kernels (meshFluid, render/fluid_surface.h), so a
+  // resting pool is flat: for fluids. Drawn like kParticles.
+  kFluid,
 };
 
 }  // namespace physketch::render

@@ -24,6 +24,7 @@ struct RunOptions {
   bool exportVdb = false;        // DIR/vdb/frame_NNNN.vdb
   bool video = false;            // DIR/video.mp4 through ffmpeg, when it is on PATH
   int smooth = 0;                // smoothing iterations of deforming surfaces (ParticleMeshOptions)
+  std::string fluidSurface = "kernels";  // --fluid-surface: kernels (meshFluid) or cells (meshParticles)
   double budgetMs = 0.0;         // --budget: solver ms per frame to fit (0: the scene's settings)
 };
 

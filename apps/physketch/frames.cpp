@@ -5,6 +5,7 @@
 #include <cstdio>
 
 #include "core/error.h"
+#include "render/fluid_surface.h"
 #include "render/voxel_mesh.h"
 
 namespace physketch::app {
@@ -76,7 +77,8 @@ std::size_t FrameWriter::meshesLive() const {
 render::SurfaceKind surfaceOf(MaterialKind kind, SolverKind solver) {
   // What the solver runs decides: rigid under mpm is a stiff elastic that deforms.
   const MaterialKind runs = solverModel(kind, solver).simulated ? solverModel(kind, solver).runsAs : kind;
-  return runs == MaterialKind::kRigid ? render::SurfaceKind::kRigidRestMesh : render::SurfaceKind::kParticles;
+  if (runs == MaterialKind::kRigid) return render::SurfaceKind::kRigidRestMesh;
+  return runs == MaterialKind::kFluid ? render::SurfaceKind::kFluid : render::SurfaceKind::kParticles;
 }
 
 // (Re)builds the meshes of one body: one mesh per material (mixed-material bodies). A
@@ -99,6 +101,16 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       cells.reserve(ids.size());
       for (std::int32_t i : ids) cells.push_back(restCells[static_cast<std::size_t>(i)]);
       mesh = render::meshVoxels(cells, mapping_.voxelSize(), origin);
+    } else if (surface == render::SurfaceKind::kFluid && !options_.fluidCells) {
+      deforming = true;
+      render::FluidSurfaceReport report;
+      mesh = render::meshFluid(positionsOf(p, ids), mapping_.voxelSize(), render::FluidSurfaceOptions{}, &report);
+      if (report.particleVolume > 0.0) {
+        const double change = (report.meshVolume - report.particleVolume) / report.particleVolume;
+        ++fluid_.meshes;
+        fluid_.maxAbsChange = std::max(fluid_.maxAbsChange, std::abs(change));
+        fluid_.sumChange += change;
+      }
     } else {
       deforming = true;
       render::ParticleMeshOptions opt;
@@ -277,7 +289,7 @@ render::ParticleCloud particleCloud(const SceneDesc& scene, const Solver& solver
 
 void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping, const Solver& solver,
                      const std::vector<Vec3i>& restCells, const std::vector<std::string>& bodyNames,
-                     int smoothIterations, const std::string& path) {
+                     int smoothIterations, bool fluidCells, const std::string& path) {
   const Vec3 origin = mapping.toWorld(Vec3i(0, 0, 0));
   const ParticleArrays& p = solver.particles();
   std::vector<render::LevelSetGrid> grids;
@@ -290,9 +302,13 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
       render::LevelSetGrid g;
       g.name = bodyFileStem(b, name) + "/" + render::fileSafeName(mat.name);
       g.material = mat.name;
-      if (surfaceOf(mat.kind, scene.solver) == render::SurfaceKind::kRigidRestMesh) {
+      const render::SurfaceKind surface = surfaceOf(mat.kind, scene.solver);
+      if (surface == render::SurfaceKind::kRigidRestMesh) {
         for (std::int32_t i : ids) g.cells.push_back(restCells[static_cast<std::size_t>(i)]);
         g.model = model.cast<double>();
+      } else if (surface == render::SurfaceKind::kFluid && !fluidCells) {
+        // The surface the frames show (meshFluid), turned into a level set.
+        g.mesh = render::meshFluid(positionsOf(p, ids), mapping.voxelSize());
       } else {
         // As meshParticles does it (render/voxel_mesh.h).
         const render::ParticleMeshOptions defaults;

@@ -23,6 +23,15 @@ struct FrameOptions {
   bool draw = true;         // render PNG frames (creates the EGL context)
   bool keepMeshes = false;  // keep each body's meshes in memory for exportMeshes
   int smoothIterations = 0; // the smoothing knob of deforming surfaces (ParticleMeshOptions)
+  bool fluidCells = false;  // --fluid-surface cells: fluids meshed as deforming cells, not kernels
+};
+
+// The fluid surfaces meshed in a run (anisotropic kernels): how far their enclosed volume was
+// from the fluid's (particles * spacing^3).
+struct FluidSurfaceStats {
+  long meshes = 0;
+  double maxAbsChange = 0.0;  // largest |mesh - particles| / particles
+  double sumChange = 0.0;     // sum of (mesh - particles) / particles, for the mean
 };
 
 // The volume change the smoothing knob made, over every deforming surface meshed in a run.
@@ -53,6 +62,7 @@ class FrameWriter {
   int exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,
                    const std::string& mtllib) const;
   const SmoothingStats& smoothing() const { return smoothing_; }
+  const FluidSurfaceStats& fluidSurfaces() const { return fluid_; }
 
   const Profile& profile() const { return profile_; }
   std::size_t trianglesLastFrame() const { return trianglesLastFrame_; }
@@ -81,6 +91,7 @@ class FrameWriter {
   FrameOptions options_;
   std::unique_ptr<render::OffscreenRenderer> renderer_;  // null without options.draw
   SmoothingStats smoothing_;
+  FluidSurfaceStats fluid_;
   std::map<int, std::vector<MeshPart>> meshes_;  // body -> one mesh per material
   std::vector<int> dirty_;                       // bodies to (re)mesh before the next frame
   std::vector<int> deforming_;                   // bodies with a deforming surface: re-meshed every frame
@@ -105,9 +116,10 @@ render::ParticleCloud particleCloud(const SceneDesc& scene, const Solver& solver
 // one .vdb file (--export vdb). Grids are named "NNNN_NAME/MATERIAL".
 void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping, const Solver& solver,
                      const std::vector<Vec3i>& restCells, const std::vector<std::string>& bodyNames,
-                     int smoothIterations, const std::string& path);
+                     int smoothIterations, bool fluidCells, const std::string& path);
 // How a material's particles become a surface under a solver: kinds it runs as rigid keep their rest mesh and move
-// with the body pose; every other kind deforms and is meshed from its particles each frame.
+// with the body pose; kinds it runs as fluid are meshed from anisotropic kernels each frame; every other kind deforms
+// and is meshed from its particles' cells each frame.
 render::SurfaceKind surfaceOf(MaterialKind kind, SolverKind solver = SolverKind::kPbd);
 
 }  // namespace physketch::app

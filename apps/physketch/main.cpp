@@ -61,6 +61,12 @@ int main(int argc, char** argv) {
                      "Smooth the surfaces of deforming bodies: N iterations of mean-curvature flow, volume kept "
                      "(report.json: frames.smoothing); 0 = off")
       ->check(CLI::Range(0, 100));
+  runCmd->add_option("--fluid-surface", run.fluidSurface,
+                     "How fluids are meshed: 'kernels' (anisotropic kernels, Yu & Turk 2013 on PhyVR's particle grid: a "
+                     "resting pool is flat, the fluid's volume kept; report.json: frames.fluid_surface) or 'cells' (the "
+                     "particles' cells, as deforming solids, cheaper and blocky)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"kernels", "cells"}));
   runCmd->add_option("--budget", run.budgetMs,
                      "Pick substeps and iterations (pbd), or the Courant number of 'substeps auto' (mpm), so that the "
                      "solver takes about MS milliseconds per frame on this machine, from a short calibration of the scene's first frames; prints the error expected "

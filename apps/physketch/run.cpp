@@ -96,7 +96,7 @@ void writeExports(const RunOptions& opt, const Prepared& p, const Solver& solver
   }
   if (opt.exportParticles) render::writeParticlesPly((out / "particles" / (stem + ".ply")).string(), particleCloud(p.scene, solver));
   if (opt.exportVdb)
-    exportLevelSets(p.scene, p.sketch->mapping, solver, restCells, names, opt.smooth, (out / "vdb" / (stem + ".vdb")).string());
+    exportLevelSets(p.scene, p.sketch->mapping, solver, restCells, names, opt.smooth, opt.fluidSurface == "cells", (out / "vdb" / (stem + ".vdb")).string());
 }
 
 // --video: DIR/video.mp4, or why there is none (said once on stderr; the run goes on).
@@ -383,6 +383,7 @@ int runScene(const RunOptions& opt) {
       fo.draw = sc.writeFrames;
       fo.keepMeshes = opt.exportMesh;
       fo.smoothIterations = opt.smooth;
+      fo.fluidCells = opt.fluidSurface == "cells";
       frameWriter = std::make_unique<FrameWriter>(sc, sk.mapping, fo);
       frameWriter->setColliders(p.colliderMeshes);
     }
@@ -460,6 +461,13 @@ int runScene(const RunOptions& opt) {
                                     {"surfaces", st.meshes},
                                     {"max_volume_change_percent", 100.0 * st.maxAbsChange},
                                     {"mean_volume_change_percent", st.meshes ? 100.0 * st.sumChange / double(st.meshes) : 0.0}};
+    }
+    if (frameWriter && frameWriter->fluidSurfaces().meshes > 0) {
+      const FluidSurfaceStats& st = frameWriter->fluidSurfaces();
+      rep["frames"]["fluid_surface"] = {{"method", opt.fluidSurface},
+                                        {"surfaces", st.meshes},
+                                        {"max_volume_change_percent", 100.0 * st.maxAbsChange},
+                                        {"mean_volume_change_percent", 100.0 * st.sumChange / double(st.meshes)}};
     }
     if (!video.is_null()) rep["frames"]["video"] = video;
     if (budget) rep["budget"] = budgetJson(*budget, opt.budgetMs, written > 1 ? 1e3 * stepSeconds / (written - 1) : 0.0);

@@ -534,6 +534,18 @@ TEST(Cli, ASceneWithSolverMpmRunsElasticSandAndFluidToFramesAndReport) {
   EXPECT_GT(rep["frames"]["triangles"].get<long>(), 0);
   EXPECT_TRUE(fs::exists(dir / "o" / "frames" / "frame_0003.png"));
   EXPECT_TRUE(rep["warnings"].empty()) << rep["warnings"];  // nothing near the domain's walls
+  // The water is meshed from anisotropic kernels by default, once per frame, its volume reported.
+  EXPECT_EQ(rep["frames"]["fluid_surface"]["method"], "kernels");
+  EXPECT_EQ(rep["frames"]["fluid_surface"]["surfaces"], 4);
+  EXPECT_LT(rep["frames"]["fluid_surface"]["max_volume_change_percent"].get<double>(), 10.0);
+  // --fluid-surface cells meshes it as the solids are (no kernel report); an unknown method is refused.
+  r = runCli("run '" + (dir / "m.scene").string() + "' -q --frames 2 --fluid-surface cells --out '" + (dir / "c").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_FALSE(readJson(dir / "c" / "report.json")["frames"].contains("fluid_surface"));
+  r = runCli("run '" + (dir / "m.scene").string() + "' -q --fluid-surface blobs --out '" + (dir / "b").string() + "'", dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--fluid-surface"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "b"));
   // Thrown at the x+ wall: the run says that material reached the domain's edge, and where.
   writeText(dir / "t.strokes", "physketch-strokes 1\nprimitive box jelly 0  0.3 0.3 0  0.08 0.08 0.08 vel=6,0,0\n");
   writeText(dir / "t.scene", "physketch-scene 1\nstrokes t.strokes\nsolver mpm\nsubsteps auto\n" + mats + "output report\n");

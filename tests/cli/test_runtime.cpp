@@ -267,6 +267,9 @@ TEST(Frames, ADeformingMaterialIsMeshedFromItsParticlesEveryFrameInPlace) {
   EXPECT_EQ(app::surfaceOf(MaterialKind::kSoft), render::SurfaceKind::kParticles);
   // Under mpm, rigid runs as a stiff elastic that deforms: meshed from its particles.
   EXPECT_EQ(app::surfaceOf(MaterialKind::kRigid, SolverKind::kMpm), render::SurfaceKind::kParticles);
+  // Fluids (under either solver) are meshed from anisotropic kernels (render/fluid_surface.h).
+  EXPECT_EQ(app::surfaceOf(MaterialKind::kFluid), render::SurfaceKind::kFluid);
+  EXPECT_EQ(app::surfaceOf(MaterialKind::kFluid, SolverKind::kMpm), render::SurfaceKind::kFluid);
   StretchingBlock block(kMap);
   SceneDesc sc;
   Material soft;

@@ -49,16 +49,7 @@ inline std::string closedManifoldViolation(const TriangleMesh& m) {
 
 // Divergence theorem: V = sum over triangles of p0 . (p1 x p2) / 6; positive when the
 // triangles are counter-clockwise seen from outside.
-inline double signedVolume(const TriangleMesh& m) {
-  double v = 0.0;
-  for (std::size_t t = 0; t < m.indices.size(); t += 3) {
-    const Vec3 p0 = m.positions[m.indices[t]].cast<double>();
-    const Vec3 p1 = m.positions[m.indices[t + 1]].cast<double>();
-    const Vec3 p2 = m.positions[m.indices[t + 2]].cast<double>();
-    v += p0.dot(p1.cross(p2)) / 6.0;
-  }
-  return v;
-}
+inline double signedVolume(const TriangleMesh& m) { return enclosedVolume(m); }
 
 inline Eigen::AlignedBox3d bounds(const TriangleMesh& m) {
   Eigen::AlignedBox3d box;
