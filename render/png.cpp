@@ -13,6 +13,11 @@ namespace {
 // zlib level 3: measured 31-35 ms for 1280x720 RGBA (docs: stack.md §3); the default level 6
 // costs roughly twice that for a few percent smaller frames.
 constexpr int kCompressionLevel = 3;
+// One row filter (Sub: each byte minus the one four to its left) instead of libpng's default,
+// which tries all five per row and keeps the best: on bench_render's 1280x720 frame 12-19 ms
+// instead of 42-46 ms, and 107 KB instead of 108 KB (rendered images have long flat runs,
+// which Sub turns into zeros). No filter: 9-13 ms but 5-9 % larger files.
+constexpr int kRowFilter = PNG_FILTER_SUB;
 
 struct PngErrorText {
   char text[256] = {0};
@@ -48,6 +53,7 @@ bool encode(std::FILE* file, const Image& image, PngErrorText* err) {
   }
   png_init_io(png, file);
   png_set_compression_level(png, kCompressionLevel);
+  png_set_filter(png, PNG_FILTER_TYPE_BASE, kRowFilter);
   png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
                PNG_COLOR_TYPE_RGBA, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_write_info(png, info);

@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/profile.h"
 #include "render/renderer.h"
 
 namespace physketch::render {
@@ -975,6 +976,7 @@ Image OffscreenRenderer::endFrame() {
   if (!r.inFrame) throw RuntimeError("endFrame called without beginFrame");
   r.makeCurrent();
   r.inFrame = false;
+  const double start = nowSeconds();
 
   Eigen::Matrix4d lightViewProj = Eigen::Matrix4d::Identity();
   const bool shadows = r.renderShadowMap(lightViewProj);
@@ -1028,6 +1030,7 @@ Image OffscreenRenderer::endFrame() {
     readFbo = r.resolveFbo;
   }
   glFinish();
+  const double drawn = nowSeconds();
   Image image;
   image.width = r.width;
   image.height = r.height;
@@ -1045,6 +1048,8 @@ Image OffscreenRenderer::endFrame() {
     std::memcpy(image.rgba.data() + static_cast<std::size_t>(y) * stride,
                 bottomUp.data() + static_cast<std::size_t>(r.height - 1 - y) * stride, stride);
   }
+  image.drawSeconds = drawn - start;
+  image.readSeconds = nowSeconds() - drawn;
   return image;
 }
 

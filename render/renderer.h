@@ -62,6 +62,10 @@ struct Image {
   // it (e.g. under the ground). It is not the number of visible pixels: a mesh hidden only by
   // something drawn after it still counts.
   std::uint64_t meshSamples = 0;
+  // Where endFrame's time went (s): drawing (shadow map, background, meshes, MSAA resolve, up to
+  // glFinish) and reading the pixels back (glReadPixels and the row flip).
+  double drawSeconds = 0.0;
+  double readSeconds = 0.0;
 };
 
 // Distances from the eye along the viewing direction (m) between which geometry is drawn;

@@ -53,6 +53,14 @@ struct SmoothingReport {
   double relativeChange() const { return volumeBefore > 0.0 ? (volumeAfter - volumeBefore) / volumeBefore : 0.0; }
 };
 
+// Where meshParticles' time went (s), for benchmarks and reports.
+struct MeshStageTimes {
+  double cells = 0.0;      // particles -> lattice cells
+  double levelSet = 0.0;   // cells -> narrow-band level set (topologyToLevelSet)
+  double smoothing = 0.0;  // the smoothing knob (0 when off)
+  double meshing = 0.0;    // volumeToMesh and assembly into a TriangleMesh
+};
+
 // A closed surface around particles that no longer sit on the voxel lattice (soft bodies,
 // fluids, MPM): each particle marks the lattice cell whose centre is nearest to it (cells of
 // edge particleSpacing, centres at latticeOrigin + particleSpacing*(i,j,k)), and the union of
@@ -63,8 +71,10 @@ struct SmoothingReport {
 // only on the set of marked cells: the same for any particle order and thread count.
 // Throws RuntimeError on a non-finite position or spacing, or a position beyond +-2^30 cells.
 // `report`, when given, receives the volume change of the smoothing.
+// `times`, when given, receives the time of each stage.
 TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
-                           const ParticleMeshOptions& options = {}, SmoothingReport* report = nullptr);
+                           const ParticleMeshOptions& options = {}, SmoothingReport* report = nullptr,
+                           MeshStageTimes* times = nullptr);
 
 // The lattice cells meshParticles marks for these particles (nearest cell centre, ties upward).
 // Throws RuntimeError as meshParticles does.
