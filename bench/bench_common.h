@@ -16,7 +16,7 @@ inline double median(std::vector<double> v) {
 
 inline void row(const char* bench, const char* kase, std::size_t particles, int threads, const char* metric,
                 double value, const char* unit) {
-  std::printf("%s,%s,%zu,%d,%s,%.4f,%s\n", bench, kase, particles, threads, metric, value, unit);
+  std::printf("%s,%s,%zu,%d,%s,%.6g,%s\n", bench, kase, particles, threads, metric, value, unit);
 }
 
 }  // namespace physketch::bench

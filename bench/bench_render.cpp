@@ -174,5 +174,63 @@ int main(int argc, char** argv) {
   row("render", "fluid_surface_kernels", pool.size(), threads, "triangles", double(kernelTriangles), "count");
   row("render", "fluid_surface_cells", pool.size(), threads, "ms", 1e3 * median(cellsMesh), "ms");
   row("render", "fluid_surface_cells", pool.size(), threads, "triangles", double(cellTriangles), "count");
+
+  // ---- The meshing knobs' error against time (issue 11; docs/accuracy.md, "Meshing knobs"): a
+  // ball of radius 12 spacings on a lattice turned off its axes (as a deforming body's particles
+  // are), meshed with each setting. Error: RMS over the mesh's vertices of their distance from
+  // the sphere around the particles' centroid that fits them best (radius = their mean distance):
+  // the shape's roughness (m); radius_bias: that radius minus the radius of the particles'
+  // volume, N h^3 (m).
+  const Eigen::Matrix3d turn = (Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized())).toRotationMatrix();
+  std::vector<Vec3> ball;
+  for (int k = -13; k <= 13; ++k)
+    for (int j = -13; j <= 13; ++j)
+      for (int i = -13; i <= 13; ++i)
+        if (Vec3(i, j, k).norm() <= 12.0) ball.push_back(Vec3(0.1, 0.2, 0.3) + turn * (kH * Vec3(i, j, k)));
+  Vec3 centroid = Vec3::Zero();
+  for (const Vec3& q : ball) centroid += q;
+  centroid /= double(ball.size());
+  const double radius = std::cbrt(3.0 * double(ball.size()) / (4.0 * 3.14159265358979)) * kH;
+  auto sphereError = [&](const render::TriangleMesh& m, double& bias) {
+    double mean = 0.0, sum = 0.0;
+    for (const Vec3f& v : m.positions) mean += (v.cast<double>() - centroid).norm();
+    mean /= double(std::max<std::size_t>(1, m.positions.size()));
+    for (const Vec3f& v : m.positions) {
+      const double d = (v.cast<double>() - centroid).norm() - mean;
+      sum += d * d;
+    }
+    bias = mean - radius;
+    return m.positions.empty() ? 0.0 : std::sqrt(sum / double(m.positions.size()));
+  };
+  const int knobRepeats = std::max(3, repeats);
+  auto knobRows = [&](const std::string& kase, auto&& mesh) {
+    std::vector<double> ms;
+    double error = 0.0, bias = 0.0;
+    for (int rep = 0; rep < knobRepeats; ++rep) {
+      const double t0 = nowSeconds();
+      const render::TriangleMesh m = mesh();
+      ms.push_back(1e3 * (nowSeconds() - t0));
+      error = sphereError(m, bias);
+    }
+    row("render", kase.c_str(), ball.size(), threads, "ms", median(ms), "ms");
+    row("render", kase.c_str(), ball.size(), threads, "rms_sphere_error", error, "m");
+    row("render", kase.c_str(), ball.size(), threads, "radius_bias", bias, "m");
+  };
+  for (int s : {0, 1, 2, 4, 8}) {
+    knobRows("mesh_smoothing_" + std::to_string(s), [&] {
+      render::ParticleMeshOptions o;
+      o.smoothIterations = s;
+      return render::meshParticles(ball, kH, o);
+    });
+  }
+  for (double f : {1.0, 0.5, 0.33, 0.25}) {
+    char kase[64];
+    std::snprintf(kase, sizeof kase, "fluid_mesh_resolution_%.2f", f);
+    knobRows(kase, [&] {
+      render::FluidSurfaceOptions o;
+      o.voxelFraction = f;
+      return render::meshFluid(ball, kH, o);
+    });
+  }
   return 0;
 }

@@ -30,7 +30,7 @@ struct KnobValues {
 using Setting = std::vector<std::pair<std::string, double>>;
 
 // Parses `KNOB=V1,V2,...`. Throws InputError naming the argument and the knob for an unknown
-// or reserved knob (grid, cfl, mesh_resolution, smoothing: not available yet), a value that is
+// or reserved knob (grid; mesh_resolution and smoothing, measured by bench_render), a value that is
 // not a number, an empty list or value, a value out of the knob's range (iterations 0), or a
 // value given twice.
 KnobValues parseVary(const std::string& arg);

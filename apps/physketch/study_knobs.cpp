@@ -36,8 +36,10 @@ struct Reserved {
 };
 constexpr Reserved kReserved[] = {
     {"grid", "MPM grid resolution: write grid_dx (grid spacing in particle spacings) or voxel"},
-    {"mesh_resolution", "meshing resolution: not available yet (study measures the simulated state, not frames)"},
-    {"smoothing", "mesh smoothing: not available yet (study measures the simulated state, not frames)"},
+    {"mesh_resolution", "meshing resolution: not a study axis (study measures the simulated state, not frames); its "
+                        "error against time is measured by bench_render, docs/accuracy.md \"Meshing knobs\""},
+    {"smoothing", "mesh smoothing: not a study axis (study measures the simulated state, not frames); its error "
+                  "against time is measured by bench_render, docs/accuracy.md \"Meshing knobs\""},
 };
 
 std::string knownKnobs() {
@@ -52,7 +54,7 @@ const KnobSpec& knobSpec(const std::string& name, const std::string& where) {
   for (const auto& r : kReserved)
     if (name == r.name) throw InputError(where, 0, name, std::string("knob '") + name + "' (" + r.why + ")");
   throw InputError(where, 0, name.empty() ? "knob" : name,
-                   "unknown knob '" + name + "' (known: " + knownKnobs() + "; later: mesh_resolution, smoothing)");
+                   "unknown knob '" + name + "' (known: " + knownKnobs() + "; meshing knobs: bench_render)");
 }
 
 double parseValue(const KnobSpec& k, const std::string& text, const std::string& where) {

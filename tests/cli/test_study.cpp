@@ -167,7 +167,7 @@ TEST(StudyCli, BadVaryValuesAreClearErrors) {
       {"--vary grid=64,128", "knob 'grid' (MPM grid resolution: write grid_dx"},
       {"--vary grid_dx=1.5,2", "knob 'grid_dx' is solver mpm's; the scene runs solver pbd"},
       {"--vary cfl=0.5", "knob 'cfl' is solver mpm's"},
-      {"--vary smoothing=1", "not available yet"},
+      {"--vary smoothing=1", "measured by bench_render"},
       {"--vary substeps", "expected KNOB=V1,V2"},
       {"--vary dt=0.02", "1/fps must be a whole multiple of dt"},
       {"--vary voxel=0.001", "(with voxel=0.001)"},  // a 15 cm workspace: the box lies outside it
