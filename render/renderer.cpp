@@ -295,6 +295,71 @@ void main() {
 }
 )";
 
+// Gaussian splats (OffscreenRenderer::drawSplats): one instanced quad per splat, sized to 3
+// standard deviations of its projected Gaussian; the fragment shader evaluates the Gaussian.
+const char* const kSplatVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 aCentre;
+layout(location = 1) in vec3 aCovA;    // covariance xx, xy, xz (m^2)
+layout(location = 2) in vec3 aCovB;    // yy, yz, zz
+layout(location = 3) in vec3 aColor;   // linear RGB
+layout(location = 4) in float aOpacity;
+uniform mat4 uView;
+uniform mat4 uProj;
+uniform vec2 uViewport;                // pixels
+out vec2 vOffset;                      // from the projected centre, pixels (y up)
+out vec3 vConic;                       // the inverse of Sigma2: (xx, xy, yy)
+out vec3 vColor;
+out float vOpacity;
+void main() {
+  vec4 t = uView * vec4(aCentre, 1.0);
+  float z = -t.z;                      // depth in front of the eye
+  vOffset = vec2(0.0);
+  vConic = vec3(0.0);
+  vColor = aColor;
+  vOpacity = 0.0;
+  if (z <= 0.0) {                      // behind the eye: a degenerate quad, drawn nowhere
+    gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
+    return;
+  }
+  vec4 clip = uProj * t;
+  float fx = uProj[0][0] * 0.5 * uViewport.x, fy = uProj[1][1] * 0.5 * uViewport.y;
+  // d(pixel) / d(view position) at t (columns: x, y, z), the perspective divide linearised.
+  mat3 J = mat3(fx / z, 0.0, 0.0, 0.0, fy / z, 0.0, fx * t.x / (z * z), fy * t.y / (z * z), 0.0);
+  mat3 T = J * mat3(uView);
+  mat3 S = mat3(aCovA.x, aCovA.y, aCovA.z, aCovA.y, aCovB.x, aCovB.y, aCovA.z, aCovB.y, aCovB.z);
+  mat3 C = T * S * transpose(T);
+  float a = C[0][0] + 0.3, b = C[0][1], c = C[1][1] + 0.3;
+  float det = a * c - b * b;
+  if (!(det > 0.0)) {
+    gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
+    return;
+  }
+  vConic = vec3(c, -b, a) / det;
+  float mid = 0.5 * (a + c);
+  float largest = mid + sqrt(max(0.0, mid * mid - det));
+  float radius = ceil(3.0 * sqrt(largest));
+  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;
+  vOffset = corner * radius;
+  vOpacity = aOpacity;
+  gl_Position = clip + vec4(vOffset * 2.0 / uViewport * clip.w, 0.0, 0.0);
+}
+)";
+const char* const kSplatFragmentShader = R"(#version 330 core
+in vec2 vOffset;
+in vec3 vConic;
+in vec3 vColor;
+in float vOpacity;
+uniform float uInvGamma;
+out vec4 fragColor;
+void main() {
+  float power = -0.5 * (vConic.x * vOffset.x * vOffset.x + vConic.z * vOffset.y * vOffset.y) -
+                vConic.y * vOffset.x * vOffset.y;
+  float alpha = min(0.99, vOpacity * exp(power));
+  if (alpha < 1.0 / 255.0) discard;
+  fragColor = vec4(pow(clamp(vColor, 0.0, 1.0), vec3(uInvGamma)) * alpha, alpha);  // premultiplied
+}
+)";
+
 GLuint compileShader(GLenum type, const char* source) {
   GLuint s = glCreateShader(type);
   glShaderSource(s, 1, &source, nullptr);
@@ -480,6 +545,9 @@ struct OffscreenRenderer::Impl {
         uShadowBias = -1;
   GLint uLightMvp = -1;
   GLint uTop = -1, uBottom = -1, uHeight = -1, uBgInvGamma = -1;
+  GLuint splatProgram = 0, splatVao = 0, splatVbo = 0;
+  GLint uSplatView = -1, uSplatProj = -1, uSplatViewport = -1, uSplatInvGamma = -1;
+  std::vector<Splat> splats;  // the frame's, in call order
   std::vector<GpuMesh> meshes;  // indexed by handle; freed slots stay (handles are never reused)
   GpuMesh ground;  // unit square [-1, 1]^2 in x/z at y = 0, normal +y
   // One GL_SAMPLES_PASSED query per drawMesh call of the current frame, read in endFrame
@@ -509,6 +577,7 @@ struct OffscreenRenderer::Impl {
   bool renderShadowMap(Eigen::Matrix4d& lightViewProj);
   void drawBackground();
   void draw(const GpuMesh& m, const DrawCall& c, bool countSamples);
+  void drawSplats();
   std::uint64_t collectMeshSamples() const;
   void destroy();
   void checkGl(const char* where) const {
@@ -660,6 +729,27 @@ void OffscreenRenderer::Impl::createProgram() {
   uBottom = glGetUniformLocation(backgroundProgram, "uBottom");
   uHeight = glGetUniformLocation(backgroundProgram, "uHeight");
   uBgInvGamma = glGetUniformLocation(backgroundProgram, "uInvGamma");
+  splatProgram = linkProgram(kSplatVertexShader, kSplatFragmentShader);
+  uSplatView = glGetUniformLocation(splatProgram, "uView");
+  uSplatProj = glGetUniformLocation(splatProgram, "uProj");
+  uSplatViewport = glGetUniformLocation(splatProgram, "uViewport");
+  uSplatInvGamma = glGetUniformLocation(splatProgram, "uInvGamma");
+  // 13 floats per splat, one instance each: centre, covariance (6), colour, opacity.
+  glGenVertexArrays(1, &splatVao);
+  glGenBuffers(1, &splatVbo);
+  glBindVertexArray(splatVao);
+  glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
+  const GLsizei splatStride = 13 * sizeof(float);
+  const int sizes[5] = {3, 3, 3, 3, 1};
+  std::size_t offset = 0;
+  for (GLuint loc = 0; loc < 5; ++loc) {
+    glEnableVertexAttribArray(loc);
+    glVertexAttribPointer(loc, sizes[loc], GL_FLOAT, GL_FALSE, splatStride, reinterpret_cast<const void*>(offset));
+    glVertexAttribDivisor(loc, 1);
+    offset += std::size_t(sizes[loc]) * sizeof(float);
+  }
+  glBindVertexArray(0);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
   // Core profile: a draw needs a vertex array, even with no attributes. Bound once here so the
   // object exists from the start (GL creates a vertex array at its first bind).
   glGenVertexArrays(1, &emptyVao);
@@ -830,6 +920,9 @@ void OffscreenRenderer::Impl::destroy() {
       glDeleteProgram(program);
       glDeleteProgram(shadowProgram);
       glDeleteProgram(backgroundProgram);
+      glDeleteProgram(splatProgram);
+      glDeleteBuffers(1, &splatVbo);
+      glDeleteVertexArrays(1, &splatVao);
       glDeleteVertexArrays(1, &emptyVao);
       glDeleteRenderbuffers(1, &colorRb);
       glDeleteRenderbuffers(1, &depthRb);
@@ -938,6 +1031,7 @@ void OffscreenRenderer::beginFrame(const Camera& camera, const Background& backg
   r.eye = camera.eye.cast<float>();
   r.background = background;
   r.calls.clear();
+  r.splats.clear();
   r.queriesUsed = 0;
   r.inFrame = true;
 }
@@ -969,6 +1063,65 @@ void OffscreenRenderer::drawMesh(int handle, const Mat4f& model, const Color& co
   }
   if (!(roughness >= 0.0f && roughness <= 1.0f)) throw RuntimeError("drawMesh: roughness must be in [0, 1]");
   r.calls.push_back({handle, model, color, roughness, 0.0f, true});
+}
+
+void OffscreenRenderer::drawSplats(const std::vector<Splat>& splats) {
+  Impl& r = *impl_;
+  if (!r.inFrame) throw RuntimeError("drawSplats called outside beginFrame/endFrame");
+  for (std::size_t i = 0; i < splats.size(); ++i) {
+    const Splat& s = splats[i];
+    auto fail = [i](const std::string& what) { throw RuntimeError("drawSplats: splat " + std::to_string(i) + ": " + what); };
+    if (!s.centre.allFinite()) fail("centre is not finite");
+    const Eigen::Matrix3f& c = s.covariance;
+    if (!c.allFinite() || !c.isApprox(c.transpose(), 1e-5f)) fail("covariance is not finite and symmetric");
+    if (Eigen::LLT<Eigen::Matrix3f>(c).info() != Eigen::Success || !(c.determinant() > 0.0f))
+      fail("covariance is not positive definite");
+    for (float v : s.color)
+      if (!(v >= 0.0f && v <= 1.0f)) fail("colour must be in [0, 1]");
+    if (!(s.opacity > 0.0f && s.opacity <= 1.0f)) fail("opacity must be in (0, 1]");
+  }
+  r.splats.insert(r.splats.end(), splats.begin(), splats.end());
+}
+
+// Back to front by the depth of the centre (ties: call order), then one instanced draw with
+// blending "over" on premultiplied colour; depth tested against the meshes, not written.
+void OffscreenRenderer::Impl::drawSplats() {
+  if (splats.empty()) return;
+  const std::size_t n = splats.size();
+  std::vector<std::pair<float, std::uint32_t>> order(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector4f t = view * splats[i].centre.homogeneous();
+    order[i] = {t.z(), static_cast<std::uint32_t>(i)};  // more negative z: farther
+  }
+  std::sort(order.begin(), order.end());
+  std::vector<float> data;
+  data.reserve(13 * n);
+  for (const auto& o : order) {
+    const Splat& s = splats[o.second];
+    const Eigen::Matrix3f& c = s.covariance;
+    const float row[13] = {s.centre.x(), s.centre.y(), s.centre.z(), c(0, 0), c(0, 1), c(0, 2), c(1, 1), c(1, 2),
+                           c(2, 2), s.color[0], s.color[1], s.color[2], s.opacity};
+    data.insert(data.end(), row, row + 13);
+  }
+  glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(data.size() * sizeof(float)), data.data(), GL_STREAM_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  glUseProgram(splatProgram);
+  glUniformMatrix4fv(uSplatView, 1, GL_FALSE, view.data());
+  glUniformMatrix4fv(uSplatProj, 1, GL_FALSE, proj.data());
+  glUniform2f(uSplatViewport, static_cast<float>(width), static_cast<float>(height));
+  glUniform1f(uSplatInvGamma, 1.0f / kGamma);
+  glEnable(GL_DEPTH_TEST);
+  glDepthMask(GL_FALSE);
+  glEnable(GL_BLEND);
+  glBlendFunc(GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+  glBindVertexArray(splatVao);
+  glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, static_cast<GLsizei>(n));
+  glBindVertexArray(0);
+  glDisable(GL_BLEND);
+  glDepthMask(GL_TRUE);
+  splats.clear();
+  checkGl("drawSplats");
 }
 
 Image OffscreenRenderer::endFrame() {
@@ -1021,6 +1174,7 @@ Image OffscreenRenderer::endFrame() {
   }
   r.checkGl("endFrame (draw)");
   r.calls.clear();
+  r.drawSplats();
 
   GLuint readFbo = r.fbo;
   if (r.resolveFbo) {  // average the samples of each pixel

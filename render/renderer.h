@@ -117,6 +117,19 @@ struct MeshStats {
   std::size_t gpuBytes = 0;   // vertex + index buffer sizes as GL reports them (bytes)
 };
 
+// One 3D Gaussian (a splat): density exp(-(x - centre)^T covariance^-1 (x - centre) / 2), drawn
+// as its screen-space projection (EWA splatting, Zwicker et al. 2002, as 3D Gaussian splatting
+// draws it, Kerbl et al. 2023): Sigma2 = J W covariance W^T J^T + 0.3 px^2 (W the view's
+// rotation, J the perspective projection's Jacobian at the centre, in pixels; the 0.3 px^2 keeps
+// a splat at least a pixel wide), and a pixel at offset d from the projected centre gets
+// alpha = opacity * exp(-d^T Sigma2^-1 d / 2), cut at 1/255 and capped at 0.99.
+struct Splat {
+  Vec3f centre = Vec3f::Zero();                          // m
+  Eigen::Matrix3f covariance = Eigen::Matrix3f::Identity();  // m^2, symmetric positive definite
+  Color color{1.0f, 1.0f, 1.0f};                        // linear RGB in [0, 1]
+  float opacity = 1.0f;                                 // (0, 1]
+};
+
 // One EGL context per renderer, rendering into its own framebuffer. The EGL display is the
 // first of these that initialises (deviceDescription() says which one was taken):
 //  1. an EGL device whose extensions contain EGL_MESA_device_software: Mesa's llvmpipe, a CPU
@@ -171,6 +184,13 @@ class OffscreenRenderer {
   // Lighting: one directional light (lightDirection()) plus ambient, normalised Blinn-Phong with
   // `roughness` (see kDefaultRoughness), shadows from Looks, gamma 2.2.
   void drawMesh(int handle, const Mat4f& model, const Color& color, float roughness = kDefaultRoughness);
+  // Draws Gaussian splats (unlit: their colour as given) after every mesh of the frame: sorted
+  // back to front by their centre's depth (ties by order of the calls, then of the list) and
+  // blended over what is drawn ("over", premultiplied alpha); meshes and the ground hide them
+  // (depth test) but they do not hide each other or cast shadows. Not counted in meshSamples.
+  // Throws RuntimeError for a non-finite centre, a covariance that is not symmetric positive
+  // definite, or a colour or opacity out of range, naming the splat.
+  void drawSplats(const std::vector<Splat>& splats);
   // Draws the frame (shadow map, background, ground, meshes), resolves the samples and reads it
   // back (top row first), with Image::meshSamples.
   Image endFrame();
