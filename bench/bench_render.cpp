@@ -138,7 +138,6 @@ int main(int argc, char** argv) {
     encode.push_back(end - p0);
     total.push_back(end - start);
   }
-  if (!std::getenv("KEEP_PNG")) std::filesystem::remove(png);
   row("render", "frame_dump", particles, threads, "ms", 1e3 * median(total), "ms");
   row("render", "frame_dump", particles, threads, "mesh_wall_ms", 1e3 * median(meshWall), "ms");
   row("render", "frame_dump", particles, threads, "cells_ms", 1e3 * median(cells), "ms");
@@ -151,6 +150,59 @@ int main(int argc, char** argv) {
   row("render", "frame_dump", particles, threads, "png_ms", 1e3 * median(encode), "ms");
   row("render", "frame_dump", particles, threads, "triangles", double(triangles), "count");
   row("render", "frame_dump", particles, threads, "smooth_iterations", double(smooth), "count");
+
+  // ---- The same bodies as Gaussian splats (--look splats): one per particle, sigma0 = h/2,
+  // stretched as the twist and squash stretch the body (F from the deformation above, applied
+  // here as the bulge's 1.1 x 0.85 x 1.1), no meshing at all.
+  std::vector<double> splatBuild, splatDraw, splatRead, splatPng, splatTotal;
+  std::size_t drawn = 0;
+  for (int rep = 0; rep < repeats; ++rep) {
+    const double start = nowSeconds();
+    std::vector<render::Splat> splats;
+    splats.reserve(particles);
+    Eigen::Matrix3f F = Eigen::Matrix3f::Identity();
+    F(0, 0) = F(2, 2) = 1.1f;
+    F(1, 1) = 0.85f;
+    const float s0 = float(0.5 * kH);
+    for (std::size_t b = 0; b < centres.size(); ++b) {
+      const std::vector<Vec3> pos = deformedBall(centres[b], perBody, 0.3 * rep + double(b));
+      const std::vector<std::uint8_t> hidden = render::enclosedParticles(pos, kH, Vec3::Zero());  // as --look splats
+      for (std::size_t j = 0; j < pos.size(); ++j) {
+        if (hidden[j]) continue;
+        const Vec3& q = pos[j];
+        render::Splat s;
+        s.centre = q.cast<float>();
+        s.covariance = s0 * s0 * F * F.transpose();
+        s.color = {0.9f, 0.3f, 0.35f};
+        s.opacity = 0.9f;
+        splats.push_back(s);
+      }
+    }
+    drawn = splats.size();
+    const double built = nowSeconds();
+    const Eigen::AlignedBox3d box(Vec3(-0.6, 0.0, -0.6), Vec3(0.6, 0.4, 0.6));
+    renderer.beginFrame(camera, render::Background{{0.62f, 0.72f, 0.86f}, {0.94f, 0.95f, 0.97f}},
+                        render::clipRangeFor(camera, box));
+    renderer.drawGround(0.0, 0.0, 0.0, 0.8, {0.55f, 0.57f, 0.55f});
+    renderer.drawSplats(splats);
+    const render::Image image = renderer.endFrame();
+    const double p0 = nowSeconds();
+    render::writePng(png.string(), image);
+    const double end = nowSeconds();
+    splatBuild.push_back(built - start);
+    splatDraw.push_back(image.drawSeconds);
+    splatRead.push_back(image.readSeconds);
+    splatPng.push_back(end - p0);
+    splatTotal.push_back(end - start);
+  }
+  row("render", "splats", particles, threads, "ms", 1e3 * median(splatTotal), "ms");
+  row("render", "splats", particles, threads, "build_ms", 1e3 * median(splatBuild), "ms");
+  row("render", "splats", particles, threads, "draw_ms", 1e3 * median(splatDraw), "ms");
+  row("render", "splats", particles, threads, "read_back_ms", 1e3 * median(splatRead), "ms");
+  row("render", "splats", particles, threads, "png_ms", 1e3 * median(splatPng), "ms");
+  row("render", "splats", particles, threads, "splats_drawn", double(drawn), "count");
+
+  if (!std::getenv("KEEP_PNG")) std::filesystem::remove(png);
 
   // ---- Fluid surface of an 80,000-particle pool (80 x 10 x 100, jittered as at rest).
   std::mt19937 rng(5);

@@ -56,6 +56,10 @@ class Solver {
   // equation of state at the particle's J); NaN elsewhere (PBD's fluids hold density as a
   // constraint, not a pressure).
   virtual double pressure(std::int32_t /*i*/) const { return std::numeric_limits<double>::quiet_NaN(); }
+  // How the material around particle i is deformed from its rest shape (the deformation gradient
+  // F), for looks that follow it (Gaussian splats: Sigma = F Sigma0 F^T). Identity where the
+  // solver keeps none (pbd); solver mpm: F, and J^(1/3) I for fluids (which keep only J).
+  virtual Mat3 deformationGradient(std::int32_t /*i*/) const { return Mat3::Identity(); }
 
   // --- changes while the simulation runs (sketching after play) -------------
   // Appends a body made of `particles` (positions at rest, stroke and material set; a rope's

@@ -547,6 +547,14 @@ std::vector<PlanEntry> MpmWorld::plan() const {
 
 // The Tait equation of state of a fluid particle (plasticity.h, fluidKirchhoff): p = K / gamma
 // (J^-gamma - 1), J the particle's volume ratio.
+Mat3 MpmWorld::deformationGradient(std::int32_t i) const {
+  const auto k = std::size_t(i);
+  if (k >= parts_.size()) throw RuntimeError("MpmWorld::deformationGradient: no particle " + std::to_string(i));
+  if (models_[std::size_t(parts_.material[k])].kind == MaterialKind::kFluid)
+    return Mat3::Identity() * std::cbrt(double(plastic_[k]));
+  return F_[k].cast<double>();
+}
+
 double MpmWorld::pressure(std::int32_t i) const {
   const auto k = std::size_t(i);
   if (k >= parts_.size() || !phase::dynamic(parts_.phase[k])) return std::numeric_limits<double>::quiet_NaN();

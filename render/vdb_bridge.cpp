@@ -208,6 +208,31 @@ std::vector<Vec3i> particleCells(const std::vector<Vec3>& positions, double part
   return cells;
 }
 
+std::vector<std::uint8_t> enclosedParticles(const std::vector<Vec3>& positions, double particleSpacing,
+                                            const Vec3& latticeOrigin) {
+  const std::vector<Vec3i> cells = particleCells(positions, particleSpacing, latticeOrigin);
+  // Cells within +-2^20 of the origin pack into 63 bits; farther ones are never enclosed (a
+  // particle 2^20 spacings out is spray, not the inside of a body).
+  constexpr int kReach = 1 << 20;
+  auto inRange = [](const Vec3i& c) { return c.cwiseAbs().maxCoeff() < kReach - 1; };
+  auto key = [](const Vec3i& c) {
+    return (std::uint64_t(c.x() + kReach) << 42) | (std::uint64_t(c.y() + kReach) << 21) | std::uint64_t(c.z() + kReach);
+  };
+  std::vector<std::uint64_t> occupied;
+  occupied.reserve(cells.size());
+  for (const Vec3i& c : cells)
+    if (inRange(c)) occupied.push_back(key(c));
+  std::sort(occupied.begin(), occupied.end());
+  auto has = [&](const Vec3i& c) { return std::binary_search(occupied.begin(), occupied.end(), key(c)); };
+  std::vector<std::uint8_t> enclosed(cells.size(), 0);
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    const Vec3i& c = cells[i];
+    enclosed[i] = inRange(c) && has(c + Vec3i(1, 0, 0)) && has(c - Vec3i(1, 0, 0)) && has(c + Vec3i(0, 1, 0)) &&
+                  has(c - Vec3i(0, 1, 0)) && has(c + Vec3i(0, 0, 1)) && has(c - Vec3i(0, 0, 1));
+  }
+  return enclosed;
+}
+
 TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,
                            const ParticleMeshOptions& options, SmoothingReport* report, MeshStageTimes* times) {
   checkOptions("meshParticles", particleSpacing, options.latticeOrigin, options.surface);

@@ -80,6 +80,12 @@ TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSp
 // Throws RuntimeError as meshParticles does.
 std::vector<Vec3i> particleCells(const std::vector<Vec3>& positions, double particleSpacing, const Vec3& latticeOrigin);
 
+// 1 for each particle whose lattice cell (as particleCells) has all six face neighbours marked
+// by other particles of the list: it is enclosed, and a look that draws particles (Gaussian
+// splats) can leave it out. Throws RuntimeError as particleCells does.
+std::vector<std::uint8_t> enclosedParticles(const std::vector<Vec3>& positions, double particleSpacing,
+                                            const Vec3& latticeOrigin);
+
 // One level set of a .vdb file: the union of `cells` (centres at origin + h * cell) turned into a
 // signed distance field exactly as meshVoxels / meshParticles do before meshing, placed in the
 // world by `model` (a rigid body's pose, rest -> world; identity for a deforming surface, whose

@@ -24,7 +24,19 @@ struct FrameOptions {
   bool keepMeshes = false;  // keep each body's meshes in memory for exportMeshes
   int smoothIterations = 0; // the smoothing knob of deforming surfaces (ParticleMeshOptions)
   bool fluidCells = false;  // --fluid-surface cells: fluids meshed as deforming cells, not kernels
+  bool splats = false;      // --look splats: every body drawn as Gaussian splats, one per particle
 };
+
+// Gaussian splats of every body's particles (--look splats), in body and id order: centre at the
+// particle, covariance sigma0^2 F F^T with sigma0 = kSplatSigma spacings and F the solver's
+// deformation gradient (PhysGaussian's Sigma' = F Sigma F^T); a fluid's splats take their
+// kernel's shape instead (render/fluid_surface.h: thin across its surface, wide along it),
+// scaled so an undeformed kernel is the same ball. Colour: the material's; opacity kSplatOpacity.
+// Particles inside a body (all six neighbour cells occupied; a fluid's deep particles) are hidden
+// behind the others and get no splat.
+constexpr double kSplatSigma = 0.5;
+constexpr float kSplatOpacity = 0.9f;
+std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing);
 
 // The fluid surfaces meshed in a run (anisotropic kernels): how far their enclosed volume was
 // from the fluid's (particles * spacing^3).
@@ -97,7 +109,7 @@ class FrameWriter {
   std::vector<int> deforming_;                   // bodies with a deforming surface: re-meshed every frame
   int meshedBodies_ = 0;                         // bodies 0..meshedBodies_-1 have been meshed once
   Profile profile_;
-  int passMesh_, passDraw_, passPng_;
+  int passMesh_, passDraw_, passPng_, passSplats_ = -1;
   std::size_t trianglesLastFrame_ = 0, trianglesMeshed_ = 0;
   int frames_ = 0;
   std::vector<int> framesWithNothingInView_;

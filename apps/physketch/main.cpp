@@ -67,6 +67,12 @@ int main(int argc, char** argv) {
                      "particles' cells, as deforming solids, cheaper and blocky)")
       ->capture_default_str()
       ->check(CLI::IsMember({"kernels", "cells"}));
+  runCmd->add_option("--look", run.look,
+                     "How bodies are drawn: 'meshes' (surfaces: rigid rest meshes, deforming cells, fluid kernels) or "
+                     "'splats' (one Gaussian splat per particle, stretched by the solver's deformation gradient F under "
+                     "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"meshes", "splats"}));
   runCmd->add_option("--budget", run.budgetMs,
                      "Pick substeps and iterations (pbd), or the Courant number of 'substeps auto' (mpm), so that the "
                      "solver takes about MS milliseconds per frame on this machine, from a short calibration of the scene's first frames; prints the error expected "

@@ -542,6 +542,15 @@ TEST(Cli, ASceneWithSolverMpmRunsElasticSandAndFluidToFramesAndReport) {
   r = runCli("run '" + (dir / "m.scene").string() + "' -q --frames 2 --fluid-surface cells --out '" + (dir / "c").string() + "'", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_FALSE(readJson(dir / "c" / "report.json")["frames"].contains("fluid_surface"));
+  // --look splats draws one Gaussian splat per particle: no meshing at all, a splats pass instead.
+  r = runCli("run '" + (dir / "m.scene").string() + "' -q --frames 2 --look splats --out '" + (dir / "s").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::string splatPasses;
+  const auto splatReport = readJson(dir / "s" / "report.json");
+  for (const auto& e : splatReport["passes"]) splatPasses += e["pass"].get<std::string>() + " ";
+  EXPECT_NE(splatPasses.find("render.splats"), std::string::npos) << splatPasses;
+  EXPECT_EQ(splatPasses.find("render.mesh"), std::string::npos) << splatPasses;
+  EXPECT_TRUE(fs::exists(dir / "s" / "frames" / "frame_0001.png"));
   r = runCli("run '" + (dir / "m.scene").string() + "' -q --fluid-surface blobs --out '" + (dir / "b").string() + "'", dir);
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("--fluid-surface"), std::string::npos) << r.err;

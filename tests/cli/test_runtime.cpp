@@ -248,6 +248,12 @@ class StretchingBlock final : public Solver {
   void setVelocity(int, const Vec3&, const Vec3&) override {}
   void setKinematicTarget(int, const Vec3&) override {}
   std::vector<int> removeParticles(const std::vector<std::int32_t>&) override { return {}; }
+  // The stretch each step applies, as a deformation gradient: 1.5^steps along x.
+  Mat3 deformationGradient(std::int32_t) const override {
+    Mat3 F = Mat3::Identity();
+    F(0, 0) = std::pow(1.5, double(steps_));
+    return F;
+  }
 
  private:
   ParticleArrays parts_;
@@ -257,6 +263,46 @@ class StretchingBlock final : public Solver {
   std::int64_t steps_ = 0;
 };
 }  // namespace
+
+// --look splats: one splat per particle, at the particle, covariance (sigma0)^2 F F^T with F the
+// solver's deformation gradient (here 1.5x along x after one step: exact, a closed form), in the
+// material's colour; a fluid's splats take their kernel's shape instead: on the block's top face
+// they are thinner across it (y) than along it (x, z).
+TEST(Frames, SplatsFollowTheDeformationGradientAndAFluidsKernels) {
+  StretchingBlock block(kMap);
+  SceneDesc sc;
+  Material soft;
+  soft.name = "jelly";
+  soft.kind = MaterialKind::kSoft;
+  soft.color = {0.9f, 0.3f, 0.35f};
+  sc.materials = {soft};
+  block.step();
+  const double h = kMap.voxelSize(), s0 = app::kSplatSigma * h;
+  const std::vector<render::Splat> splats = app::particleSplats(sc, block, h);
+  // Stretched 1.5x in x, fewer of the block's particles are hidden than the 6^3 of the cube.
+  ASSERT_GT(splats.size(), std::size_t(8 * 8 * 8 - 6 * 6 * 6));
+  ASSERT_LE(splats.size(), block.particles().size());
+  EXPECT_EQ(splats[0].centre.x(), block.particles().x[0]);  // ids in order; particle 0 is a corner
+  for (std::size_t i = 0; i < splats.size(); ++i) {
+    EXPECT_NEAR(splats[i].covariance(0, 0), 1.5 * 1.5 * s0 * s0, 1e-6 * s0 * s0);
+    EXPECT_NEAR(splats[i].covariance(1, 1), s0 * s0, 1e-6 * s0 * s0);
+    EXPECT_NEAR(splats[i].covariance(0, 1), 0.0, 1e-9);
+    EXPECT_EQ(splats[i].color, soft.color);
+  }
+  StretchingBlock pool(kMap);  // unstretched: a lattice cube of 8^3
+  // Unstretched as a solid, its 6^3 inner particles are hidden: 8^3 - 6^3 splats.
+  sc.materials[0].kind = MaterialKind::kSoft;
+  EXPECT_EQ(app::particleSplats(sc, pool, h).size(), std::size_t(8 * 8 * 8 - 6 * 6 * 6));
+  sc.materials[0].kind = MaterialKind::kFluid;
+  const std::vector<render::Splat> drops = app::particleSplats(sc, pool, h);
+  ASSERT_EQ(drops.size(), pool.particles().size());  // 8 wide: none is deep (4 cells from every side)
+  const std::size_t top = (4 * 8 + 7) * 8 + 4;  // i = 4, j = 7 (the top layer), k = 4
+  const Eigen::Matrix3f& c = drops[top].covariance;
+  std::printf("top splat variances (x, y, z) in spacings^2: %.3f %.3f %.3f\n", c(0, 0) / (h * h), c(1, 1) / (h * h),
+              c(2, 2) / (h * h));
+  EXPECT_LT(c(1, 1), 0.8f * c(0, 0));
+  EXPECT_LT(c(1, 1), 0.8f * c(2, 2));
+}
 
 TEST(Frames, ADeformingMaterialIsMeshedFromItsParticlesEveryFrameInPlace) {
   // Rigid kinds keep their rest mesh; any other kind deforms, so FrameWriter meshes it
