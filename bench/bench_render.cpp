@@ -60,6 +60,31 @@ std::vector<Vec3> deformedBall(const Vec3& centre, std::size_t count, double t) 
   return p;
 }
 
+// The frame's tail, the same for meshes and splats: sky, ground, the bodies (`drawBodies`),
+// draw, read-back and PNG, each stage's seconds appended to its series.
+struct FrameTail {
+  std::vector<double> draw, readBack, png;
+  template <class DrawBodies>
+  void run(render::OffscreenRenderer& renderer, const Camera& camera, const std::string& path, DrawBodies&& drawBodies) {
+    const Eigen::AlignedBox3d box(Vec3(-0.6, 0.0, -0.6), Vec3(0.6, 0.4, 0.6));
+    renderer.beginFrame(camera, render::Background{{0.62f, 0.72f, 0.86f}, {0.94f, 0.95f, 0.97f}},
+                        render::clipRangeFor(camera, box));
+    renderer.drawGround(0.0, 0.0, 0.0, 0.8, {0.55f, 0.57f, 0.55f});
+    drawBodies();
+    const render::Image image = renderer.endFrame();
+    const double p0 = nowSeconds();
+    render::writePng(path, image);
+    draw.push_back(image.drawSeconds);
+    readBack.push_back(image.readSeconds);
+    png.push_back(nowSeconds() - p0);
+  }
+  void rows(const char* kase, std::size_t particles, int threads) const {
+    row("render", kase, particles, threads, "draw_ms", 1e3 * median(draw), "ms");
+    row("render", kase, particles, threads, "read_back_ms", 1e3 * median(readBack), "ms");
+    row("render", kase, particles, threads, "png_ms", 1e3 * median(png), "ms");
+  }
+};
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -90,7 +115,8 @@ int main(int argc, char** argv) {
   std::vector<int> handles;
   for (std::size_t b = 0; b < centres.size(); ++b) handles.push_back(renderer.uploadMesh(render::TriangleMesh{}));
   const auto png = std::filesystem::temp_directory_path() / "physketch_bench_render.png";
-  std::vector<double> meshWall, cells, levelSet, smoothing, meshing, upload, draw, readBack, encode, total;
+  std::vector<double> meshWall, cells, levelSet, smoothing, meshing, upload, total;
+  FrameTail meshTail;
   std::size_t triangles = 0;
   for (int rep = 0; rep < repeats; ++rep) {
     render::MeshStageTimes sum;
@@ -119,24 +145,15 @@ int main(int argc, char** argv) {
     }
     up = nowSeconds() - meshed;
     meshWall.push_back(meshed - start);
-    const Eigen::AlignedBox3d box(Vec3(-0.6, 0.0, -0.6), Vec3(0.6, 0.4, 0.6));
-    renderer.beginFrame(camera, render::Background{{0.62f, 0.72f, 0.86f}, {0.94f, 0.95f, 0.97f}},
-                        render::clipRangeFor(camera, box));
-    renderer.drawGround(0.0, 0.0, 0.0, 0.8, {0.55f, 0.57f, 0.55f});
-    for (int h : handles) renderer.drawMesh(h, Mat4f::Identity(), {0.9f, 0.3f, 0.35f});
-    const render::Image image = renderer.endFrame();
-    const double p0 = nowSeconds();
-    render::writePng(png.string(), image);
-    const double end = nowSeconds();
+    meshTail.run(renderer, camera, png.string(), [&] {
+      for (int h : handles) renderer.drawMesh(h, Mat4f::Identity(), {0.9f, 0.3f, 0.35f});
+    });
     cells.push_back(sum.cells);
     levelSet.push_back(sum.levelSet);
     smoothing.push_back(sum.smoothing);
     meshing.push_back(sum.meshing);
     upload.push_back(up);
-    draw.push_back(image.drawSeconds);
-    readBack.push_back(image.readSeconds);
-    encode.push_back(end - p0);
-    total.push_back(end - start);
+    total.push_back(nowSeconds() - start);
   }
   row("render", "frame_dump", particles, threads, "ms", 1e3 * median(total), "ms");
   row("render", "frame_dump", particles, threads, "mesh_wall_ms", 1e3 * median(meshWall), "ms");
@@ -145,16 +162,15 @@ int main(int argc, char** argv) {
   row("render", "frame_dump", particles, threads, "smoothing_ms", 1e3 * median(smoothing), "ms");
   row("render", "frame_dump", particles, threads, "meshing_ms", 1e3 * median(meshing), "ms");
   row("render", "frame_dump", particles, threads, "upload_ms", 1e3 * median(upload), "ms");
-  row("render", "frame_dump", particles, threads, "draw_ms", 1e3 * median(draw), "ms");
-  row("render", "frame_dump", particles, threads, "read_back_ms", 1e3 * median(readBack), "ms");
-  row("render", "frame_dump", particles, threads, "png_ms", 1e3 * median(encode), "ms");
+  meshTail.rows("frame_dump", particles, threads);
   row("render", "frame_dump", particles, threads, "triangles", double(triangles), "count");
   row("render", "frame_dump", particles, threads, "smooth_iterations", double(smooth), "count");
 
   // ---- The same bodies as Gaussian splats (--look splats): one per particle, sigma0 = h/2,
   // stretched as the twist and squash stretch the body (F from the deformation above, applied
   // here as the bulge's 1.1 x 0.85 x 1.1), no meshing at all.
-  std::vector<double> splatBuild, splatDraw, splatRead, splatPng, splatTotal;
+  std::vector<double> splatBuild, splatTotal;
+  FrameTail splatTail;
   std::size_t drawn = 0;
   for (int rep = 0; rep < repeats; ++rep) {
     const double start = nowSeconds();
@@ -180,26 +196,13 @@ int main(int argc, char** argv) {
     }
     drawn = splats.size();
     const double built = nowSeconds();
-    const Eigen::AlignedBox3d box(Vec3(-0.6, 0.0, -0.6), Vec3(0.6, 0.4, 0.6));
-    renderer.beginFrame(camera, render::Background{{0.62f, 0.72f, 0.86f}, {0.94f, 0.95f, 0.97f}},
-                        render::clipRangeFor(camera, box));
-    renderer.drawGround(0.0, 0.0, 0.0, 0.8, {0.55f, 0.57f, 0.55f});
-    renderer.drawSplats(splats);
-    const render::Image image = renderer.endFrame();
-    const double p0 = nowSeconds();
-    render::writePng(png.string(), image);
-    const double end = nowSeconds();
+    splatTail.run(renderer, camera, png.string(), [&] { renderer.drawSplats(splats); });
     splatBuild.push_back(built - start);
-    splatDraw.push_back(image.drawSeconds);
-    splatRead.push_back(image.readSeconds);
-    splatPng.push_back(end - p0);
-    splatTotal.push_back(end - start);
+    splatTotal.push_back(nowSeconds() - start);
   }
   row("render", "splats", particles, threads, "ms", 1e3 * median(splatTotal), "ms");
   row("render", "splats", particles, threads, "build_ms", 1e3 * median(splatBuild), "ms");
-  row("render", "splats", particles, threads, "draw_ms", 1e3 * median(splatDraw), "ms");
-  row("render", "splats", particles, threads, "read_back_ms", 1e3 * median(splatRead), "ms");
-  row("render", "splats", particles, threads, "png_ms", 1e3 * median(splatPng), "ms");
+  splatTail.rows("splats", particles, threads);
   row("render", "splats", particles, threads, "splats_drawn", double(drawn), "count");
 
   if (!std::getenv("KEEP_PNG")) std::filesystem::remove(png);
