@@ -97,29 +97,42 @@ void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshColl
 }
 
 // expect freefall | expect rest | expect height BODY Y | expect dam_break A | expect runout |
-// expect hydrostatic
+// expect hydrostatic | expect pendulum BODY PX PY PZ
 // (docs/formats.md, "Expected answers").
 Expectation parseExpect(const RecordFile& file, const Record& r, const std::vector<Expectation>& existing) {
-  const bool dam = r.tokens.size() > 1 && r.tokens[1] == "dam_break";
-  FieldReader f(file, r, {"kind", dam ? "a" : "body", "y"}, 1);
+  const std::string first = r.tokens.size() > 1 ? r.tokens[1] : "";
+  const std::vector<std::string> names = first == "dam_break"  ? std::vector<std::string>{"kind", "a"}
+                                         : first == "pendulum" ? std::vector<std::string>{"kind", "body", "x", "y", "z"}
+                                                               : std::vector<std::string>{"kind", "body", "y"};
+  FieldReader f(file, r, names, 1);
   Expectation e;
   e.line = r.line;
   const std::string& kind = f.word(0);
-  const std::size_t want = kind == "height" ? 3 : kind == "dam_break" ? 2 : 1;
+  const std::size_t want = kind == "height" ? 3 : kind == "dam_break" ? 2 : kind == "pendulum" ? 5 : 1;
   if (kind == "freefall") e.kind = Expectation::Kind::kFreefall;
   else if (kind == "rest") e.kind = Expectation::Kind::kRest;
   else if (kind == "height") e.kind = Expectation::Kind::kHeight;
   else if (kind == "dam_break") e.kind = Expectation::Kind::kDamBreak;
   else if (kind == "runout") e.kind = Expectation::Kind::kRunout;
   else if (kind == "hydrostatic") e.kind = Expectation::Kind::kHydrostatic;
-  else f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout, hydrostatic)");
+  else if (kind == "pendulum") e.kind = Expectation::Kind::kPendulum;
+  else
+    f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout, hydrostatic, pendulum)");
   if (f.count() < want)
-    f.fail(f.count(), kind == "height" ? "expect height needs BODY and Y (m): expect height NAME Y"
-                                       : "expect dam_break needs the column's width A (m): expect dam_break A");
+    f.fail(f.count(), kind == "height"     ? "expect height needs BODY and Y (m): expect height NAME Y"
+                      : kind == "pendulum" ? "expect pendulum needs BODY and the pivot (m): expect pendulum NAME PX PY PZ"
+                                           : "expect dam_break needs the column's width A (m): expect dam_break A");
   if (f.count() > want)
     throw InputError(file.path, r.line, "#" + std::to_string(want + 1),
                      "extra field '" + f.word(want) + "' (expect " + kind + " takes " +
-                         (want == 1 ? "no further field)" : want == 2 ? "A only)" : "BODY and Y only)"));
+                         (want == 1   ? "no further field)"
+                          : want == 2 ? "A only)"
+                          : want == 3 ? "BODY and Y only)"
+                                      : "BODY and the pivot's PX PY PZ only)"));
+  if (e.kind == Expectation::Kind::kPendulum) {
+    e.body = SceneDesc::expectedBodyName(f.word(1));
+    e.point = Vec3(f.inRange(2, -1e6, 1e6), f.inRange(3, -1e6, 1e6), f.inRange(4, -1e6, 1e6));
+  }
   if (e.kind == Expectation::Kind::kHeight) {
     e.body = SceneDesc::expectedBodyName(f.word(1));
     e.value = f.inRange(2, -1e6, 1e6);
@@ -129,8 +142,9 @@ Expectation parseExpect(const RecordFile& file, const Record& r, const std::vect
     if (!(e.value > 0.0)) f.fail(1, "the column's width A must be above 0 m");
   }
   for (const auto& o : existing) {
-    const bool same = o.kind == e.kind && (e.kind != Expectation::Kind::kHeight || o.body == e.body);
-    if (same) f.fail(e.kind == Expectation::Kind::kHeight ? 1 : 0,
+    const bool perBody = e.kind == Expectation::Kind::kHeight || e.kind == Expectation::Kind::kPendulum;
+    const bool same = o.kind == e.kind && (!perBody || o.body == e.body);
+    if (same) f.fail(perBody ? 1 : 0,
                      "expect " + kind + (e.body.empty() ? "" : " " + f.word(1)) + " given twice (first on line " +
                          std::to_string(o.line) + ")");
     // Free fall and rest of every dynamic body cannot both hold (unless nothing moves): one or the other.
@@ -353,6 +367,7 @@ const char* toString(Expectation::Kind kind) {
     case Expectation::Kind::kHeight: return "height";
     case Expectation::Kind::kDamBreak: return "dam_break";
     case Expectation::Kind::kRunout: return "runout";
+    case Expectation::Kind::kPendulum: return "pendulum";
     case Expectation::Kind::kHydrostatic: return "hydrostatic";
   }
   return "?";

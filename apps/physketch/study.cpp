@@ -384,6 +384,10 @@ std::string normText(bool analytic, const SceneDesc* scene, const std::string& r
           s += "expect hydrostatic: RMS over fluid particles at the last frame of (p - p_hydrostatic(depth)) / (rho0 g), "
                "Tait's equation of state integrated down the column (m of head)";
           break;
+        case Expectation::Kind::kPendulum:
+          s += "expect pendulum " + e.body + ": RMS over frames 1.. of |c(t) - the simple pendulum's bob| about the "
+               "pivot, length |c0 - pivot|, released as at t = 0, theta'' = -(g/L) sin theta integrated (m)";
+          break;
       }
     }
   return s + (s.find(';') != std::string::npos ? "; the error is the largest of these" : "");

@@ -88,6 +88,14 @@ double freefallError(const Trajectory& tr, const Vec3& gravity, double groundY, 
                      int expectLine);
 // |c_y(T) - y| (m) of the named body at the last frame. Throws InputError for an unknown body.
 double heightError(const Trajectory& tr, const Expectation& e, const std::string& scenePath);
+// The angle theta(t) (rad) of a simple pendulum, theta'' = -(g/L) sin theta, from theta0 and
+// theta'0 (rad/s) at t = 0, at each of `times` (s, ascending), by RK4 with steps of 1e-4 s or less.
+std::vector<double> pendulumAngle(double theta0, double omega0, double gOverL, const std::vector<double>& times);
+// expect pendulum BODY PX PY PZ: RMS over frames 1.. of |c(t) - p(t)| (m), p(t) the bob of a simple
+// pendulum about the pivot P of length L = |c0 - P| in the plane of gravity and c0 - P, released
+// at c0's angle with the body's velocity at t = 0 (pendulumAngle). Throws InputError naming the
+// record for an unknown or non-dynamic body, no gravity, or a pivot at the body's centre.
+double pendulumError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath);
 // printf-formats one number ("nan" for NaN), for tables and messages.
 std::string fmt(const char* format, double v);
 // Martin & Moyce 1952's surge front (../shared/data/martin-moyce-1952-front.csv): rows (T, Z).

@@ -71,15 +71,72 @@ double freefallError(const Trajectory& tr, const Vec3& gravity, double groundY, 
   return std::sqrt(sum / double(count));
 }
 
-double heightError(const Trajectory& tr, const Expectation& e, const std::string& scenePath) {
+namespace {
+// The index of the body an expect record names. Throws InputError listing the bodies.
+std::size_t namedBody(const Trajectory& tr, const Expectation& e, const std::string& scenePath) {
   std::string known;
   for (std::size_t b = 0; b < tr.names.size(); ++b) {
-    if (tr.names[b] == e.body) return std::abs(tr.centres.back()[b].y() - e.value);
+    if (tr.names[b] == e.body) return b;
     std::string shown = tr.names[b];
     std::replace(shown.begin(), shown.end(), ' ', '_');
     known += (known.empty() ? "" : ", ") + shown;
   }
   throw InputError(scenePath, e.line, "body", "no body named '" + e.body + "' (bodies: " + known + ")");
+}
+}  // namespace
+
+double heightError(const Trajectory& tr, const Expectation& e, const std::string& scenePath) {
+  return std::abs(tr.centres.back()[namedBody(tr, e, scenePath)].y() - e.value);
+}
+
+std::vector<double> pendulumAngle(double theta0, double omega0, double gOverL, const std::vector<double>& times) {
+  // RK4 on (theta, theta') with steps of at most 1e-4 s, stopping at each requested time.
+  std::vector<double> out;
+  double t = 0.0, th = theta0, w = omega0;
+  for (double target : times) {
+    while (t < target) {
+      const double h = std::min(1e-4, target - t);
+      auto acc = [gOverL](double a) { return -gOverL * std::sin(a); };
+      const double k1t = w, k1w = acc(th);
+      const double k2t = w + 0.5 * h * k1w, k2w = acc(th + 0.5 * h * k1t);
+      const double k3t = w + 0.5 * h * k2w, k3w = acc(th + 0.5 * h * k2t);
+      const double k4t = w + h * k3w, k4w = acc(th + h * k3t);
+      th += h / 6.0 * (k1t + 2.0 * k2t + 2.0 * k3t + k4t);
+      w += h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w);
+      t += h;
+    }
+    out.push_back(th);
+  }
+  return out;
+}
+
+double pendulumError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath) {
+  const std::size_t b = namedBody(tr, e, scenePath);
+  const double g = gravity.norm();
+  if (!(g > 0.0)) throw InputError(scenePath, e.line, "kind", "expect pendulum needs gravity");
+  if (!tr.dynamic0[b]) throw InputError(scenePath, e.line, "body", "body '" + e.body + "' is not dynamic at t = 0");
+  const Vec3 r0 = tr.centres[0][b] - e.point;
+  const double L = r0.norm();
+  if (!(L > 0.0)) throw InputError(scenePath, e.line, "x", "the pivot is the body's centre: no pendulum");
+  // The swing plane: down (along gravity) and the side the body starts on (any side when it
+  // hangs straight down; its velocity then decides).
+  const Vec3 down = gravity / g;
+  Vec3 side = r0 - r0.dot(down) * down;
+  if (side.norm() < 1e-9 * L) side = tr.velocity0[b] - tr.velocity0[b].dot(down) * down;
+  if (side.norm() < 1e-12) side = down.unitOrthogonal();
+  side.normalize();
+  const double theta0 = std::atan2(r0.dot(side), r0.dot(down));
+  const Vec3 tangent = std::cos(theta0) * side - std::sin(theta0) * down;
+  const double omega0 = tr.velocity0[b].dot(tangent) / L;
+  const std::vector<double> theta = pendulumAngle(theta0, omega0, g / L, tr.t);
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t f = 1; f < tr.t.size(); ++f) {
+    const Vec3 want = e.point + L * (std::sin(theta[f]) * side + std::cos(theta[f]) * down);
+    sum += (tr.centres[f][b] - want).squaredNorm();
+    ++n;
+  }
+  return n ? std::sqrt(sum / double(n)) : 0.0;
 }
 
 const std::vector<std::pair<double, double>>& martinMoyceFront() {
@@ -211,6 +268,7 @@ double analyticError(const Trajectory& tr, const SceneDesc& scene) {
       case Expectation::Kind::kDamBreak: err = damBreakError(tr, e, scene.gravity, scene.path); break;
       case Expectation::Kind::kRunout: err = runoutError(tr, e, scene.gravity, scene.path); break;
       case Expectation::Kind::kHydrostatic: err = hydrostaticRunError(tr, e, scene); break;
+      case Expectation::Kind::kPendulum: err = pendulumError(tr, e, scene.gravity, scene.path); break;
     }
     if (std::isnan(err)) return err;
     worst = std::max(worst, err);

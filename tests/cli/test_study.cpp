@@ -203,6 +203,11 @@ TEST(StudyCli, ExpectErrorsNameTheSceneLine) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("c.scene:6: field 'kind': expect hydrostatic: no particle has a pressure"), std::string::npos)
       << r.err;
+  // expect pendulum needs the pivot's three coordinates: the missing one is named.
+  std::ofstream(dir / "p.scene") << head << "expect pendulum box 0 1\n";
+  r = runCli("study '" + (dir / "p.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("p.scene:6: field 'z': expect pendulum needs BODY and the pivot"), std::string::npos) << r.err;
   // Sideways gravity: the dam-break law is about a column falling down y.
   std::ofstream(dir / "d.scene") << head << "gravity 9.81 0 0\nexpect dam_break 0.1\n";
   r = runCli("study '" + (dir / "d.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
@@ -497,6 +502,67 @@ TEST(StudyNorms, RunoutErrorFollowsLubesLaw) {
   EXPECT_NEAR(runoutError(tr, e, Vec3(0, -9.81, 0), "r.scene"), 0.03, 1e-12);
   tr.front.back() = -0.4 + 0.12 - 0.5 * h;
   EXPECT_NEAR(runoutError(tr, e, Vec3(0, -9.81, 0), "r.scene"), 0.0, 1e-12);
+}
+
+// The pendulum's oracle: at 0.01 rad the simple pendulum is theta0 cos(omega' t) with the
+// frequency lowered by theta0^2 / 16 (Lindstedt-Poincare), up to its third harmonic of amplitude
+// theta0^3 / 192 = 5e-9 rad, so the RK4 angle must match within 3e-8 rad over 2 s (without the
+// frequency shift it drifts 7e-7 rad, which this tolerance would catch); at 1 rad its quarter period is
+// K(sin(1/2)) / omega (the complete elliptic integral, here by the arithmetic-geometric mean),
+// where the angle must be 0 within 1e-7 rad.
+TEST(StudyNorms, PendulumAngleMatchesClosedForms) {
+  const double gOverL = 9.81 / 0.3, omega = std::sqrt(gOverL);
+  std::vector<double> times;
+  for (int k = 1; k <= 20; ++k) times.push_back(0.1 * k);
+  const std::vector<double> small = pendulumAngle(0.01, 0.0, gOverL, times);
+  const double shifted = omega * (1.0 - 0.01 * 0.01 / 16.0);
+  for (std::size_t k = 0; k < times.size(); ++k) EXPECT_NEAR(small[k], 0.01 * std::cos(shifted * times[k]), 3e-8);
+  double a = 1.0, b = std::cos(0.5);  // AGM(1, sqrt(1 - k^2)) with k = sin(theta0 / 2)
+  for (int i = 0; i < 20; ++i) {
+    const double m = 0.5 * (a + b);
+    b = std::sqrt(a * b);
+    a = m;
+  }
+  const double quarter = (M_PI / (2.0 * a)) / omega;
+  EXPECT_NEAR(pendulumAngle(1.0, 0.0, gOverL, {quarter})[0], 0.0, 1e-7);
+  EXPECT_GT(quarter, 0.5 * M_PI / omega * 1.06);  // the large swing is slower: K(sin 0.5) = 1.0663 pi/2
+}
+
+// pendulumError against a bob moved on the small-angle closed form: a pivot off the origin, a
+// swing in a vertical plane at 45 degrees to x, 0.01 rad: under 1e-6 m (the closed form leaves
+// out the frequency shift: 0.3 m x 7e-7 rad at 2 s). The same motion with a 2 % longer cord is 1 % slower: its bob drifts from the
+// expected one by about 0.3 m x 0.01 rad x (1 % of omega t) at 2 s, several 1e-5 m. An unknown body
+// names the body; a body that is not dynamic is refused.
+TEST(StudyNorms, PendulumErrorIsTheBobsDistanceFromTheSimplePendulum) {
+  const Vec3 pivot(0.2, 0.9, -0.1), side = Vec3(1.0, 0.0, 1.0).normalized(), down(0.0, -1.0, 0.0);
+  const double L = 0.3, theta0 = 0.01;
+  auto motion = [&](double length) {
+    Trajectory tr;
+    tr.names = {"bob"};
+    tr.dynamic0 = {true};
+    tr.velocity0 = {Vec3::Zero()};
+    for (int f = 0; f <= 60; ++f) {
+      const double t = f / 30.0, th = theta0 * std::cos(std::sqrt(9.81 / length) * t);
+      tr.t.push_back(t);
+      tr.centres.push_back({pivot + L * (std::sin(th) * side + std::cos(th) * down)});
+    }
+    return tr;
+  };
+  Expectation e;
+  e.kind = Expectation::Kind::kPendulum;
+  e.body = "bob";
+  e.point = pivot;
+  const double exact = pendulumError(motion(L), e, Vec3(0, -9.81, 0), "p.scene");
+  const double slower = pendulumError(motion(1.02 * L), e, Vec3(0, -9.81, 0), "p.scene");
+  std::printf("pendulum error: exact motion %.3g m, 1 %% slower %.3g m\n", exact, slower);
+  EXPECT_LT(exact, 1e-6);
+  EXPECT_GT(slower, 1e-5);
+  e.body = "lid";
+  EXPECT_THROW(pendulumError(motion(L), e, Vec3(0, -9.81, 0), "p.scene"), InputError);
+  e.body = "bob";
+  Trajectory fixed = motion(L);
+  fixed.dynamic0 = {false};
+  EXPECT_THROW(pendulumError(fixed, e, Vec3(0, -9.81, 0), "p.scene"), InputError);
 }
 
 TEST(StudyCli, RestAndHeightErrorsMatchClosedForms) {
