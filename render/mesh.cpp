@@ -1,6 +1,7 @@
 #include "render/mesh.h"
 
 #include <charconv>
+#include <cmath>
 #include <cstdio>
 
 #include "core/atomic_file.h"
@@ -27,6 +28,62 @@ void appendVec(std::string& out, const char* tag, const Vec3f& v) {
 }
 
 }  // namespace
+
+TriangleMesh tubeMesh(const std::vector<std::vector<Vec3>>& chains, double radius, int sides) {
+  if (!(radius > 0.0) || !std::isfinite(radius)) throw RuntimeError("tubeMesh: radius must be finite and > 0 m");
+  if (sides < 3) throw RuntimeError("tubeMesh: need at least 3 sides");
+  TriangleMesh mesh;
+  const double step = 2.0 * 3.14159265358979323846 / sides;
+  for (std::size_t c = 0; c < chains.size(); ++c) {
+    std::vector<Vec3> pts = chains[c];
+    if (pts.empty()) continue;
+    for (const Vec3& q : pts)
+      if (!q.allFinite()) throw RuntimeError("tubeMesh: chain " + std::to_string(c) + " has a point that is not finite");
+    if (pts.size() == 1) pts = {pts[0] - Vec3(radius, 0, 0), pts[0] + Vec3(radius, 0, 0)};
+    const std::size_t n = pts.size();
+    // Direction at each point (central differences; one-sided at the ends; the previous one
+    // where two points coincide, +x for the first).
+    std::vector<Vec3> dir(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Vec3 d = pts[std::min(i + 1, n - 1)] - pts[i > 0 ? i - 1 : 0];
+      dir[i] = d.norm() > 0.0 ? d.normalized() : (i > 0 ? dir[i - 1] : Vec3::UnitX());
+    }
+    Vec3 normal = dir[0].unitOrthogonal();
+    const auto first = static_cast<std::uint32_t>(mesh.positions.size());
+    for (std::size_t i = 0; i < n; ++i) {
+      if (i > 0) {
+        // Parallel transport: turn the frame by the rotation taking the last direction to this one.
+        const Eigen::Quaterniond turn = Eigen::Quaterniond::FromTwoVectors(dir[i - 1], dir[i]);
+        normal = (turn * normal - (turn * normal).dot(dir[i]) * dir[i]).normalized();
+      }
+      const Vec3 binormal = dir[i].cross(normal);
+      for (int k = 0; k < sides; ++k) {
+        const Vec3 radial = std::cos(k * step) * normal + std::sin(k * step) * binormal;
+        mesh.positions.push_back((pts[i] + radius * radial).cast<float>());
+        mesh.normals.push_back(radial.cast<float>());
+      }
+    }
+    auto ring = [&](std::size_t i, int k) { return first + static_cast<std::uint32_t>(i * sides + ((k % sides) + sides) % sides); };
+    for (std::size_t i = 0; i + 1 < n; ++i)
+      for (int k = 0; k < sides; ++k) {
+        // Counter-clockwise seen from outside: the ring turns right-handed about dir.
+        mesh.indices.insert(mesh.indices.end(), {ring(i, k), ring(i + 1, k + 1), ring(i + 1, k)});
+        mesh.indices.insert(mesh.indices.end(), {ring(i, k), ring(i, k + 1), ring(i + 1, k + 1)});
+      }
+    // Caps: a fan around each end point, facing away from the tube.
+    const auto startCentre = static_cast<std::uint32_t>(mesh.positions.size());
+    mesh.positions.push_back(pts.front().cast<float>());
+    mesh.normals.push_back((-dir.front()).cast<float>());
+    const auto endCentre = static_cast<std::uint32_t>(mesh.positions.size());
+    mesh.positions.push_back(pts.back().cast<float>());
+    mesh.normals.push_back(dir.back().cast<float>());
+    for (int k = 0; k < sides; ++k) {
+      mesh.indices.insert(mesh.indices.end(), {startCentre, ring(0, k + 1), ring(0, k)});
+      mesh.indices.insert(mesh.indices.end(), {endCentre, ring(n - 1, k), ring(n - 1, k + 1)});
+    }
+  }
+  return mesh;
+}
 
 double enclosedVolume(const TriangleMesh& mesh) {
   double v = 0.0;

@@ -24,6 +24,14 @@ struct TriangleMesh {
 // Negative for a mesh wound the other way.
 double enclosedVolume(const TriangleMesh& mesh);
 
+// A closed tube of `radius` (m) around each chain of points (a rope's particles in chain order):
+// a ring of `sides` vertices around every point, in the plane normal to the chain's direction
+// there (central differences), turned from ring to ring by parallel transport so the tube does
+// not twist; the end rings are closed by fans around the end points. A chain of one point
+// becomes a tube of length 2 radius along x. Normals: radial. Throws RuntimeError for a
+// non-finite point, a radius that is not > 0 or fewer than 3 sides.
+TriangleMesh tubeMesh(const std::vector<std::vector<Vec3>>& chains, double radius, int sides = 8);
+
 // Writes a mesh as Wavefront OBJ (positions, normals, faces). Throws RuntimeError.
 void writeObj(const std::string& path, const TriangleMesh& mesh);
 

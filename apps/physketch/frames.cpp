@@ -29,6 +29,17 @@ std::vector<Vec3> positionsOf(const ParticleArrays& p, const std::vector<std::in
   return pos;
 }
 
+// A rope is one particle across: a tube of the particle's radius (h/2) along each run of
+// consecutive ids (neighbours on the chain; a cut leaves a gap in the ids).
+render::TriangleMesh ropeTube(const std::vector<std::int32_t>& ids, const std::vector<Vec3>& pos, double spacing) {
+  std::vector<std::vector<Vec3>> chains(1);
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    if (k > 0 && ids[k] != ids[k - 1] + 1) chains.emplace_back();
+    chains.back().push_back(pos[k]);
+  }
+  return render::tubeMesh(chains, 0.5 * spacing);
+}
+
 }  // namespace
 
 std::string frameName(int index) { return frameStem(index) + ".png"; }
@@ -118,18 +129,12 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       opt.latticeOrigin = origin;
       opt.smoothIterations = options_.smoothIterations;
       render::SmoothingReport report;
-      std::vector<Vec3> pos = positionsOf(p, ids);
+      const std::vector<Vec3> pos = positionsOf(p, ids);
       if (scene_.materials[static_cast<std::size_t>(material)].kind == MaterialKind::kRope) {
-        // A rope is one particle across: links that run diagonally through the lattice mark
-        // cells that touch only at edges, which mesh as a dashed line. Points along each link
-        // (consecutive ids are neighbours on the chain) mark the cells between.
-        for (std::size_t k = 0; k + 1 < ids.size(); ++k) {
-          if (ids[k + 1] != ids[k] + 1) continue;
-          const Vec3 from = pos[k], to = pos[k + 1];
-          for (double f : {0.25, 0.5, 0.75}) pos.push_back(from + f * (to - from));
-        }
+        mesh = ropeTube(ids, pos, mapping_.voxelSize());
+      } else {
+        mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
       }
-      mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
       if (options_.smoothIterations > 0 && report.volumeBefore > 0.0) {
         ++smoothing_.meshes;
         smoothing_.maxAbsChange = std::max(smoothing_.maxAbsChange, std::abs(report.relativeChange()));
@@ -360,6 +365,8 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
       } else if (surface == render::SurfaceKind::kFluid && !fluidCells) {
         // The surface the frames show (meshFluid), turned into a level set.
         g.mesh = render::meshFluid(positionsOf(p, ids), mapping.voxelSize());
+      } else if (mat.kind == MaterialKind::kRope) {
+        g.mesh = ropeTube(ids, positionsOf(p, ids), mapping.voxelSize());  // the frames' tube
       } else {
         // As meshParticles does it (render/voxel_mesh.h).
         const render::ParticleMeshOptions defaults;
