@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::IsMember({"kernels", "cells"}));
   runCmd->add_option("--look", run.look,
-                     "How bodies are drawn: 'meshes' (surfaces: rigid rest meshes, deforming cells, fluid kernels) or "
+                     "How bodies are drawn: 'meshes' (surfaces: rigid rest meshes, deforming cells, rope tubes, fluid kernels) or "
                      "'splats' (one Gaussian splat per particle, stretched by the solver's deformation gradient F under "
                      "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md)")
       ->capture_default_str()
