@@ -97,18 +97,19 @@ void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshColl
 }
 
 // expect freefall | expect rest | expect height BODY Y | expect dam_break A | expect runout |
-// expect hydrostatic | expect pendulum BODY PX PY PZ
+// expect hydrostatic | expect pendulum BODY PX PY PZ | expect sphere CX CY CZ R
 // (docs/formats.md, "Expected answers").
 Expectation parseExpect(const RecordFile& file, const Record& r, const std::vector<Expectation>& existing) {
   const std::string first = r.tokens.size() > 1 ? r.tokens[1] : "";
   const std::vector<std::string> names = first == "dam_break"  ? std::vector<std::string>{"kind", "a"}
                                          : first == "pendulum" ? std::vector<std::string>{"kind", "body", "x", "y", "z"}
+                                         : first == "sphere"   ? std::vector<std::string>{"kind", "x", "y", "z", "radius"}
                                                                : std::vector<std::string>{"kind", "body", "y"};
   FieldReader f(file, r, names, 1);
   Expectation e;
   e.line = r.line;
   const std::string& kind = f.word(0);
-  const std::size_t want = kind == "height" ? 3 : kind == "dam_break" ? 2 : kind == "pendulum" ? 5 : 1;
+  const std::size_t want = kind == "height" ? 3 : kind == "dam_break" ? 2 : kind == "pendulum" || kind == "sphere" ? 5 : 1;
   if (kind == "freefall") e.kind = Expectation::Kind::kFreefall;
   else if (kind == "rest") e.kind = Expectation::Kind::kRest;
   else if (kind == "height") e.kind = Expectation::Kind::kHeight;
@@ -116,11 +117,13 @@ Expectation parseExpect(const RecordFile& file, const Record& r, const std::vect
   else if (kind == "runout") e.kind = Expectation::Kind::kRunout;
   else if (kind == "hydrostatic") e.kind = Expectation::Kind::kHydrostatic;
   else if (kind == "pendulum") e.kind = Expectation::Kind::kPendulum;
+  else if (kind == "sphere") e.kind = Expectation::Kind::kSphere;
   else
-    f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout, hydrostatic, pendulum)");
+    f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout, hydrostatic, pendulum, sphere)");
   if (f.count() < want)
     f.fail(f.count(), kind == "height"     ? "expect height needs BODY and Y (m): expect height NAME Y"
                       : kind == "pendulum" ? "expect pendulum needs BODY and the pivot (m): expect pendulum NAME PX PY PZ"
+                      : kind == "sphere"   ? "expect sphere needs the centre and radius (m): expect sphere CX CY CZ R"
                                            : "expect dam_break needs the column's width A (m): expect dam_break A");
   if (f.count() > want)
     throw InputError(file.path, r.line, "#" + std::to_string(want + 1),
@@ -128,10 +131,16 @@ Expectation parseExpect(const RecordFile& file, const Record& r, const std::vect
                          (want == 1   ? "no further field)"
                           : want == 2 ? "A only)"
                           : want == 3 ? "BODY and Y only)"
+                          : kind == "sphere" ? "the centre's CX CY CZ and the radius R only)"
                                       : "BODY and the pivot's PX PY PZ only)"));
   if (e.kind == Expectation::Kind::kPendulum) {
     e.body = SceneDesc::expectedBodyName(f.word(1));
     e.point = Vec3(f.inRange(2, -1e6, 1e6), f.inRange(3, -1e6, 1e6), f.inRange(4, -1e6, 1e6));
+  }
+  if (e.kind == Expectation::Kind::kSphere) {
+    e.point = Vec3(f.inRange(1, -1e6, 1e6), f.inRange(2, -1e6, 1e6), f.inRange(3, -1e6, 1e6));
+    e.value = f.inRange(4, 0.0, 1e6);
+    if (!(e.value > 0.0)) f.fail(4, "the sphere's radius R must be above 0 m");
   }
   if (e.kind == Expectation::Kind::kHeight) {
     e.body = SceneDesc::expectedBodyName(f.word(1));
@@ -369,6 +378,7 @@ const char* toString(Expectation::Kind kind) {
     case Expectation::Kind::kRunout: return "runout";
     case Expectation::Kind::kPendulum: return "pendulum";
     case Expectation::Kind::kHydrostatic: return "hydrostatic";
+    case Expectation::Kind::kSphere: return "sphere";
   }
   return "?";
 }

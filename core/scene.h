@@ -48,11 +48,12 @@ struct MeshCollider {
 // run's error against (docs/formats.md, "Expected answers"; docs/accuracy.md, the norms).
 // `physketch run` ignores it.
 struct Expectation {
-  enum class Kind { kFreefall, kRest, kHeight, kDamBreak, kRunout, kHydrostatic, kPendulum };
+  enum class Kind { kFreefall, kRest, kHeight, kDamBreak, kRunout, kHydrostatic, kPendulum, kSphere };
   Kind kind = Kind::kFreefall;
   std::string body;   // kHeight, kPendulum: the body's name (body=NAME, or "stroke N" written stroke_N)
-  double value = 0.0; // kHeight: the final height of its centre of mass (m); kDamBreak: the column's width a (m)
-  Vec3 point = Vec3::Zero();  // kPendulum: the pivot (m)
+  double value = 0.0; // kHeight: the final height of its centre of mass (m); kDamBreak: the column's width a (m);
+                      // kSphere: the radius (m)
+  Vec3 point = Vec3::Zero();  // kPendulum: the pivot (m); kSphere: the centre (m)
   int line = 0;
 };
 const char* toString(Expectation::Kind kind);

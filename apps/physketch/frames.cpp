@@ -116,7 +116,9 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
     } else if (surface == render::SurfaceKind::kFluid && !options_.fluidCells) {
       deforming = true;
       render::FluidSurfaceReport report;
-      mesh = render::meshFluid(positionsOf(p, ids), mapping_.voxelSize(), render::FluidSurfaceOptions{}, &report);
+      render::FluidSurfaceOptions fo;
+      fo.voxelFraction = options_.fluidVoxelFraction;
+      mesh = render::meshFluid(positionsOf(p, ids), mapping_.voxelSize(), fo, &report);
       if (report.particleVolume > 0.0) {
         const double change = (report.meshVolume - report.particleVolume) / report.particleVolume;
         ++fluid_.meshes;
@@ -297,16 +299,14 @@ void FrameWriter::setColliders(const std::vector<TriangleSoup>& meshes) {
   }
 }
 
-int FrameWriter::exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,
-                              const std::string& mtllib) const {
-  if (!options_.keepMeshes) throw RuntimeError("FrameWriter::exportMeshes: created without keepMeshes");
-  const std::vector<render::ExportMaterial> materials = exportMaterials(scene_);
-  int written = 0;
+std::map<int, std::vector<render::MaterialMesh>> FrameWriter::worldMeshes(const Solver& solver) const {
+  if (!options_.keepMeshes) throw RuntimeError("FrameWriter::worldMeshes: created without keepMeshes");
+  std::map<int, std::vector<render::MaterialMesh>> bodies;
   for (const auto& [b, parts] : meshes_) {
     if (solver.mode(b) == BodyMode::kEmpty || parts.empty()) continue;
     const Mat4f model = solver.pose(b).model();
     const Eigen::Matrix3f rotation = model.topLeftCorner<3, 3>();
-    std::vector<render::MaterialMesh> out;
+    std::vector<render::MaterialMesh>& out = bodies[b];
     for (const MeshPart& m : parts) {
       render::MaterialMesh part{m.material, m.mesh};
       if (m.surface == render::SurfaceKind::kRigidRestMesh) {
@@ -316,6 +316,16 @@ int FrameWriter::exportMeshes(const Solver& solver, const std::vector<std::strin
       }
       out.push_back(std::move(part));
     }
+  }
+  return bodies;
+}
+
+int FrameWriter::exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,
+                              const std::string& mtllib) const {
+  if (!options_.keepMeshes) throw RuntimeError("FrameWriter::exportMeshes: created without keepMeshes");
+  const std::vector<render::ExportMaterial> materials = exportMaterials(scene_);
+  int written = 0;
+  for (const auto& [b, out] : worldMeshes(solver)) {
     const std::string name = b < static_cast<int>(bodyNames.size()) ? bodyNames[static_cast<std::size_t>(b)] : "";
     const std::string stem = dir + "/" + bodyFileStem(b, name);
     render::writeBodyObj(stem + ".obj", name, out, materials, mtllib);

@@ -13,6 +13,7 @@
 #include "core/triangle_soup.h"
 #include "core/solver.h"
 #include "render/export.h"
+#include "render/fluid_surface.h"
 #include "render/renderer.h"
 #include "render/voxel_mesh.h"
 #include "sketch/grid.h"
@@ -25,6 +26,9 @@ struct FrameOptions {
   int smoothIterations = 0; // the smoothing knob of deforming surfaces (ParticleMeshOptions)
   bool fluidCells = false;  // --fluid-surface cells: fluids meshed as deforming cells, not kernels
   bool splats = false;      // --look splats: every body drawn as Gaussian splats, one per particle
+  // --mesh-resolution: the edge of a fluid surface's field voxels, in particle spacings
+  // (render::FluidSurfaceOptions::voxelFraction), 0.1..1
+  double fluidVoxelFraction = render::FluidSurfaceOptions{}.voxelFraction;
 };
 
 // Gaussian splats of every body's particles (--look splats), in body and id order: centre at the
@@ -73,6 +77,9 @@ class FrameWriter {
   // as meshed. `mtllib`: the OBJ's material library line. Returns the number of bodies written.
   int exportMeshes(const Solver& solver, const std::vector<std::string>& bodyNames, const std::string& dir,
                    const std::string& mtllib) const;
+  // Every body's surfaces as last meshed by update() (needs options.keepMeshes), in world
+  // coordinates: rigid meshes moved by the body's pose. Body index -> one mesh per material.
+  std::map<int, std::vector<render::MaterialMesh>> worldMeshes(const Solver& solver) const;
   const SmoothingStats& smoothing() const { return smoothing_; }
   const FluidSurfaceStats& fluidSurfaces() const { return fluid_; }
 

@@ -67,6 +67,11 @@ int main(int argc, char** argv) {
                      "particles' cells, as deforming solids, cheaper and blocky)")
       ->capture_default_str()
       ->check(CLI::IsMember({"kernels", "cells"}));
+  runCmd->add_option("--mesh-resolution", run.meshResolution,
+                     "Voxel edge of a fluid surface's kernel field, in particle spacings: smaller is finer and slower "
+                     "(docs/accuracy.md, \"Meshing knobs\"; the study knob mesh_resolution)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 1.0));
   runCmd->add_option("--look", run.look,
                      "How bodies are drawn: 'meshes' (surfaces: rigid rest meshes, deforming cells, rope tubes, fluid kernels) or "
                      "'splats' (one Gaussian splat per particle, stretched by the solver's deformation gradient F under "

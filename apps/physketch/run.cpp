@@ -384,6 +384,7 @@ int runScene(const RunOptions& opt) {
       fo.keepMeshes = opt.exportMesh;
       fo.smoothIterations = opt.smooth;
       fo.fluidCells = opt.fluidSurface == "cells";
+      fo.fluidVoxelFraction = opt.meshResolution;
       fo.splats = opt.look == "splats";
       frameWriter = std::make_unique<FrameWriter>(sc, sk.mapping, fo);
       frameWriter->setColliders(p.colliderMeshes);

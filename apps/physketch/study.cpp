@@ -24,6 +24,7 @@
 #include <tbb/task_arena.h>
 
 #include "apps/physketch/app.h"
+#include "apps/physketch/frames.h"
 #include "apps/physketch/prepare.h"
 #include "apps/physketch/runtime.h"
 #include "apps/physketch/study.h"
@@ -47,7 +48,8 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 // 2: trajectories carry the front, the t = 0 extent and the hydrostatic error (expect dam_break, runout, hydrostatic).
-constexpr int kPartVersion = 2;
+// 3: and the last frame's surface (meshing knobs, expect sphere).
+constexpr int kPartVersion = 3;
 
 // --- one run ------------------------------------------------------------------------
 
@@ -122,6 +124,24 @@ json finiteList(const std::vector<double>& v) {
 }
 Vec3 vec(const json& j) { return Vec3(j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()); }
 
+// A mesh as flat lists: positions x y z ..., triangles i j k ... (normals are not kept).
+json surfaceJson(const render::TriangleMesh& m) {
+  std::vector<float> xyz;
+  xyz.reserve(3 * m.positions.size());
+  for (const Vec3f& v : m.positions) xyz.insert(xyz.end(), {v.x(), v.y(), v.z()});
+  return {{"positions", xyz}, {"indices", m.indices}};
+}
+
+render::TriangleMesh surfaceFrom(const json& j) {
+  render::TriangleMesh m;
+  const auto xyz = j.at("positions").get<std::vector<float>>();
+  for (std::size_t i = 0; i + 2 < xyz.size(); i += 3) m.positions.emplace_back(xyz[i], xyz[i + 1], xyz[i + 2]);
+  m.indices = j.at("indices").get<std::vector<std::uint32_t>>();
+  for (std::uint32_t i : m.indices)
+    if (i >= m.positions.size()) throw RuntimeError("study part: a surface triangle indexes past its vertices");
+  return m;
+}
+
 json trajectoryJson(const Trajectory& tr) {
   json centres = json::array();
   for (const auto& frame : tr.centres) {
@@ -135,7 +155,7 @@ json trajectoryJson(const Trajectory& tr) {
           {"reach", tr.reach},   {"dynamic0", tr.dynamic0}, {"names", tr.names},
           {"max_displacement_m", tr.maxDisplacement}, {"max_speed_mps", tr.maxSpeed}, {"spacing_m", tr.spacing},
           {"front_x", tr.front}, {"lo0", finiteVec(tr.lo0)}, {"hi0", finiteVec(tr.hi0)},
-          {"hydrostatic_m", finiteList(tr.hydrostatic)}};
+          {"hydrostatic_m", finiteList(tr.hydrostatic)}, {"surface", surfaceJson(tr.surface)}};
 }
 
 Trajectory trajectoryFrom(const json& j) {
@@ -158,6 +178,7 @@ Trajectory trajectoryFrom(const json& j) {
   for (const auto& x : j.at("hydrostatic_m"))
     tr.hydrostatic.push_back(x.is_null() ? std::numeric_limits<double>::quiet_NaN() : x.get<double>());
   tr.hi0 = j.at("hi0").is_null() ? Vec3::Constant(-std::numeric_limits<double>::infinity()) : vec(j.at("hi0"));
+  tr.surface = surfaceFrom(j.at("surface"));
   return tr;
 }
 
@@ -188,6 +209,47 @@ void checkExpectations(const Prepared& p) {
                            p.strokes.path + " draws " + std::to_string(p.sketch->runtime.size()) + " operation(s) after play)");
 }
 
+bool expectsSurface(const SceneDesc& scene) {
+  return std::any_of(scene.expectations.begin(), scene.expectations.end(),
+                     [](const Expectation& e) { return e.kind == Expectation::Kind::kSphere; });
+}
+
+// A meshing knob that would change nothing in this scene is an error (as an MPM knob under
+// pbd): smoothing needs a surface meshed from cells (a deforming body: soft, cloth, an MPM
+// solid, ...), mesh_resolution a fluid's kernel surface.
+void checkMeshingKnobs(const Setting& setting, const SceneDesc& scene, const Solver& solver, const std::string& option) {
+  bool cells = false, kernels = false;
+  for (int b = 0; b < solver.bodyCount(); ++b)
+    for (std::int32_t i : solver.bodyParticles(b)) {
+      const Material& m = scene.materials[std::size_t(solver.particles().material[std::size_t(i)])];
+      const render::SurfaceKind k = surfaceOf(m.kind, scene.solver);
+      kernels |= k == render::SurfaceKind::kFluid;
+      cells |= k == render::SurfaceKind::kParticles && m.kind != MaterialKind::kRope;
+    }
+  const std::string where = option + " '" + settingText(setting) + "'";
+  for (const auto& [knob, v] : setting) {
+    if (knob == "smoothing" && !cells)
+      throw InputError(where, 0, knob, "knob 'smoothing' smooths surfaces meshed from particles' cells (soft, cloth, "
+                                       "MPM solids); nothing in " + scene.path + " is meshed that way");
+    if (knob == "mesh_resolution" && !kernels)
+      throw InputError(where, 0, knob, "knob 'mesh_resolution' sets the voxels of fluid surfaces; " + scene.path +
+                                           " has no fluid");
+  }
+}
+
+// Every body's surfaces at one frame as one mesh (indices offset), for the surface norms.
+render::TriangleMesh joinedSurface(const std::map<int, std::vector<render::MaterialMesh>>& bodies) {
+  render::TriangleMesh out;
+  for (const auto& [b, parts] : bodies)
+    for (const render::MaterialMesh& m : parts) {
+      const auto base = static_cast<std::uint32_t>(out.positions.size());
+      out.positions.insert(out.positions.end(), m.mesh.positions.begin(), m.mesh.positions.end());
+      out.normals.insert(out.normals.end(), m.mesh.normals.begin(), m.mesh.normals.end());
+      for (std::uint32_t i : m.mesh.indices) out.indices.push_back(base + i);
+    }
+  return out;
+}
+
 // Runs the scene with one setting `repeats` times (each from a fresh solver; the state after
 // every repeat must be the same) and returns its part. `analytic`: measure the error against
 // the scene's expect records here.
@@ -206,13 +268,25 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
     if (analytic) checkExpectations(p);
     const SceneDesc& sc = p.scene;
     const int frames = maxFrames > 0 ? std::min(maxFrames, sc.frameCount()) : sc.frameCount();
+    const MeshingSetting meshing = meshingOf(setting);
+    const bool meshes = meshing.varied || expectsSurface(sc);
     Trajectory tr;
-    std::vector<double> msPerFrame;
+    std::vector<double> msPerFrame, meshMsPerFrame;
     std::uint64_t hash = 0;
     std::string status = "ok";
     for (int r = 0; r < repeats; ++r) {
       const std::unique_ptr<Solver> solver = makeSolver(p);
       RuntimeDriver runtime(*p.sketch, *solver);
+      if (r == 0 && meshing.varied) checkMeshingKnobs(setting, sc, *solver, option);
+      std::unique_ptr<FrameWriter> frameWriter;
+      if (meshes) {
+        FrameOptions fo;
+        fo.draw = false;
+        fo.keepMeshes = true;
+        fo.smoothIterations = meshing.smoothing;
+        fo.fluidVoxelFraction = meshing.fluidVoxelFraction;
+        frameWriter = std::make_unique<FrameWriter>(sc, p.sketch->mapping, fo);
+      }
       const bool record = r == 0;
       std::vector<Vec3> x0;
       if (record) {
@@ -222,6 +296,7 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
         observe(*solver, x0, sc, tr);
       }
       double simulated = 0.0;  // s of wall time in steps only: observing is not the solver's cost
+      double meshed = 0.0;     // s of wall time meshing frames (a meshing study)
       for (int f = 1; f < frames && !solver->guard().tripped(); ++f) {
         const double t0 = nowSeconds();
         for (int s = 0; s < sc.stepsPerFrame(); ++s) {
@@ -229,10 +304,17 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
           if (!solver->step()) break;
         }
         simulated += nowSeconds() - t0;
+        if (frameWriter && !solver->guard().tripped()) {
+          const double m0 = nowSeconds();
+          frameWriter->update(*solver, runtime.restCells());
+          meshed += nowSeconds() - m0;
+        }
         if (record && !solver->guard().tripped()) observe(*solver, x0, sc, tr);
       }
       if (solver->guard().tripped()) status = "unstable: " + solver->guard().message();
-      msPerFrame.push_back(frames > 1 ? 1000.0 * simulated / (frames - 1) : 0.0);
+      if (record && frameWriter && status == "ok") tr.surface = joinedSurface(frameWriter->worldMeshes(*solver));
+      msPerFrame.push_back(frames > 1 ? 1000.0 * (simulated + meshed) / (frames - 1) : 0.0);
+      meshMsPerFrame.push_back(frames > 1 ? 1000.0 * meshed / (frames - 1) : 0.0);
       if (r == 0) hash = solver->stateHash();
       else if (solver->stateHash() != hash)
         throw RuntimeError("setting " + settingText(setting) + ": repeat " + std::to_string(r + 1) +
@@ -247,10 +329,14 @@ json runSetting(const std::string& scenePath, const Setting& setting, int repeat
     part["repeats"] = repeats;
     part["ms_per_frame_repeats"] = msPerFrame;
     part["ms_per_frame"] = median(msPerFrame);
+    if (meshes) part["mesh_ms_per_frame"] = median(meshMsPerFrame);
     part["status"] = status;
     part["machine"] = machine();
+    if (analytic) {
+      part["error_m"] = status == "ok" ? json(analyticError(tr, sc)) : json(nullptr);
+      tr.surface = {};  // measured: only a fine reference needs the surfaces (they can be megabytes)
+    }
     part["trajectory"] = trajectoryJson(tr);
-    if (analytic) part["error_m"] = status == "ok" ? json(analyticError(tr, sc)) : json(nullptr);
   });
   return part;
 }
@@ -288,8 +374,15 @@ Plan makePlan(const StudyOptions& opt, const SceneDesc& scene) {
       const auto [lo, hi] = std::minmax_element(k.values.begin(), k.values.end());
       plan.reference.emplace_back(k.knob, finestIsLargest(k.knob) ? *hi : *lo);
     }
+    const Setting at = opt.referenceAt.empty() ? Setting{} : parseSetting(opt.referenceAt, "--reference-at");
+    for (const auto& k : plan.knobs)
+      if (k.knob == "smoothing" &&
+          std::none_of(at.begin(), at.end(), [](const auto& kv) { return kv.first == "smoothing"; }))
+        throw InputError("--vary", 0, "smoothing",
+                         "knob 'smoothing' has no finest value (more smoothing is rounder, not nearer the truth): "
+                         "declare the answer (expect sphere CX CY CZ R) or name the reference with --reference-at smoothing=N");
     if (!opt.referenceAt.empty())
-      for (const auto& [knob, v] : parseSetting(opt.referenceAt, "--reference-at")) {
+      for (const auto& [knob, v] : at) {
         auto it = std::find_if(plan.reference.begin(), plan.reference.end(), [&](const auto& kv) { return kv.first == knob; });
         if (it != plan.reference.end()) it->second = v;
         else plan.reference.emplace_back(knob, v);
@@ -356,7 +449,11 @@ std::string csvText(const std::vector<Row>& rows) {
   return s;
 }
 
-std::string normText(bool analytic, const SceneDesc* scene, const std::string& referenceText) {
+std::string normText(bool analytic, const SceneDesc* scene, const std::string& referenceText, bool surfaces) {
+  if (!analytic && surfaces)
+    return "symmetric RMS distance between the last frame's surfaces and the reference run's: the square root of the "
+           "mean, over the vertices of both, of the squared distance to the other surface's triangles (m); reference: " +
+           referenceText;
   if (!analytic)
     return "RMS over frames 1.. and the bodies dynamic at t = 0 of the distance between each body's centre of "
            "mass and the reference run's (m); reference: " + referenceText;
@@ -388,17 +485,23 @@ std::string normText(bool analytic, const SceneDesc* scene, const std::string& r
           s += "expect pendulum " + e.body + ": RMS over frames 1.. of |c(t) - the simple pendulum's bob| about the "
                "pivot, length |c0 - pivot|, released as at t = 0, theta'' = -(g/L) sin theta integrated (m)";
           break;
+        case Expectation::Kind::kSphere:
+          s += "expect sphere: RMS over the last frame's surface vertices of |v - C| - R, C = (" + fmt("%g", e.point.x()) +
+               ", " + fmt("%g", e.point.y()) + ", " + fmt("%g", e.point.z()) + "), R = " + fmt("%g", e.value) + " (m)";
+          break;
       }
     }
   return s + (s.find(';') != std::string::npos ? "; the error is the largest of these" : "");
 }
 
 std::string markdown(const std::vector<Row>& rows, const std::vector<json>& parts, const std::string& scene,
-                     const std::string& norm, int jobs) {
+                     const std::string& norm, int jobs, bool surfaces) {
   std::ostringstream md;
   md << "# physketch study: " << scene << "\n\n";
   md << "- error: " << norm << "\n";
-  md << "- wall time: the solver's steps only, per simulated frame, median of the repeats\n";
+  md << (surfaces ? "- wall time: the solver's steps and the meshing of every frame's surfaces (no drawing), per simulated "
+                    "frame, median of the repeats\n"
+                  : "- wall time: the solver's steps only, per simulated frame, median of the repeats\n");
   std::vector<std::string> machines;
   for (const json& p : parts) {
     const std::string m = p.at("machine").get<std::string>();
@@ -425,18 +528,21 @@ void writeOutputs(const fs::path& out, const std::vector<json>& parts, const jso
                   const SceneDesc* scene, const std::string& referenceText, int jobs) {
   const std::vector<Row> rows = makeRows(parts, reference, analytic);
   const std::string scenePath = parts.front().at("scene").get<std::string>();
-  const std::string norm = normText(analytic, scene, referenceText);
+  const bool surfaces = parts.front().contains("mesh_ms_per_frame");
+  const std::string norm = normText(analytic, scene, referenceText, surfaces);
   std::vector<PlotPoint> pts;
   for (const Row& r : rows) pts.push_back({r.ms, r.error, r.front, settingText(r.setting)});
   const std::string title = "physketch study: " + fs::path(scenePath).filename().string() + " (error against " +
                             (analytic ? std::string("the scene's expect") : "a fine run: " + referenceText) + ")";
-  const std::string yLabel = analytic ? "error against the expected answer (m)" : "RMS centre distance to the fine run (m)";
+  const std::string yLabel = analytic   ? "error against the expected answer (m)"
+                             : surfaces ? "RMS surface distance to the fine run (m)"
+                                        : "RMS centre distance to the fine run (m)";
   const std::string png = studyPlotPng(pts, title, yLabel);
   std::error_code ec;
   fs::create_directories(out, ec);
   if (ec) throw RuntimeError("cannot create output folder " + out.string() + ": " + ec.message());
   writeFileAtomic((out / "study.csv").string(), csvText(rows));
-  writeFileAtomic((out / "study.md").string(), markdown(rows, parts, scenePath, norm, jobs));
+  writeFileAtomic((out / "study.md").string(), markdown(rows, parts, scenePath, norm, jobs, surfaces));
   writeFileAtomic((out / "study.png").string(), png);
 }
 

@@ -15,6 +15,7 @@
 #include "core/math.h"
 #include "core/scene.h"
 #include "core/solver.h"
+#include "render/mesh.h"
 
 namespace physketch::app {
 
@@ -30,7 +31,7 @@ struct KnobValues {
 using Setting = std::vector<std::pair<std::string, double>>;
 
 // Parses `KNOB=V1,V2,...`. Throws InputError naming the argument and the knob for an unknown
-// or reserved knob (grid; mesh_resolution and smoothing, measured by bench_render), a value that is
+// or reserved knob (grid), a value that is
 // not a number, an empty list or value, a value out of the knob's range (iterations 0), or a
 // value given twice.
 KnobValues parseVary(const std::string& arg);
@@ -44,9 +45,21 @@ constexpr std::size_t kMaxSettings = 10000;
 // "iterations=4,substeps=8" (values as %.10g): the --only argument that names the setting.
 std::string settingText(const Setting& s);
 // Applies a setting to a scene: iterations, substeps, dt (s), voxel (m; the workspace edge
-// becomes 151 voxels, centre kept). Throws InputError naming `option` when the result is not a
+// becomes 151 voxels, centre kept), grid_dx and cfl (solver mpm); the meshing knobs leave the
+// scene alone (meshingOf). Throws InputError naming `option` when the result is not a
 // valid scene (1/fps not a whole number of dt steps, a workspace over 1000 m).
 void applySetting(const Setting& s, SceneDesc& scene, const std::string& option);
+
+// The meshing knobs (smoothing, mesh_resolution): how a run meshes its frames, not what it
+// simulates. A study meshes every frame when a setting has one of them or the scene expects
+// a surface (expect sphere); the meshing time counts in the time per frame.
+bool isMeshingKnob(const std::string& knob);
+struct MeshingSetting {
+  bool varied = false;              // the setting has a meshing knob
+  int smoothing = 0;                // run --smooth
+  double fluidVoxelFraction = 0.5;  // run --mesh-resolution
+};
+MeshingSetting meshingOf(const Setting& s);
 
 // --- error norms (study_error.cpp) -------------------------------------------
 
@@ -64,6 +77,9 @@ struct Trajectory {
   std::vector<double> front;              // m, per frame: the largest x of any dynamic particle (centre)
   Vec3 lo0 = Vec3::Zero(), hi0 = Vec3::Zero();  // m: the dynamic particles' centres' extent at t = 0
   std::vector<double> hydrostatic;        // m, per frame, when the scene expects it: hydrostaticError
+  // The last frame's surfaces (every body's, in world coordinates, as frames mesh them), when the
+  // run meshes (a meshing knob, expect sphere); empty otherwise.
+  render::TriangleMesh surface;
 };
 
 // Tait's equation of state integrated down a column at rest: the pressure (Pa) at depth d (m)
@@ -115,10 +131,15 @@ double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravi
 // expect hydrostatic: the last frame's hydrostaticError. Throws InputError naming the record
 // when no particle has a pressure (no fluid, or solver pbd) or gravity is zero.
 double hydrostaticRunError(const Trajectory& tr, const Expectation& e, const SceneDesc& scene);
+// expect sphere CX CY CZ R: RMS over the last frame's surface vertices of |v - C| - R (m).
+// Throws InputError naming the record when nothing was meshed.
+double sphereError(const Trajectory& tr, const Expectation& e, const std::string& scenePath);
 // The scene's error: the largest of its expect records' errors (all in m).
 double analyticError(const Trajectory& tr, const SceneDesc& scene);
 // RMS over frames 1.. and the bodies dynamic at t = 0 in the reference (present in both) of
 // the distance between centres of mass (m). NaN when the runs have different frame counts.
+// When the runs meshed their frames (a meshing study): the symmetric RMS distance between the
+// last frames' surfaces instead (render::rmsSurfaceDistance; NaN when either is empty).
 double fineError(const Trajectory& run, const Trajectory& reference);
 
 // --- Pareto front (study_plot.cpp) -------------------------------------------

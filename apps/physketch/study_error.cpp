@@ -6,6 +6,7 @@
 #include <string>
 
 #include "apps/physketch/study.h"
+#include "render/mesh_distance.h"
 #include "core/error.h"
 #include "core/solver.h"
 
@@ -257,6 +258,17 @@ double hydrostaticRunError(const Trajectory& tr, const Expectation& e, const Sce
   return tr.hydrostatic.back();
 }
 
+double sphereError(const Trajectory& tr, const Expectation& e, const std::string& scenePath) {
+  if (tr.surface.positions.empty())
+    throw InputError(scenePath, e.line, "kind", "expect sphere: nothing was meshed at the last frame (no body left)");
+  double sum = 0.0;
+  for (const Vec3f& v : tr.surface.positions) {
+    const double d = (v.cast<double>() - e.point).norm() - e.value;
+    sum += d * d;
+  }
+  return std::sqrt(sum / double(tr.surface.positions.size()));
+}
+
 double analyticError(const Trajectory& tr, const SceneDesc& scene) {
   double worst = 0.0;
   for (const Expectation& e : scene.expectations) {
@@ -269,6 +281,7 @@ double analyticError(const Trajectory& tr, const SceneDesc& scene) {
       case Expectation::Kind::kRunout: err = runoutError(tr, e, scene.gravity, scene.path); break;
       case Expectation::Kind::kHydrostatic: err = hydrostaticRunError(tr, e, scene); break;
       case Expectation::Kind::kPendulum: err = pendulumError(tr, e, scene.gravity, scene.path); break;
+      case Expectation::Kind::kSphere: err = sphereError(tr, e, scene.path); break;
     }
     if (std::isnan(err)) return err;
     worst = std::max(worst, err);
@@ -277,6 +290,10 @@ double analyticError(const Trajectory& tr, const SceneDesc& scene) {
 }
 
 double fineError(const Trajectory& run, const Trajectory& reference) {
+  if (!run.surface.empty() || !reference.surface.empty()) {
+    if (run.surface.empty() || reference.surface.empty()) return std::numeric_limits<double>::quiet_NaN();
+    return render::rmsSurfaceDistance(run.surface, reference.surface);
+  }
   if (run.centres.size() != reference.centres.size()) return std::numeric_limits<double>::quiet_NaN();
   double sum = 0.0;
   std::size_t count = 0;

@@ -16,6 +16,7 @@ struct KnobSpec {
   double lo, hi;  // inclusive range
   bool integer;
   const char* what;
+  bool meshing = false;  // changes how frames are meshed, not the simulation
 };
 
 // The knobs a study varies today; their ranges are the scene records' (docs/formats.md).
@@ -27,6 +28,10 @@ constexpr KnobSpec kKnobs[] = {
      "voxel size = particle spacing (m); the workspace edge becomes 151 voxels, centred as in the scene"},
     {"grid_dx", 1.0, 4.0, false, "solver mpm: grid spacing in particle spacings (scene record 'grid_dx')"},
     {"cfl", 1e-3, 1.0, false, "solver mpm with 'substeps auto': the Courant number C (scene record 'cfl')"},
+    {"smoothing", 0, 100, true, "mean-curvature smoothing iterations of deforming surfaces meshed from cells (run --smooth)",
+     true},
+    {"mesh_resolution", 0.1, 1.0, false,
+     "voxel edge of fluid surfaces' kernel field, in particle spacings (run --mesh-resolution)", true},
 };
 
 // Knobs the issue names that arrive with later work: a clear refusal, never "unknown".
@@ -36,10 +41,6 @@ struct Reserved {
 };
 constexpr Reserved kReserved[] = {
     {"grid", "MPM grid resolution: write grid_dx (grid spacing in particle spacings) or voxel"},
-    {"mesh_resolution", "meshing resolution: not a study axis (study measures the simulated state, not frames); its "
-                        "error against time is measured by bench_render, docs/accuracy.md \"Meshing knobs\""},
-    {"smoothing", "mesh smoothing: not a study axis (study measures the simulated state, not frames); its error "
-                  "against time is measured by bench_render, docs/accuracy.md \"Meshing knobs\""},
 };
 
 std::string knownKnobs() {
@@ -54,7 +55,7 @@ const KnobSpec& knobSpec(const std::string& name, const std::string& where) {
   for (const auto& r : kReserved)
     if (name == r.name) throw InputError(where, 0, name, std::string("knob '") + name + "' (" + r.why + ")");
   throw InputError(where, 0, name.empty() ? "knob" : name,
-                   "unknown knob '" + name + "' (known: " + knownKnobs() + "; meshing knobs: bench_render)");
+                   "unknown knob '" + name + "' (known: " + knownKnobs() + ")");
 }
 
 double parseValue(const KnobSpec& k, const std::string& text, const std::string& where) {
@@ -129,6 +130,21 @@ Setting parseSetting(const std::string& arg, const std::string& option) {
   return s;
 }
 
+bool isMeshingKnob(const std::string& knob) {
+  for (const auto& k : kKnobs)
+    if (knob == k.name) return k.meshing;
+  return false;
+}
+
+MeshingSetting meshingOf(const Setting& s) {
+  MeshingSetting m;
+  for (const auto& [knob, v] : s) {
+    if (knob == "smoothing") m.smoothing = static_cast<int>(v), m.varied = true;
+    if (knob == "mesh_resolution") m.fluidVoxelFraction = v, m.varied = true;
+  }
+  return m;
+}
+
 std::vector<Setting> cartesianProduct(const std::vector<KnobValues>& knobs) {
   std::size_t n = 1;
   for (const auto& k : knobs) {
@@ -169,6 +185,7 @@ void applySetting(const Setting& s, SceneDesc& scene, const std::string& option)
     if (knob == "iterations") scene.iterations = static_cast<int>(v);
     else if (knob == "substeps") scene.substeps = static_cast<int>(v);
     else if (knob == "voxel") scene.workspaceSize = v * sketch::kGridSize;
+    else if (isMeshingKnob(knob)) continue;  // frames' meshing, not the scene: meshingOf()
     else if (knob == "grid_dx" || knob == "cfl") {
       // MPM's: under pbd they would change nothing, and a study of nothing is an error.
       if (scene.solver != SolverKind::kMpm)

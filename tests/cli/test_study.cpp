@@ -167,7 +167,9 @@ TEST(StudyCli, BadVaryValuesAreClearErrors) {
       {"--vary grid=64,128", "knob 'grid' (MPM grid resolution: write grid_dx"},
       {"--vary grid_dx=1.5,2", "knob 'grid_dx' is solver mpm's; the scene runs solver pbd"},
       {"--vary cfl=0.5", "knob 'cfl' is solver mpm's"},
-      {"--vary smoothing=1", "measured by bench_render"},
+      {"--vary smoothing=1", "knob 'smoothing' smooths surfaces meshed from particles' cells"},  // a rigid box
+      {"--vary mesh_resolution=0.5", "knob 'mesh_resolution' sets the voxels of fluid surfaces"},
+      {"--vary smoothing=0,2 --reference fine", "knob 'smoothing' has no finest value"},
       {"--vary substeps", "expected KNOB=V1,V2"},
       {"--vary dt=0.02", "1/fps must be a whole multiple of dt"},
       {"--vary voxel=0.001", "(with voxel=0.001)"},  // a 15 cm workspace: the box lies outside it
@@ -208,6 +210,15 @@ TEST(StudyCli, ExpectErrorsNameTheSceneLine) {
   r = runCli("study '" + (dir / "p.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("p.scene:6: field 'z': expect pendulum needs BODY and the pivot"), std::string::npos) << r.err;
+  // expect sphere needs a centre and a radius above 0.
+  std::ofstream(dir / "q.scene") << head << "expect sphere 0 0.5 0 0\n";
+  r = runCli("study '" + (dir / "q.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("q.scene:6: field 'radius': the sphere's radius R must be above 0 m"), std::string::npos) << r.err;
+  std::ofstream(dir / "q2.scene") << head << "expect sphere 0 0.5 0\n";
+  r = runCli("study '" + (dir / "q2.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("q2.scene:6: field 'radius': expect sphere needs the centre and radius"), std::string::npos) << r.err;
   // Sideways gravity: the dam-break law is about a column falling down y.
   std::ofstream(dir / "d.scene") << head << "gravity 9.81 0 0\nexpect dam_break 0.1\n";
   r = runCli("study '" + (dir / "d.scene").string() + "' --vary substeps=1 --out '" + (dir / "o").string() + "'", dir);
@@ -586,6 +597,94 @@ TEST(StudyCli, RestAndHeightErrorsMatchClosedForms) {
   ASSERT_EQ(r.code, 0) << r.err;
   for (const auto& row : readCsv(dir / "land" / "study.csv"))
     EXPECT_NEAR(std::stod(row.at("error_m")), 0.05 - 7.5 / 151.0, 1e-6);
+  fs::remove_all(dir);
+}
+
+// The meshing knobs reach the frames' meshes (docs/accuracy.md, "Meshing knobs"). Oracles: a
+// sphere's radius and roughness computed here from the part's surface vertices; the vertex count
+// of a surface, which grows as 1 / voxel^2 (its area over the voxel's face).
+namespace {
+
+struct SurfaceStats {
+  std::size_t vertices = 0;
+  double meanRadius = 0.0, roughness = 0.0, sphereRms = 0.0;  // m, about the centre c
+};
+
+SurfaceStats surfaceStats(const fs::path& part, const Eigen::Vector3d& c, double radius) {
+  const nlohmann::json j = nlohmann::json::parse(slurp(part));
+  const auto xyz = j.at("trajectory").at("surface").at("positions").get<std::vector<double>>();
+  std::vector<double> r;
+  for (std::size_t i = 0; i + 2 < xyz.size(); i += 3) r.push_back((Eigen::Vector3d(xyz[i], xyz[i + 1], xyz[i + 2]) - c).norm());
+  SurfaceStats s;
+  s.vertices = r.size();
+  if (r.empty()) return s;
+  for (double x : r) s.meanRadius += x / double(r.size());
+  for (double x : r) {
+    s.roughness += (x - s.meanRadius) * (x - s.meanRadius) / double(r.size());
+    s.sphereRms += (x - radius) * (x - radius) / double(r.size());
+  }
+  s.roughness = std::sqrt(s.roughness);
+  s.sphereRms = std::sqrt(s.sphereRms);
+  return s;
+}
+
+double partError(const fs::path& part) { return nlohmann::json::parse(slurp(part)).at("error_m").get<double>(); }
+
+}  // namespace
+
+TEST(StudyCli, MeshingKnobsReachTheFramesMeshes) {
+  const fs::path dir = freshDir("meshing");
+  const double h = 1.0 / 151.0;  // the scenes' particle spacing (a 1 m workspace)
+  const Eigen::Vector3d c(0.0, 0.5, 0.0);
+  // The soft ball (spinning, so its particles leave the lattice): surfaces kept by a fine-reference
+  // part, the error of an analytic one.
+  const std::string ball = "study '" + scene("mesh_ball.scene") + "' -q ";
+  for (const char* s : {"0", "8"}) {
+    Result r = runCli(ball + "--only smoothing=" + s + " --reference fine --reference-at smoothing=8 --out '" +
+                          (dir / ("fine" + std::string(s))).string() + "'", dir);
+    ASSERT_EQ(r.code, 0) << r.err;
+  }
+  Result r = runCli(ball + "--only smoothing=0 --out '" + (dir / "analytic0").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const SurfaceStats raw = surfaceStats(dir / "fine0" / "part.json", c, 0.08);
+  const SurfaceStats smooth = surfaceStats(dir / "fine8" / "part.json", c, 0.08);
+  ASSERT_GT(raw.vertices, 1000u);
+  // Eight mean-curvature iterations flatten the voxel staircase: the surface's spread about its
+  // mean radius falls (0.68 -> 0.40 mm measured); 0.75 leaves room for another lattice rotation
+  // and fails if the knob does not reach the mesher (ratio 1).
+  EXPECT_LT(smooth.roughness, 0.75 * raw.roughness) << raw.roughness << " " << smooth.roughness;
+  // expect sphere's error is the RMS of |v - C| - R over the same surface (same run, bit for bit),
+  // and the cell surface lies within half a spacing of the sketched sphere (the outer cells' faces
+  // are h/2 beyond the outer particles; 1.7 mm measured).
+  EXPECT_NEAR(partError(dir / "analytic0" / "part.json"), raw.sphereRms, 1e-9);
+  EXPECT_LT(raw.sphereRms, 0.5 * h);
+  // The drop of water: kernel surfaces at voxels of 1 and 1/2 spacing. Four times the vertices
+  // (4.1 measured; 3..5.5 allows the surface's own change), both within a third of a spacing of
+  // the sphere (1.2 mm measured).
+  const std::string drop = "study '" + scene("mesh_drop.scene") + "' -q ";
+  for (const char* f : {"1", "0.5"}) {
+    r = runCli(drop + "--only mesh_resolution=" + f + " --reference fine --out '" + (dir / ("drop" + std::string(f))).string() + "'", dir);
+    ASSERT_EQ(r.code, 0) << r.err;
+  }
+  const SurfaceStats coarse = surfaceStats(dir / "drop1" / "part.json", c, 0.08);
+  const SurfaceStats fine = surfaceStats(dir / "drop0.5" / "part.json", c, 0.08);
+  ASSERT_GT(coarse.vertices, 500u);
+  const double ratio = double(fine.vertices) / double(coarse.vertices);
+  EXPECT_GT(ratio, 3.0);
+  EXPECT_LT(ratio, 5.5);
+  EXPECT_LT(coarse.sphereRms, h / 3.0);
+  EXPECT_LT(fine.sphereRms, h / 3.0);
+  // A fine-reference study over the knob: the reference (the finest voxels) is 0 from itself, the
+  // coarse setting some fraction of a spacing away; the table names the surface norm.
+  r = runCli(drop + "--vary mesh_resolution=1,0.5 --reference fine --out '" + (dir / "study").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Table t = readCsv(dir / "study" / "study.csv");
+  ASSERT_EQ(t.size(), 2u);
+  EXPECT_EQ(std::stod(t[0].at("mesh_resolution")), 0.5);
+  EXPECT_EQ(std::stod(t[0].at("error_m")), 0.0);
+  EXPECT_GT(std::stod(t[1].at("error_m")), 1e-5);
+  EXPECT_LT(std::stod(t[1].at("error_m")), h / 3.0);
+  EXPECT_NE(slurp(dir / "study" / "study.md").find("symmetric RMS distance between the last frame's surfaces"), std::string::npos);
   fs::remove_all(dir);
 }
 
