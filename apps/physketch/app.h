@@ -28,6 +28,7 @@ struct RunOptions {
   double meshResolution = 0.5;   // --mesh-resolution: fluid surfaces' field voxels, in particle spacings
   std::string look = "meshes";           // --look: meshes or splats (Gaussian splats per particle)
   double budgetMs = 0.0;         // --budget: solver ms per frame to fit (0: the scene's settings)
+  std::string budgetFrom;        // --from-study DIR: choose from a study's rows instead of calibrating
 };
 
 int runScene(const RunOptions& options);

@@ -78,11 +78,16 @@ int main(int argc, char** argv) {
                      "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md)")
       ->capture_default_str()
       ->check(CLI::IsMember({"meshes", "splats"}));
-  runCmd->add_option("--budget", run.budgetMs,
+  auto* budgetOpt = runCmd->add_option("--budget", run.budgetMs,
                      "Pick substeps and iterations (pbd), or the Courant number of 'substeps auto' (mpm), so that the "
                      "solver takes about MS milliseconds per frame on this machine, from a short calibration of the scene's first frames; prints the error expected "
                      "(report.json: budget; docs/accuracy.md)")
       ->check(CLI::PositiveNumber);
+  runCmd->add_option("--from-study", run.budgetFrom,
+                     "With --budget: choose from the whole-run rows of 'physketch study SCENE ... --out DIR' (DIR/study.json) "
+                     "instead of calibrating; after the run, measure its error against the study's answer and print it "
+                     "beside the prediction")
+      ->needs(budgetOpt);
 
   PlanOptions plan;
   auto* planCmd = cli.add_subcommand("plan", "Print the passes one step runs for a scene, how often and why");
@@ -99,9 +104,11 @@ int main(int argc, char** argv) {
   auto* studyCmd = cli.add_subcommand(
       "study",
       "What accuracy costs in time: run the scene once per setting of the knobs varied (every combination),\n"
-      "measure each run's error and wall time per frame; write DIR/study.csv, study.md and study.png\n"
+      "measure each run's error and wall time per frame; write DIR/study.csv, study.md, study.png and study.json\n"
       "(error against time per frame, log-log, the Pareto front marked). Knobs: iterations, substeps,\n"
-      "dt (s), voxel (m: the voxel size; the workspace edge becomes 151 voxels). Error: against the\n"
+      "dt (s), voxel (m: the voxel size; the workspace edge becomes 151 voxels), grid_dx and cfl (solver\n"
+      "mpm), smoothing and mesh_resolution (meshing: every frame is meshed and the last frame's surface\n"
+      "measured, e.g. against 'expect sphere'). Error: against the\n"
       "scene's 'expect' records (--reference analytic, the default when it has one) or against a fine\n"
       "run (--reference fine: the finest value of each knob, or --reference-at). docs/accuracy.md.");
   studyCmd->add_option("scene", study.scene, "Scene file (not with --collect)");

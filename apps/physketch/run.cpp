@@ -313,7 +313,18 @@ int printPlan(const PlanOptions& opt) {
 namespace {
 
 // What --budget chose, on stderr before the run.
-void printBudget(const BudgetChoice& b, double budgetMs) {
+void printBudget(const BudgetChoice& b, double budgetMs, int threads) {
+  if (b.source != "calibration") {
+    std::fprintf(stderr, "budget: %s for %.4g ms per frame: %.4g ms per frame and an error of %.3g m expected (the whole "
+                         "run, from the study in %s: %s)\n",
+                 settingText(b.setting).c_str(), budgetMs, b.predictedMs, b.predictedError, b.source.c_str(), b.norm.c_str());
+    if (b.studyThreads != threads)
+      std::fprintf(stderr, "warning: the study ran with %d thread(s) per setting, this run with %d: its times do not "
+                           "predict this run's (give --threads %d)\n", b.studyThreads, threads, b.studyThreads);
+    if (!b.fits)
+      std::fprintf(stderr, "warning: --budget %.4g ms: no setting of the study fits; running the fastest stable one\n", budgetMs);
+    return;
+  }
   std::fprintf(stderr,
                "budget: %s for %.4g ms per frame: %.4g ms per frame and an error of %.3g m expected (RMS of body "
                "centres over frames 1-%d against %s)\n",
@@ -324,14 +335,15 @@ void printBudget(const BudgetChoice& b, double budgetMs) {
                  budgetMs);
 }
 
-json budgetJson(const BudgetChoice& b, double budgetMs, double measuredMs) {
+json budgetJson(const BudgetChoice& b, double budgetMs, double measuredMs, double measuredError) {
   json tried = json::array();
   for (const BudgetCandidate& c : b.candidates)
     tried.push_back({{"setting", settingText(c.setting)},
                      {"ms_per_frame", c.msPerFrame},
                      {"error_m", std::isfinite(c.error) ? json(c.error) : json(nullptr)},
                      {"status", c.status}});
-  return {{"budget_ms_per_frame", budgetMs},
+  json j = {{"budget_ms_per_frame", budgetMs},
+          {"source", b.source},
           {"setting", settingText(b.setting)},
           {"fits", b.fits},
           {"calibration_frames", b.calibrationFrames},
@@ -341,6 +353,16 @@ json budgetJson(const BudgetChoice& b, double budgetMs, double measuredMs) {
           {"measured_ms_per_frame", measuredMs},
           {"measured_over_budget", budgetMs > 0.0 ? measuredMs / budgetMs : 0.0},
           {"candidates", tried}};
+  if (b.source != "calibration") {
+    // A study's rows are whole runs: the prediction is checked against this run's own error.
+    j.erase("calibration_frames");
+    j["norm"] = b.norm;
+    j["study_threads"] = b.studyThreads;
+    j["measured_error_m"] = std::isfinite(measuredError) ? json(measuredError) : json(nullptr);
+    j["measured_over_predicted_error"] =
+        std::isfinite(measuredError) && b.predictedError > 0.0 ? json(measuredError / b.predictedError) : json(nullptr);
+  }
+  return j;
 }
 
 }  // namespace
@@ -355,9 +377,10 @@ int runScene(const RunOptions& opt) {
   std::optional<BudgetChoice> budget;
   if (const int rc = withExitCodes([&] {
         if (opt.budgetMs > 0.0) {
-          budget = calibrateBudget(opt.scene, opt.budgetMs, threads, opt.quiet);
+          budget = opt.budgetFrom.empty() ? calibrateBudget(opt.scene, opt.budgetMs, threads, opt.quiet)
+                                          : budgetFromStudy(loadScene(opt.scene), opt.budgetFrom, opt.budgetMs);
           p = prepare(opt.scene, threads, false, [&](SceneDesc& sc) { applySetting(budget->setting, sc, "--budget"); });
-          printBudget(*budget, opt.budgetMs);
+          printBudget(*budget, opt.budgetMs, threads);
         } else {
           p = prepare(opt.scene, threads);
         }
@@ -399,6 +422,15 @@ int runScene(const RunOptions& opt) {
     double exportSeconds = 0.0;
     const double tSimStart = nowSeconds();
     double stepSeconds = 0.0;  // the solver's steps only (what --budget fits)
+    // --budget --from-study: the run is recorded as the study recorded its rows, to measure its error.
+    const bool measureError = budget && budget->source != "calibration";
+    Trajectory trajectory;
+    std::vector<Vec3> x0;
+    if (measureError) {
+      const ParticleArrays& ps = solver->particles();
+      for (std::size_t i = 0; i < ps.size(); ++i) x0.emplace_back(ps.x[i], ps.y[i], ps.z[i]);
+      observeStart(*solver, sk, trajectory);
+    }
     for (int f = 0; f < frames; ++f) {
       if (f > 0) {
         for (int s = 0; s < sc.stepsPerFrame(); ++s) {
@@ -411,6 +443,7 @@ int runScene(const RunOptions& opt) {
         }
         if (solver->guard().tripped()) break;
       }
+      if (measureError) observe(*solver, x0, sc, trajectory);
       if (frameWriter) {
         if (sc.writeFrames) {
           frameWriter->write(*solver, runtime.restCells(), (out / "frames" / frameName(f)).string());
@@ -472,7 +505,21 @@ int runScene(const RunOptions& opt) {
                                         {"mean_volume_change_percent", 100.0 * st.sumChange / double(st.meshes)}};
     }
     if (!video.is_null()) rep["frames"]["video"] = video;
-    if (budget) rep["budget"] = budgetJson(*budget, opt.budgetMs, written > 1 ? 1e3 * stepSeconds / (written - 1) : 0.0);
+    if (budget) {
+      const double measuredMs = written > 1 ? 1e3 * stepSeconds / (written - 1) : 0.0;
+      double measuredError = std::numeric_limits<double>::quiet_NaN();
+      if (measureError && !solver->guard().tripped()) {
+        try {
+          measuredError = budgetRunError(*budget, trajectory, sc);
+        } catch (const InputError& e) {  // the study measured it, so only a changed scene gets here
+          std::fprintf(stderr, "warning: --from-study: the run's error cannot be measured: %s\n", e.what());
+        }
+        if (!opt.quiet)
+          std::fprintf(stderr, "budget: measured %.4g ms per frame (predicted %.4g) and an error of %.3g m (predicted %.3g)\n",
+                       measuredMs, budget->predictedMs, measuredError, budget->predictedError);
+      }
+      rep["budget"] = budgetJson(*budget, opt.budgetMs, measuredMs, measuredError);
+    }
     if (opt.exportMesh || opt.exportParticles || opt.exportVdb) {
       json kinds = json::array();
       if (opt.exportMesh) kinds.push_back("mesh");

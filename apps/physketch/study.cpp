@@ -42,28 +42,6 @@ std::string fmt(const char* f, double v) {
   return buf;
 }
 
-namespace {
-
-namespace fs = std::filesystem;
-using nlohmann::json;
-
-// 2: trajectories carry the front, the t = 0 extent and the hydrostatic error (expect dam_break, runout, hydrostatic).
-// 3: and the last frame's surface (meshing knobs, expect sphere).
-constexpr int kPartVersion = 3;
-
-// --- one run ------------------------------------------------------------------------
-
-std::string machine() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line, cpu = "unknown CPU";
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0 && line.find(':') != std::string::npos) {
-      cpu = line.substr(line.find(':') + 2);
-      break;
-    }
-  return cpu + ", " + std::to_string(std::thread::hardware_concurrency()) + " logical cores";
-}
-
 // The state a study needs from the run at one frame: centres of every body, and the
 // largest particle displacement from t = 0 and speed (for expect rest).
 void observe(const Solver& solver, const std::vector<Vec3>& x0, const SceneDesc& scene, Trajectory& tr) {
@@ -112,6 +90,28 @@ void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr
     tr.dynamic0.push_back(solver.mode(b) == BodyMode::kDynamic);
     tr.names.push_back(b < int(sk.bodyNames.size()) ? sk.bodyNames[std::size_t(b)] : "after play " + std::to_string(b));
   }
+}
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// 2: trajectories carry the front, the t = 0 extent and the hydrostatic error (expect dam_break, runout, hydrostatic).
+// 3: and the last frame's surface (meshing knobs, expect sphere).
+constexpr int kPartVersion = 3;
+
+// --- one run ------------------------------------------------------------------------
+
+std::string machine() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line, cpu = "unknown CPU";
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0 && line.find(':') != std::string::npos) {
+      cpu = line.substr(line.find(':') + 2);
+      break;
+    }
+  return cpu + ", " + std::to_string(std::thread::hardware_concurrency()) + " logical cores";
 }
 
 json vec(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
@@ -544,6 +544,26 @@ void writeOutputs(const fs::path& out, const std::vector<json>& parts, const jso
   writeFileAtomic((out / "study.csv").string(), csvText(rows));
   writeFileAtomic((out / "study.md").string(), markdown(rows, parts, scenePath, norm, jobs, surfaces));
   writeFileAtomic((out / "study.png").string(), png);
+  // For run --budget --from-study: the rows, which scene they measured, and (fine) the reference.
+  json j;
+  j["physketch_study"] = kStudyJsonVersion;
+  j["scene"] = scenePath;
+  j["scene_digest"] = scene ? sceneDigest(*scene) : "";
+  j["reference"] = analytic ? "analytic" : "fine";
+  j["norm"] = norm;
+  if (!analytic) {
+    j["reference_setting"] = referenceText;
+    j["reference_trajectory"] = reference->at("trajectory");
+  }
+  j["rows"] = json::array();
+  for (const Row& r : rows)
+    j["rows"].push_back({{"setting", settingJson(r.setting)},
+                         {"error_m", std::isfinite(r.error) ? json(r.error) : json(nullptr)},
+                         {"ms_per_frame", r.ms},
+                         {"threads", r.threads},
+                         {"particles", r.particles},
+                         {"status", r.status}});
+  writeFileAtomic((out / "study.json").string(), j.dump(1) + "\n");
 }
 
 // --- the modes ------------------------------------------------------------------------
@@ -756,6 +776,80 @@ int runStudy(const StudyOptions& opt) {
     std::cerr << "error: " << e.what() << "\n";
     return kExitRuntime;
   }
+}
+
+std::string sceneDigest(const SceneDesc& scene) {
+  std::uint64_t h = 1469598103934665603ull;  // FNV-1a 64
+  for (const std::string& path : {scene.path, scene.strokesPath}) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path, 0, "", "cannot read (to tell which scene a study measured)");
+    for (std::istreambuf_iterator<char> it(in), end; it != end; ++it) {
+      h ^= static_cast<unsigned char>(*it);
+      h *= 1099511628211ull;
+    }
+    h ^= 0xff;  // the boundary between the files
+    h *= 1099511628211ull;
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return hex;
+}
+
+BudgetChoice budgetFromStudy(const SceneDesc& scene, const std::string& dir, double budgetMs) {
+  if (!(budgetMs > 0.0) || !std::isfinite(budgetMs))
+    throw InputError("--budget", 0, "budget", "must be a positive number of milliseconds per frame");
+  const fs::path path = fs::path(dir) / "study.json";
+  if (!fs::is_regular_file(path))
+    throw InputError(path.string(), 0, "", "no study here: run 'physketch study " + scene.path +
+                                               " --vary ... --out " + dir + "' first");
+  const json j = readJsonFile(path);
+  BudgetChoice out;
+  try {
+    if (j.at("physketch_study").get<int>() != kStudyJsonVersion)
+      throw InputError(path.string(), 0, "physketch_study", "written by another physketch: run the study again");
+    const std::string digest = j.at("scene_digest").get<std::string>();
+    if (digest != sceneDigest(scene))
+      throw InputError(path.string(), 0, "scene_digest",
+                       "the study measured " + j.at("scene").get<std::string>() + " as it was then; " + scene.path +
+                           " or its stroke file differs: run the study again");
+    out.source = dir;
+    out.analytic = j.at("reference") == "analytic";
+    out.norm = j.at("norm").get<std::string>();
+    if (!out.analytic) {
+      out.reference = parseSetting(j.at("reference_setting").get<std::string>(), "study.json");
+      out.referenceTrajectory = trajectoryFrom(j.at("reference_trajectory"));
+    }
+    for (const json& r : j.at("rows")) {
+      BudgetCandidate c;
+      c.setting = settingFrom(r.at("setting"));
+      for (const auto& [knob, v] : c.setting)
+        if (isMeshingKnob(knob))
+          throw InputError(path.string(), 0, knob, "the study varied meshing knob '" + knob +
+                                                       "'; --budget fits the solver's time per frame: use a study of "
+                                                       "solver knobs (iterations, substeps, dt, voxel, grid_dx, cfl)");
+      c.msPerFrame = r.at("ms_per_frame").get<double>();
+      c.error = r.at("error_m").is_null() ? std::numeric_limits<double>::quiet_NaN() : r.at("error_m").get<double>();
+      c.status = r.at("status").get<std::string>();
+      out.studyThreads = r.at("threads").get<int>();
+      out.candidates.push_back(std::move(c));
+    }
+  } catch (const json::exception& e) {
+    throw InputError(path.string(), 0, "", std::string("not a study.json: ") + e.what());
+  }
+  if (out.candidates.empty()) throw InputError(path.string(), 0, "rows", "the study has no rows");
+  const std::ptrdiff_t pick = chooseWithinBudget(out.candidates, budgetMs, out.fits);
+  if (pick < 0) throw RuntimeError("--budget: every setting of the study in " + dir + " was stopped by the stability guard");
+  const BudgetCandidate& c = out.candidates[std::size_t(pick)];
+  out.setting = c.setting;
+  out.predictedMs = c.msPerFrame;
+  out.predictedError = c.error;
+  return out;
+}
+
+double budgetRunError(const BudgetChoice& b, const Trajectory& run, const SceneDesc& scene) {
+  if (b.analytic) return analyticError(run, scene);
+  if (b.referenceTrajectory) return fineError(run, *b.referenceTrajectory);
+  return std::numeric_limits<double>::quiet_NaN();
 }
 
 }  // namespace physketch::app

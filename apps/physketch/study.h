@@ -1,7 +1,7 @@
 // physketch study: what accuracy costs in time. Runs a scene once per setting of the knobs
 // it is asked to vary (the cartesian product), measures each run's error against the answer
 // the scene declares (`expect` records) or against a converged fine run, and its wall time per
-// frame; writes study.csv, study.md and study.png (docs/accuracy.md).
+// frame; writes study.csv, study.md, study.png and study.json (docs/accuracy.md).
 //
 // The pieces are here so tests can check them without the binary: knob parsing, the
 // product, the error norms (study_error.cpp) and the Pareto front (study_plot.cpp).
@@ -16,6 +16,10 @@
 #include "core/scene.h"
 #include "core/solver.h"
 #include "render/mesh.h"
+
+namespace physketch::sketch {
+struct Sketch;
+}
 
 namespace physketch::app {
 
@@ -81,6 +85,12 @@ struct Trajectory {
   // run meshes (a meshing knob, expect sphere); empty otherwise.
   render::TriangleMesh surface;
 };
+
+// Recording a run as a study measures it: observeStart once at t = 0 (velocities, reaches, names,
+// the extent of the dynamic particles), then observe at every frame including frame 0 (centres,
+// largest displacement from x0 and speed, front, hydrostatic error when expected).
+void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr);
+void observe(const Solver& solver, const std::vector<Vec3>& x0, const SceneDesc& scene, Trajectory& tr);
 
 // Tait's equation of state integrated down a column at rest: the pressure (Pa) at depth d (m)
 // below the free surface of a fluid of rest density rho0, bulk modulus K and exponent gamma
@@ -199,6 +209,8 @@ struct BudgetCandidate {
 std::ptrdiff_t chooseWithinBudget(const std::vector<BudgetCandidate>& candidates, double budgetMs, bool& fits);
 
 struct BudgetChoice {
+  // "calibration", or the study folder the rows came from (run --budget MS --from-study DIR).
+  std::string source = "calibration";
   Setting setting;
   bool fits = false;
   double predictedMs = 0.0;     // the chosen candidate's calibrated ms per frame
@@ -206,6 +218,13 @@ struct BudgetChoice {
   int calibrationFrames = 0;    // frames 1..K of the scene the calibration ran
   Setting reference;            // the fine run the errors are measured against
   std::vector<BudgetCandidate> candidates;
+  // From a study: its rows are whole runs, so the prediction is for the whole run, and the run's
+  // own error is measured against the same answer: the scene's expect records (analytic) or the
+  // study's reference trajectory (fine).
+  bool analytic = false;
+  std::optional<Trajectory> referenceTrajectory;
+  int studyThreads = 0;
+  std::string norm;             // what the errors measure, in words
 };
 // Runs frames 0..maxFrames-1 of the scene with one setting (study's runner); its solver ms
 // per frame and status ("ok" or "unstable: ...").
@@ -219,6 +238,20 @@ Trajectory calibrationRun(const std::string& scenePath, const Setting& setting, 
 // 1/C), errors against half the smallest C tried. Throws InputError for an MPM scene with fixed
 // substeps or a budget that is not a positive number.
 BudgetChoice calibrateBudget(const std::string& scenePath, double budgetMs, int threads, bool quiet);
+
+// study.json (written next to study.csv): the study's rows with the scene's digest, so that run
+// --budget --from-study can choose from them. Version of its layout:
+constexpr int kStudyJsonVersion = 1;
+// FNV-1a 64 of the scene file's bytes and its stroke file's, as 16 hex digits: which scene a
+// study measured. Throws InputError when either cannot be read.
+std::string sceneDigest(const SceneDesc& scene);
+// Chooses from DIR/study.json's rows as chooseWithinBudget does. Throws InputError naming the
+// file for a missing or malformed study.json, another scene (digest), a study that varied a
+// meshing knob (the budget is the solver's time) or a budget that is not a positive number.
+BudgetChoice budgetFromStudy(const SceneDesc& scene, const std::string& dir, double budgetMs);
+// The run's error in the norm its BudgetChoice was predicted in (from a study only); NaN when
+// the run was stopped.
+double budgetRunError(const BudgetChoice& b, const Trajectory& run, const SceneDesc& scene);
 
 // Plot size of study.png (pixels).
 constexpr int kPlotWidth = 900;

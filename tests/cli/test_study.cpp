@@ -754,6 +754,78 @@ TEST(StudyBudget, RunBudgetReportsTheCalibratedChoice) {
   fs::remove_all(dir);
 }
 
+// run --budget --from-study: the choice among a study's whole-run rows (recomputed here from
+// study.csv by chooseWithinBudget's rule), and the run's own error, which must equal the study's
+// measurement of the same setting (the runs are deterministic: an independent run of it).
+TEST(StudyBudget, FromStudyChoosesAStudyRowAndMeasuresTheRunsError) {
+  const fs::path dir = freshDir("budget_study");
+  const std::string drop = scene("drop.scene");
+  Result r = runCli("study '" + drop + "' --vary substeps=1,4,16 --threads 1 -q --out '" + (dir / "s").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Table rows = readCsv(dir / "s" / "study.csv");
+  ASSERT_EQ(rows.size(), 3u);
+  auto rowOf = [&](const std::string& setting) {
+    for (const auto& row : rows)
+      if ("substeps=" + row.at("substeps") == setting) return row;
+    ADD_FAILURE() << "no row " << setting;
+    return rows.front();
+  };
+  // A budget every row fits: the most accurate row; one no row fits: the fastest, with a warning.
+  for (const double budgetMs : {1e6, 1e-6}) {
+    const fs::path out = dir / (budgetMs > 1.0 ? "big" : "tiny");
+    r = runCli("run '" + drop + "' --budget " + std::to_string(budgetMs) + " --from-study '" + (dir / "s").string() +
+                   "' --threads 1 --out '" + out.string() + "'", dir);
+    ASSERT_EQ(r.code, 0) << r.err;
+    const nlohmann::json b = nlohmann::json::parse(slurp(out / "report.json")).at("budget");
+    std::string expected;
+    double best = 0.0;
+    for (const auto& row : rows) {
+      const double key = budgetMs > 1.0 ? std::stod(row.at("error_m")) : std::stod(row.at("ms_per_frame"));
+      if (expected.empty() || key < best) expected = "substeps=" + row.at("substeps"), best = key;
+    }
+    EXPECT_EQ(b.at("setting").get<std::string>(), expected);
+    EXPECT_EQ(b.at("fits").get<bool>(), budgetMs > 1.0);
+    EXPECT_EQ(b.at("source").get<std::string>(), (dir / "s").string());
+    const double studied = std::stod(rowOf(expected).at("error_m"));
+    EXPECT_NEAR(b.at("predicted_error_m").get<double>(), studied, 1e-6 * studied);  // the csv prints 7 digits
+    EXPECT_NEAR(b.at("measured_error_m").get<double>(), studied, 1e-6 * studied);
+    EXPECT_NE(r.err.find("budget: measured"), std::string::npos) << r.err;
+    if (budgetMs < 1.0) {
+      EXPECT_NE(r.err.find("no setting of the study fits"), std::string::npos) << r.err;
+    }
+  }
+  // A study against a fine run keeps its reference's trajectory: the reference row is 0 from it.
+  r = runCli("study '" + drop + "' --vary substeps=1,4 --reference fine --threads 1 -q --out '" + (dir / "f").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = runCli("run '" + drop + "' --budget 1e6 --from-study '" + (dir / "f").string() + "' --threads 1 --out '" +
+                 (dir / "fo").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json fb = nlohmann::json::parse(slurp(dir / "fo" / "report.json")).at("budget");
+  EXPECT_EQ(fb.at("setting").get<std::string>(), "substeps=4");
+  EXPECT_EQ(fb.at("measured_error_m").get<double>(), 0.0);
+  // Errors: no study there; a scene that changed since the study; no --budget; a meshing study.
+  r = runCli("run '" + drop + "' --budget 5 --from-study '" + (dir / "none").string() + "' --out '" + (dir / "x").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("study.json: no study here"), std::string::npos) << r.err;
+  fs::copy_file(scene("drop.strokes"), dir / "drop.strokes");
+  std::ofstream(dir / "drop.scene") << slurp(drop) << "# changed\n";
+  r = runCli("run '" + (dir / "drop.scene").string() + "' --budget 5 --from-study '" + (dir / "s").string() + "' --out '" +
+                 (dir / "x").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("differs: run the study again"), std::string::npos) << r.err;
+  r = runCli("run '" + drop + "' --from-study '" + (dir / "s").string() + "' --out '" + (dir / "x").string() + "'", dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--budget"), std::string::npos) << r.err;
+  r = runCli("study '" + scene("mesh_ball.scene") + "' --vary smoothing=0 -q --out '" + (dir / "m").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = runCli("run '" + scene("mesh_ball.scene") + "' --budget 5 --from-study '" + (dir / "m").string() + "' --out '" +
+                 (dir / "x").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("meshing knob 'smoothing'"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "x"));
+  fs::remove_all(dir);
+}
+
 // run --budget under solver mpm picks the Courant number C of 'substeps auto': the candidates are
 // C = 1, 1/2, 1/4, ... (halving until one is over the budget), their solver time per frame
 // grows as C falls (each halving about doubles the substeps), the choice is the calibrated one,
