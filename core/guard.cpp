@@ -21,6 +21,31 @@ const char* toString(GuardKind kind) {
   return "?";
 }
 
+bool recoverable(GuardKind kind) {
+  switch (kind) {
+    case GuardKind::kExplosion:
+    case GuardKind::kPenetration:
+    case GuardKind::kCfl:
+    case GuardKind::kCompression:
+    case GuardKind::kEnergyGrowth: return true;
+    case GuardKind::kNone:
+    case GuardKind::kNaN:
+    case GuardKind::kInverted: return false;
+  }
+  return false;
+}
+
+void GuardLog::add(const GuardRecord& r) {
+  if (!seen(r.kind)) first_.push_back(r);
+  ++counts_[static_cast<std::size_t>(r.kind)];
+}
+
+long GuardLog::total() const {
+  long n = 0;
+  for (long c : counts_) n += c;
+  return n;
+}
+
 std::string GuardRecord::message() const {
   if (!tripped()) return "stable";
   std::ostringstream os;

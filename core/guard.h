@@ -46,6 +46,34 @@ struct GuardRecord {
   std::string message() const;
 };
 
+// What a solver does when the guard trips (physketch run --guard): stop the run (the default), or,
+// for a kind whose state is still worth continuing from, record the event and go on (warn).
+enum class GuardPolicy { kStop, kWarn };
+// The kinds a run may continue past under GuardPolicy::kWarn: a particle too fast, too deep in
+// a collider or the ground, a fluid over-compressed, energy growth, a particle moving more than a
+// grid cell in a substep. NaN/Inf and an inverted deformation gradient (J <= 0) always stop: the
+// state they leave cannot be stepped meaningfully; so does `substeps auto` needing over 1000.
+bool recoverable(GuardKind kind);
+
+// The events a run continued past under GuardPolicy::kWarn: the first record of each kind in
+// full (the pass named by a replay, as when the run stops), and how many steps tripped each kind.
+class GuardLog {
+ public:
+  GuardPolicy policy = GuardPolicy::kStop;
+  // Whether a record of this kind is logged and the run goes on.
+  bool warns(GuardKind kind) const { return policy == GuardPolicy::kWarn && recoverable(kind); }
+  // Whether a record of this kind is logged already (a later one is only counted: no replay).
+  bool seen(GuardKind kind) const { return count(kind) > 0; }
+  void add(const GuardRecord& r);
+  long count(GuardKind kind) const { return counts_[static_cast<std::size_t>(kind)]; }
+  long total() const;
+  const std::vector<GuardRecord>& first() const { return first_; }  // in the order the kinds first tripped
+
+ private:
+  std::vector<GuardRecord> first_;
+  long counts_[8] = {};
+};
+
 // The checks every solver shares, over particles in id order; returns the first
 // offender (kind kNone if all pass) with its particle, body, stroke, value, bound and
 // hint filled in (pass, step, substep and material are the caller's to fill).

@@ -31,6 +31,11 @@ class Solver {
   virtual const GuardRecord& guard() const = 0;
   // Check after every pass, not only once per step (physketch run --validate).
   virtual void setValidate(bool on) = 0;
+  // Stop at the first trip (default), or continue past recoverable kinds and log them
+  // (physketch run --guard warn). A step the guard tripped in under warn is completed as if
+  // unchecked; the energy watch takes a new reference after it.
+  virtual void setGuardPolicy(GuardPolicy policy) = 0;
+  virtual const GuardLog& guardLog() const = 0;
 
   virtual const ParticleArrays& particles() const = 0;
   bool alive(std::int32_t i) const { return !phase::has(particles().phase[static_cast<std::size_t>(i)], phase::kRemoved); }

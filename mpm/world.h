@@ -90,6 +90,8 @@ class MpmWorld final : public Solver {
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool on) override { validate_ = on; }
+  void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
+  const GuardLog& guardLog() const override { return guardLog_; }
 
   const ParticleArrays& particles() const override { return parts_; }
   int bodyCount() const override { return static_cast<int>(members_.size()); }
@@ -271,6 +273,7 @@ class MpmWorld final : public Solver {
   std::vector<std::int8_t> edgeSide_;
   int lastSubsteps_ = 0;
   bool validate_ = false;
+  GuardLog guardLog_;  // the events a run continued past (policy warn)
   std::vector<bool> work_;
   std::vector<std::string> warnings_;
   Profile profile_{kMpmPasses};

@@ -884,25 +884,43 @@ bool PbdWorld::step() {
   // growth within the step is caught (loose_ is current: rebuilt above).
   if (work_[std::size_t(PbdPass::kGuard)] && !energy_.armed() && energyClosed())
     energy_.arm(energyNow(), params_.gravity, 2.0 * params_.particleRadius);
-  if (validate_) {
-    if (runStep(true) && work_[std::size_t(PbdPass::kGuard)]) {
-      GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
-      if (r.tripped()) {
-        r.pass = "guard";
-        r.step = steps_;
-        guard_ = std::move(r);
-      }
-    }
-  } else {
-    const std::vector<Motion> start = motion_;  // per body: cheap to keep
-    const std::vector<GroundCache> cacheStart = groundCache_;
-    // Particle-level state at the start of the step (only when there is some).
-    std::vector<float> looseStart;
+  // The start of the step: to replay it with a check after every pass (naming the pass that
+  // produced a bad value), and under policy warn to complete a step the guard stopped midway.
+  const bool warn = guardLog_.policy == GuardPolicy::kWarn;
+  std::vector<Motion> start;
+  std::vector<GroundCache> cacheStart;
+  std::vector<float> looseStart;  // particle-level state (only when there is some)
+  if (!validate_ || warn) {
+    start = motion_;  // per body: cheap to keep
+    cacheStart = groundCache_;
     if (!loose_.empty()) {
       looseStart.reserve(6 * loose_.size());
       for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
         for (std::int32_t i : loose_) looseStart.push_back((*a)[std::size_t(i)]);
     }
+  }
+  const auto restoreStart = [&] {
+    motion_ = start;
+    groundCache_ = cacheStart;
+    std::size_t at = 0;
+    for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
+      for (std::int32_t i : loose_) (*a)[std::size_t(i)] = looseStart[at++];
+  };
+  bool midway = false;  // the guard stopped the step at a pass: the state is not the step's end
+  if (validate_) {
+    if (runStep(true)) {
+      if (work_[std::size_t(PbdPass::kGuard)]) {
+        GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
+        if (r.tripped()) {
+          r.pass = "guard";
+          r.step = steps_;
+          guard_ = std::move(r);
+        }
+      }
+    } else {
+      midway = true;
+    }
+  } else {
     runStep(false);
     if (work_[std::size_t(PbdPass::kGuard)]) {
       GuardRecord r;
@@ -915,17 +933,19 @@ bool PbdWorld::step() {
         if (!r.tripped()) r = checkEnergy();
       }
       if (r.tripped()) {
-        // Replay the step from its start with a check after every pass, so the record
-        // names the pass that produced the bad value (the step is deterministic).
-        motion_ = start;
-        groundCache_ = cacheStart;
-        std::size_t at = 0;
-        for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
-          for (std::int32_t i : loose_) (*a)[std::size_t(i)] = looseStart[at++];
-        if (runStep(true)) {  // cannot happen for a deterministic step; keep the first record
-          r.pass = "guard";
-          r.step = steps_;
-          guard_ = std::move(r);
+        r.pass = "guard";
+        r.step = steps_;
+        if (guardLog_.warns(r.kind) && guardLog_.seen(r.kind)) {
+          guard_ = std::move(r);  // logged in full before: counted, the step kept as it ran
+        } else {
+          // Replay the step from its start with a check after every pass, so the record
+          // names the pass that produced the bad value (the step is deterministic).
+          restoreStart();
+          midway = true;
+          if (runStep(true)) {  // cannot happen for a deterministic step; keep the first record
+            guard_ = std::move(r);
+            midway = false;
+          }
         }
       }
     }
@@ -941,7 +961,19 @@ bool PbdWorld::step() {
   knobs.substeps = params_.substeps;
   knobs.iterations = params_.iterations;
   guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
-  return false;
+  if (!guardLog_.warns(guard_.kind)) return false;
+  // Policy warn: log the event, finish the step as an unchecked one would, and go on; the
+  // energy watch takes a new reference at the next step.
+  guardLog_.add(guard_);
+  guard_ = GuardRecord{};
+  if (midway) {
+    restoreStart();
+    runStep(false);
+    for (Motion& mo : motion_) mo.kinStart = mo.kinTarget = mo.c;
+  }
+  energy_.reset();
+  ++steps_;
+  return true;
 }
 
 // Energy growth while the system is closed: no carried body (tools included) and no collider

@@ -115,6 +115,8 @@ class PbdWorld final : public Solver {
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool on) override { validate_ = on; }
+  void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
+  const GuardLog& guardLog() const override { return guardLog_; }
 
   const ParticleArrays& particles() const override { return parts_; }
   int bodyCount() const override { return static_cast<int>(members_.size()); }
@@ -342,6 +344,7 @@ class PbdWorld final : public Solver {
   bool looseDirty_ = true;             // loose_ must be rebuilt before the next step  // per particle: vy before the solve when it touched the ground, else 0
   std::int64_t steps_ = 0;
   bool validate_ = false;
+  GuardLog guardLog_;  // the events a run continued past (policy warn)
   std::vector<bool> work_;      // the passes this step runs (work() at its start)
   bool writtenSuspect_ = true;  // write_particles' summary: some particle may fail the guard
   Profile profile_{kPbdPasses};

@@ -27,6 +27,7 @@ struct RunOptions {
   std::string fluidSurface = "kernels";  // --fluid-surface: kernels (meshFluid) or cells (meshParticles)
   double meshResolution = 0.5;   // --mesh-resolution: fluid surfaces' field voxels, in particle spacings
   std::string look = "meshes";           // --look: meshes or splats (Gaussian splats per particle)
+  std::string guard = "stop";    // --guard: stop at the first trip, or warn and go on (recoverable kinds)
   double budgetMs = 0.0;         // --budget: solver ms per frame to fit (0: the scene's settings)
   std::string budgetFrom;        // --from-study DIR: choose from a study's rows instead of calibrating
 };

@@ -78,6 +78,13 @@ int main(int argc, char** argv) {
                      "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md)")
       ->capture_default_str()
       ->check(CLI::IsMember({"meshes", "splats"}));
+  runCmd->add_option("--guard", run.guard,
+                     "When the stability guard trips: 'stop' the run (exit 2, report.json: guard), or 'warn': log the "
+                     "event and go on where the state can go on (a particle too fast or too deep, fluid compression, "
+                     "energy growth, CFL; NaN and inverted elements always stop). report.json: status 'warned', "
+                     "guard_warnings (the first record of each kind, with the frame, and how many steps tripped it)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"stop", "warn"}));
   auto* budgetOpt = runCmd->add_option("--budget", run.budgetMs,
                      "Pick substeps and iterations (pbd), or the Courant number of 'substeps auto' (mpm), so that the "
                      "solver takes about MS milliseconds per frame on this machine, from a short calibration of the scene's first frames; prints the error expected "

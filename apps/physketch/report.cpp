@@ -64,8 +64,12 @@ json planJson(const std::vector<PlanEntry>& plan) {
   return a;
 }
 
-json guardJson(const GuardRecord& g) {
-  return {{"kind", toString(g.kind)}, {"pass", g.pass},         {"step", g.step},   {"substep", g.substep},
+int guardFrame(const GuardRecord& g, int stepsPerFrame) {
+  return static_cast<int>(g.step / std::max(1, stepsPerFrame)) + 1;
+}
+
+json guardJson(const GuardRecord& g, int stepsPerFrame) {
+  return {{"kind", toString(g.kind)}, {"frame", guardFrame(g, stepsPerFrame)}, {"pass", g.pass},         {"step", g.step},   {"substep", g.substep},
           {"particle", g.particle},   {"body", g.body},         {"stroke", g.stroke}, {"material", g.material},
           {"value", g.value},         {"bound", g.bound},       {"hint", g.hint},   {"message", g.message()}};
 }

@@ -23,7 +23,9 @@ std::map<std::string, std::int64_t> particlesPerKind(const Prepared& p);
 // Provenance of the sketch: particles per operation, per material and per body, and lint warnings.
 nlohmann::json sketchJson(const Prepared& p);
 nlohmann::json planJson(const std::vector<PlanEntry>& plan);
-nlohmann::json guardJson(const GuardRecord& g);
+// frame: the frame the tripping step was computing (step / steps per frame + 1).
+nlohmann::json guardJson(const GuardRecord& g, int stepsPerFrame);
+int guardFrame(const GuardRecord& g, int stepsPerFrame);
 // Every body's pose at one frame: [cx, cy, cz, qw, qx, qy, qz] (m; unit quaternion, rest -> world).
 nlohmann::json posesJson(const Solver& solver);
 nlohmann::json runtimeJson(const sketch::Sketch& sk, const RuntimeDriver& runtime);

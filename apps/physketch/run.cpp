@@ -396,6 +396,7 @@ int runScene(const RunOptions& opt) {
     const sketch::Sketch& sk = *p.sketch;
     const int frames = opt.frames > 0 ? opt.frames : sc.frameCount();
     solver->setValidate(opt.validate);
+    solver->setGuardPolicy(opt.guard == "warn" ? GuardPolicy::kWarn : GuardPolicy::kStop);
     if (opt.video && !sc.writeFrames) {
       throw InputError(sc.path, 0, "output", "--video needs frames, and this scene's 'output' record leaves them out");
     }
@@ -466,8 +467,19 @@ int runScene(const RunOptions& opt) {
     rep["physketch"] = PHYSKETCH_VERSION;
     rep["scene"] = sc.path;
     rep["strokes_file"] = sc.strokesPath;
-    rep["status"] = solver->guard().tripped() ? "unstable" : "ok";
-    if (solver->guard().tripped()) rep["guard"] = guardJson(solver->guard());
+    const GuardLog& guardLog = solver->guardLog();
+    rep["status"] = solver->guard().tripped() ? "unstable" : guardLog.total() > 0 ? "warned" : "ok";
+    rep["guard_policy"] = opt.guard;
+    if (solver->guard().tripped()) rep["guard"] = guardJson(solver->guard(), sc.stepsPerFrame());
+    if (guardLog.total() > 0) {
+      json events = json::array();
+      for (const GuardRecord& g : guardLog.first()) {
+        json e = guardJson(g, sc.stepsPerFrame());
+        e["steps_tripped"] = guardLog.count(g.kind);
+        events.push_back(std::move(e));
+      }
+      rep["guard_warnings"] = std::move(events);
+    }
     rep["threads"] = threads;
     rep["grid"] = {{"cells_per_axis", sketch::kGridSize},
                    {"voxel_size_m", sk.mapping.voxelSize()},
@@ -549,8 +561,12 @@ int runScene(const RunOptions& opt) {
                        {"total", tEnd - tStart}};
     if (sc.writeReport) writeFileAtomic((out / "report.json").string(), rep.dump(1) + "\n");
 
+    for (const GuardRecord& g : guardLog.first())
+      std::cerr << "warning: frame " << guardFrame(g, sc.stepsPerFrame()) << ": " << g.message() << " (--guard warn: "
+                << guardLog.count(g.kind) << " step(s) tripped '" << toString(g.kind) << "'; the run went on)\n";
     if (solver->guard().tripped()) {
-      std::cerr << "error: " << solver->guard().message() << "\n";
+      std::cerr << "error: frame " << guardFrame(solver->guard(), sc.stepsPerFrame()) << ": " << solver->guard().message()
+                << "\n";
       return kExitRuntime;
     }
     for (const auto& w : warnings) std::cerr << "warning: " << w.get<std::string>() << "\n";

@@ -289,6 +289,56 @@ TEST(Cli, AnUnstableRunExitsTwoAndTheReportNamesTheGuardRecord) {
   fs::remove_all(dir);
 }
 
+// --guard warn: a recoverable trip (a stiff jelly pressed into the ground: penetration) is logged
+// and the run goes on to its last frame; the log's first record is the one a stopping run reports
+// (same frame, pass and particle), the frames before it are the stopping run's, and the run is the
+// same for 1 and 2 threads. NaN and inverted elements stop under warn too.
+TEST(Cli, GuardWarnLogsRecoverableTripsAndGoesOn) {
+  const fs::path dir = freshDir("guard_warn");
+  const std::string hard = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hard/";
+  auto shortCopy = [&](const std::string& name, const std::string& duration) {
+    fs::copy_file(hard + name + ".strokes", dir / (name + ".strokes"));
+    std::string text = slurp(hard + name + ".scene");
+    const std::size_t at = text.find("\nduration ");
+    text = text.substr(0, at) + "\nduration " + duration + text.substr(text.find('\n', at + 1));
+    writeText(dir / (name + ".scene"), text);
+    return (dir / (name + ".scene")).string();
+  };
+  const std::string soft = shortCopy("stiff_soft", "0.5");
+  Result r = runCli("run '" + soft + "' -q --out '" + (dir / "stop").string() + "'", dir);
+  ASSERT_EQ(r.code, 2) << r.err;
+  const auto stop = readJson(dir / "stop" / "report.json");
+  const auto& record = stop["guard"];
+  ASSERT_EQ(record["kind"], "penetration");
+  nlohmann::json warned[2];
+  for (int threads : {1, 2}) {
+    const fs::path out = dir / ("warn" + std::to_string(threads));
+    r = runCli("run '" + soft + "' -q --guard warn --threads " + std::to_string(threads) + " --out '" + out.string() + "'", dir);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("warning: frame " + std::to_string(record["frame"].get<int>()) + ": stability guard: penetration"),
+              std::string::npos) << r.err;
+    warned[threads - 1] = readJson(out / "report.json");
+  }
+  const auto& rep = warned[0];
+  EXPECT_EQ(rep["status"], "warned");
+  EXPECT_EQ(rep["frames"]["written"], rep["frames"]["requested"]);
+  ASSERT_GE(rep["guard_warnings"].size(), 1u);
+  const auto& first = rep["guard_warnings"][0];
+  for (const char* key : {"kind", "frame", "step", "substep", "pass", "particle", "stroke", "material"})
+    EXPECT_EQ(first[key], record[key]) << key;
+  EXPECT_GE(first["steps_tripped"].get<int>(), 1);
+  const int before = record["frame"].get<int>();  // frames 0..before-1 were written by both runs
+  for (int f = 0; f < before; ++f) EXPECT_EQ(rep["poses"][f], stop["poses"][f]) << "frame " << f;
+  EXPECT_EQ(warned[0]["poses"], warned[1]["poses"]);
+  EXPECT_EQ(warned[0]["guard_warnings"], warned[1]["guard_warnings"]);
+  // An inverted deformation gradient is not recoverable: warn stops as stop does.
+  const std::string steel = shortCopy("mpm_fixed_substeps", "0.2");
+  r = runCli("run '" + steel + "' -q --guard warn --out '" + (dir / "steel").string() + "'", dir);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_EQ(readJson(dir / "steel" / "report.json")["guard"]["kind"], "inverted");
+  fs::remove_all(dir);
+}
+
 TEST(Cli, HelpVersionAndUsageErrors) {
   const fs::path dir = freshDir("help");
   EXPECT_EQ(runCli("--help", dir).code, 0);

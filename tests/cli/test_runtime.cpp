@@ -233,6 +233,8 @@ class StretchingBlock final : public Solver {
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool) override {}
+  void setGuardPolicy(GuardPolicy) override {}
+  const GuardLog& guardLog() const override { return log_; }
   const ParticleArrays& particles() const override { return parts_; }
   int bodyCount() const override { return 1; }
   const std::vector<std::int32_t>& bodyParticles(int) const override { return members_; }
@@ -260,6 +262,7 @@ class StretchingBlock final : public Solver {
   std::vector<std::int32_t> members_;
   Profile profile_;
   GuardRecord guard_;
+  GuardLog log_;
   std::int64_t steps_ = 0;
 };
 }  // namespace

@@ -203,3 +203,41 @@ TEST(Guard, KnobAdviceNamesTheKnobWithThisRunsValues) {
   mpm.substeps = 1;
   EXPECT_EQ(knobAdvice(cfl, mpm), "raise 'substeps' from 1 to at least 2, or write 'substeps auto'");
 }
+
+namespace physketch {
+namespace {
+
+// The warn policy's log: only recoverable kinds are logged (NaN and inverted elements stop), only
+// under kWarn, the first record of each kind is kept in full in the order the kinds first came, and
+// every later one is counted.
+TEST(GuardLog, KeepsTheFirstRecordOfEachRecoverableKindAndCountsTheRest) {
+  GuardLog log;
+  for (GuardKind k : {GuardKind::kExplosion, GuardKind::kNaN, GuardKind::kInverted}) EXPECT_FALSE(log.warns(k));
+  log.policy = GuardPolicy::kWarn;
+  const GuardKind recoverableKinds[] = {GuardKind::kExplosion, GuardKind::kPenetration, GuardKind::kCfl,
+                                        GuardKind::kCompression, GuardKind::kEnergyGrowth};
+  for (GuardKind k : recoverableKinds) EXPECT_TRUE(log.warns(k)) << toString(k);
+  for (GuardKind k : {GuardKind::kNone, GuardKind::kNaN, GuardKind::kInverted}) EXPECT_FALSE(log.warns(k)) << toString(k);
+  GuardRecord a;
+  a.kind = GuardKind::kPenetration;
+  a.step = 13;
+  GuardRecord b = a;
+  b.step = 14;
+  GuardRecord c;
+  c.kind = GuardKind::kEnergyGrowth;
+  c.step = 20;
+  EXPECT_FALSE(log.seen(GuardKind::kPenetration));
+  log.add(a);
+  log.add(b);
+  log.add(c);
+  EXPECT_TRUE(log.seen(GuardKind::kPenetration));
+  EXPECT_EQ(log.count(GuardKind::kPenetration), 2);
+  EXPECT_EQ(log.count(GuardKind::kEnergyGrowth), 1);
+  EXPECT_EQ(log.total(), 3);
+  ASSERT_EQ(log.first().size(), 2u);
+  EXPECT_EQ(log.first()[0].step, 13);  // the first penetration, not the second
+  EXPECT_EQ(log.first()[1].kind, GuardKind::kEnergyGrowth);
+}
+
+}  // namespace
+}  // namespace physketch
