@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -336,6 +337,61 @@ TEST(Cli, GuardWarnLogsRecoverableTripsAndGoesOn) {
   r = runCli("run '" + steel + "' -q --guard warn --out '" + (dir / "steel").string() + "'", dir);
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_EQ(readJson(dir / "steel" / "report.json")["guard"]["kind"], "inverted");
+  fs::remove_all(dir);
+}
+
+// Issue 11's representative plans: a fluid-only PBD scene runs the fluid passes and none of the
+// rigid, soft or rope ones; MPM sand + water runs the return mapping for the sand only; MPM
+// elastic runs none; a report-only output makes no meshes and no GL context. The expected sets
+// follow from what each scene holds (docs/architecture.md's pass tables), not from the plan code.
+TEST(Cli, PlansOfRepresentativeScenesListOnlyTheirPasses) {
+  const fs::path dir = freshDir("plans");
+  auto planOf = [&](const std::string& name, const std::string& scene, const std::string& strokes) {
+    writeText(dir / (name + ".strokes"), "physketch-strokes 1\n" + strokes);
+    writeText(dir / (name + ".scene"), "physketch-scene 1\nstrokes " + name + ".strokes\nduration 0.1\n" + scene + "output report\n");
+    const std::string outFile = (dir / "plan.txt").string();
+    EXPECT_EQ(std::system((std::string(PHYSKETCH_CLI) + " plan '" + (dir / (name + ".scene")).string() + "' --all > '" +
+                           outFile + "'").c_str()), 0);
+    const std::string text = slurp(outFile);
+    std::map<std::string, std::string> lines;  // pass -> "on"/"off" and its reason
+    std::istringstream in(text);
+    std::string last;
+    for (std::string line; std::getline(in, line);) {
+      if (line.rfind("        ", 0) == 0 && !last.empty()) lines[last] += line;  // the pass's detail line
+      for (const char* state : {"  on   ", "  off  "})
+        if (line.rfind(state, 0) == 0) {
+          const std::string rest = line.substr(7);
+          last = rest.substr(0, rest.find(' '));
+          lines[last] = std::string(state).substr(2, 3) + rest.substr(rest.find(' '));
+        }
+    }
+    lines["(footer)"] = text.substr(std::min(text.size(), text.rfind("per frame:")));
+    return lines;
+  };
+  auto on = [](const std::map<std::string, std::string>& plan, const std::string& pass) {
+    return plan.count(pass) && plan.at(pass).rfind("on ", 0) == 0;
+  };
+  const auto fluid = planOf("fluid", "material water fluid density=1000\n", "primitive box water 0  0 0.2 0  0.1 0.1 0.1\n");
+  for (const char* pass : {"predict", "fluid_neighbors", "particle_contact", "density", "particle_update", "guard"})
+    EXPECT_TRUE(on(fluid, pass)) << pass;
+  for (const char* pass : {"integrate", "find_contacts", "rigid_contact", "body_contact", "update", "cluster_match", "distance",
+                           "plasticity", "restitution", "kinematic", "find_colliders", "collider_contact"}) {
+    ASSERT_TRUE(fluid.count(pass)) << pass;
+    EXPECT_FALSE(on(fluid, pass)) << pass << ": " << fluid.at(pass);
+  }
+  EXPECT_NE(fluid.at("(footer)").find("no meshes and no GL context"), std::string::npos) << fluid.at("(footer)");
+  const auto mixed = planOf("mpm", "solver mpm\nsubsteps auto\nmaterial water fluid\nmaterial grit sand\n",
+                            "primitive box water 0  0 0.2 0  0.1 0.1 0.1\nprimitive box grit 0  0.2 0.2 0  0.1 0.1 0.1\n");
+  ASSERT_TRUE(on(mixed, "plasticity"));
+  EXPECT_NE(mixed.at("plasticity").find("plastic materials grit (sand)"), std::string::npos) << mixed.at("plasticity");
+  EXPECT_EQ(mixed.at("plasticity").find("water"), std::string::npos) << mixed.at("plasticity");
+  // The sand's 15^3 particles (a 0.1 m box at 1/151 m), not the water's.
+  EXPECT_NE(mixed.at("plasticity").find("touches 3375 particles"), std::string::npos) << mixed.at("plasticity");
+  EXPECT_NE(mixed.at("p2g").find("touches 6750 particles"), std::string::npos) << mixed.at("p2g");
+  const auto elastic = planOf("elastic", "solver mpm\nsubsteps auto\nmaterial jelly elastic preset=soft\n",
+                              "primitive box jelly 0  0 0.2 0  0.1 0.1 0.1\n");
+  EXPECT_FALSE(on(elastic, "plasticity"));
+  for (const char* pass : {"p2g", "grid_update", "g2p", "guard"}) EXPECT_TRUE(on(elastic, pass)) << pass;
   fs::remove_all(dir);
 }
 
