@@ -287,7 +287,8 @@ class PbdWorld final : public Solver {
     std::vector<float> qx, qy, qz;    // per membership: rest offset from the cluster's rest centre (m)
     std::vector<float> lambda;        // per membership: XPBD multiplier of this substep
     std::vector<float> compliance;    // per cluster (m/N)
-    std::vector<float> yield, creep;  // per cluster: plasticity (Müller 2005 §4.4)
+    // per cluster: plasticity (Müller 2005 §4.4); empty while no cluster is plastic
+    std::vector<float> yield, creep;
     std::vector<Quat> rotation;       // per cluster: warm start of the polar decomposition
     std::vector<std::int32_t> body;   // per cluster
     std::vector<Vec3> restCentre;     // per cluster: centre of its members where they were made (m)

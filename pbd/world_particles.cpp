@@ -180,9 +180,15 @@ void PbdWorld::buildClusters(std::size_t b) {
       clusters_.lambda.push_back(0.0f);
     }
     clusters_.members.add(ids, 1.0f);
+    // Plasticity's parameters exist only once some cluster is plastic (then for every cluster,
+    // 0 for the elastic ones): a scene without plastic_creep holds nothing for the pass.
+    if (mat.soft.plasticCreep > 0.0 || !clusters_.creep.empty()) {
+      clusters_.yield.resize(clusters_.compliance.size(), 0.0f);
+      clusters_.creep.resize(clusters_.compliance.size(), 0.0f);
+      clusters_.yield.push_back(static_cast<float>(mat.soft.plasticYield));
+      clusters_.creep.push_back(static_cast<float>(mat.soft.plasticCreep));
+    }
     clusters_.compliance.push_back(alpha);
-    clusters_.yield.push_back(static_cast<float>(mat.soft.plasticYield));
-    clusters_.creep.push_back(static_cast<float>(mat.soft.plasticCreep));
     clusters_.rotation.push_back(Quat::Identity());
     clusters_.body.push_back(static_cast<std::int32_t>(b));
   }
@@ -423,8 +429,10 @@ void PbdWorld::dropRemovedConstraints() {
     if (ids.empty()) continue;
     kc.members.add(ids, 1.0f);
     kc.compliance.push_back(clusters_.compliance[c]);
-    kc.yield.push_back(clusters_.yield[c]);
-    kc.creep.push_back(clusters_.creep[c]);
+    if (!clusters_.creep.empty()) {
+      kc.yield.push_back(clusters_.yield[c]);
+      kc.creep.push_back(clusters_.creep[c]);
+    }
     kc.rotation.push_back(clusters_.rotation[c]);
     kc.body.push_back(clusters_.body[c]);
     kc.restCentre.push_back(clusters_.restCentre[c]);
@@ -841,6 +849,7 @@ void PbdWorld::particleUpdate(double h) {
 // current shape seen in the cluster's frame at rate plastic_creep (1/s).
 void PbdWorld::plasticity(double h) {
   const Clusters& cl = clusters_.members;
+  if (clusters_.creep.empty()) return;  // no plastic cluster
   for (std::size_t c = 0; c < cl.size(); ++c) {
     if (clusters_.creep[c] <= 0.0f || mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) continue;
     const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];

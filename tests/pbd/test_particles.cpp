@@ -322,6 +322,12 @@ TEST(Soft, PlanListsOnlyTheParticlePassesItNeeds) {
     EXPECT_TRUE(has(names, on)) << on;
   for (const char* off : {"integrate", "rigid_contact", "body_contact", "distance", "find_neighbors", "plasticity"})
     EXPECT_FALSE(has(names, off)) << off;
+  // No plastic_creep: the plasticity pass holds nothing (its per-cluster parameters are not kept).
+  for (const PlanEntry& e : w.planAll())
+    if (e.name == "plasticity") {
+      EXPECT_FALSE(e.on);
+      EXPECT_EQ(e.heldBytes, 0u);
+    }
   // The plan is the step: every planned pass ran perStep times.
   ASSERT_TRUE(w.step());
   for (const PlanEntry& e : w.plan()) EXPECT_EQ(w.profile().entries()[std::size_t(e.pass)].calls, e.perStep) << e.name;
