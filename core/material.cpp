@@ -96,4 +96,22 @@ SolverModel solverModel(MaterialKind kind, SolverKind solver) {
   return onlyBy(SolverKind::kPbd);
 }
 
+void pairFriction(const Material& a, const Material& b, double& mus, double& muk) {
+  using Rule = Material::FrictionRule;
+  const bool ownA = a.frictionRule == Rule::kOwn, ownB = b.frictionRule == Rule::kOwn;
+  const bool otherA = a.frictionRule == Rule::kOther, otherB = b.frictionRule == Rule::kOther;
+  if (ownA != ownB) {
+    const Material& m = ownA ? a : b;
+    mus = m.staticFriction, muk = m.dynamicFriction;
+  } else if (!ownA && otherA != otherB) {
+    const Material& m = otherA ? b : a;
+    mus = m.staticFriction, muk = m.dynamicFriction;
+  } else if (!ownA && otherA) {
+    mus = muk = 0.5;  // two tools without friction=: neither names one
+  } else {
+    mus = 0.5 * (a.staticFriction + b.staticFriction);
+    muk = 0.5 * (a.dynamicFriction + b.dynamicFriction);
+  }
+}
+
 }  // namespace physketch

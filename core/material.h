@@ -7,6 +7,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
@@ -55,6 +56,11 @@ struct Material {
   double restitution = 0.0;                       // [0, 1], normal speed kept after a contact
   std::array<float, 3> color{0.7f, 0.7f, 0.7f};  // linear RGB in [0, 1]
   double roughness = 0.5;  // rendering only, [0, 1]: 0 a sharp highlight, 1 a broad faint one (render/renderer.h)
+  // How this material's friction combines with another's at a contact (pairFriction): kMean, the
+  // mean of both (every scene material); kOwn, this material's coefficients decide (a tool stroke
+  // with friction=mu); kOther, the other material's decide (a tool stroke without it).
+  enum class FrictionRule : std::uint8_t { kMean, kOwn, kOther };
+  FrictionRule frictionRule = FrictionRule::kMean;
 
   // Young's modulus and friends: soft (E only), elastic, sand, snow, plasticine.
   struct Elastic {
@@ -120,6 +126,11 @@ struct Material {
 // XPBD compliance (m/N) of a soft material for particle spacing h (m): the given
 // compliance, or 1/(E h) — a cube of edge h under E has spring stiffness k = E h^2 / h.
 double softCompliance(const Material& m, double spacing);
+
+// The static and dynamic Coulomb coefficients of a contact between materials a and b: the one
+// whose rule is kOwn decides (both: their mean); else the other of one whose rule is kOther
+// (both: 0.5, the default coefficient); else the mean of the two.
+void pairFriction(const Material& a, const Material& b, double& mus, double& muk);
 
 // Index of the material called `name`, or -1.
 int findMaterial(const std::vector<Material>& materials, const std::string& name);

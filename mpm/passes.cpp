@@ -161,11 +161,19 @@ void MpmWorld::p2g(float h) {
       hn_.assign(3 * grid_.size(), 0.0f);
     }
     const bool carried = mode_[std::size_t(parts_.group(i))] == BodyMode::kKinematic;
+    const MatModel& mat = models_[std::size_t(parts_.material[i])];
+    const bool ownFriction = carried && mat.ownFriction;  // a tool with friction=mu: its mu decides
+    if (ownFriction && hmus_.empty()) {
+      hmus_.assign(grid_.size(), std::numeric_limits<float>::quiet_NaN());
+      hmuk_.assign(grid_.size(), std::numeric_limits<float>::quiet_NaN());
+    }
     const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b)
         for (int c = 0; c < 3; ++c) {
           const std::size_t node = st.node(a, b, c);
+          if (held_[node] == 0 && !hmus_.empty()) hmus_[node] = hmuk_[node] = std::numeric_limits<float>::quiet_NaN();
+          if (ownFriction) hmus_[node] = mat.mus, hmuk_[node] = mat.muk;
           if (held_[node] == 0 && carried) std::fill_n(hn_.begin() + std::ptrdiff_t(3 * node), 3, 0.0f);
           held_[node] = carried && held_[node] != 1 ? 2 : 1;
           hx_[node] = parts_.vx[i];
@@ -204,7 +212,10 @@ void MpmWorld::gridUpdate(float h) {
         v[2] = hz_[node];
       } else {
         if (held_[node] == 2) {
-          const float mus = mixedFriction_ ? gfs_[node] / m : uniformMus_, muk = mixedFriction_ ? gfk_[node] / m : uniformMuk_;
+          // The tool's own friction where it names one, else the touched material's.
+          const bool own = !hmus_.empty() && hmus_[node] == hmus_[node];
+          const float mus = own ? hmus_[node] : mixedFriction_ ? gfs_[node] / m : uniformMus_;
+          const float muk = own ? hmuk_[node] : mixedFriction_ ? gfk_[node] / m : uniformMuk_;
           pushOnly(v, hx_[node], hy_[node], hz_[node], &hn_[3 * node], mus, muk);
         }
         const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};

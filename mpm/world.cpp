@@ -117,6 +117,7 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     mm.mass = float(r.density * params_.spacing * params_.spacing * params_.spacing);
     mm.mus = float(r.staticFriction);
     mm.muk = float(r.dynamicFriction);
+    mm.ownFriction = r.frictionRule == Material::FrictionRule::kOwn;
     mm.frictionDeg = float(r.sand.frictionAngleDeg);
     mm.hardeningDeg = float(r.sand.hardening);
     mm.alpha = float(druckerPragerAlpha(r.sand.frictionAngleDeg * kPi / 180.0));
@@ -575,7 +576,7 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
       return b;
     }
     case MpmPass::kGridUpdate: {
-      std::size_t b = heldBytes(held_, hx_, hy_, hz_, hn_);
+      std::size_t b = heldBytes(held_, hx_, hy_, hz_, hn_, hmus_, hmuk_);
       for (const Collider& c : colliders_) b += c.sdf.bytes();
       return b;
     }

@@ -171,6 +171,7 @@ class MpmWorld final : public Solver {
     float yield = 0.0f;                // plasticine: tau_Y
     float bulk = 0.0f, gamma = 7.0f, viscosity = 0.0f;  // fluid
     bool plastic = false;
+    bool ownFriction = false;          // Material::FrictionRule::kOwn: its mus/muk decide its contacts (a tool with friction=)
   };
   struct Saved;  // the state a step changes, for the guard's replay
 
@@ -259,6 +260,9 @@ class MpmWorld final : public Solver {
   std::vector<std::uint8_t> held_;        // 1: a node a fixed body holds (sticky); 2: a carried body (one-sided)
   std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
   std::vector<float> hn_;                 // per node 3: a carried body's outward normal (not unit)
+  // Per node held by a carried body whose material's friction decides its contacts (a tool with
+  // friction=mu): that mu (static, dynamic); NaN elsewhere. Allocated with the first such body.
+  std::vector<float> hmus_, hmuk_;
   // Sorting: dynamic particles by block, and the blocks that have any, by colour.
   std::vector<std::int32_t> order_, blockStart_, blockKey_;
   std::vector<std::int32_t> colourBlocks_[8];

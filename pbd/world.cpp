@@ -175,6 +175,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   invInertiaRest_.push_back(Mat3::Zero());
   staticFriction_.push_back(0.0);
   dynamicFriction_.push_back(0.0);
+  frictionRule_.push_back(Material::FrictionRule::kMean);
   restitution_.push_back(0.0);
   reach_.push_back(0.0);
   restBox_.emplace_back();
@@ -219,15 +220,26 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
   }
 }
 
+void PbdWorld::bodyPairFriction(std::size_t a, std::size_t b, double& mus, double& muk) const {
+  Material ma, mb;
+  ma.staticFriction = staticFriction_[a], ma.dynamicFriction = dynamicFriction_[a], ma.frictionRule = frictionRule_[a];
+  mb.staticFriction = staticFriction_[b], mb.dynamicFriction = dynamicFriction_[b], mb.frictionRule = frictionRule_[b];
+  pairFriction(ma, mb, mus, muk);
+}
+
 // Mass, inertia, friction and reach of a body from its members' rest offsets.
 void PbdWorld::refreshMassProperties(std::size_t b) {
   const auto& mem = members_[b];
   double m = 0.0, mus = 0.0, muk = 0.0, e = 0.0, reach = 0.0;
   Eigen::AlignedBox3d box;
+  bool firstMember = true;
   for (std::int32_t i : mem) {
     const auto k = std::size_t(i);
     const double mi = parts_.mass[k];
     const Material& mat = materials_[static_cast<std::size_t>(parts_.material[k])];
+    if (firstMember) frictionRule_[b] = mat.frictionRule;
+    else if (frictionRule_[b] != mat.frictionRule) frictionRule_[b] = Material::FrictionRule::kMean;
+    firstMember = false;
     m += mi;
     mus += mi * mat.staticFriction;
     muk += mi * mat.dynamicFriction;
@@ -1389,8 +1401,8 @@ void PbdWorld::bodyContact() {
         const bool stacked = flat && da && db;
         const double wta = !da ? 0.0 : stacked ? pa.invMass : generalizedInverseMass(pa, pc, t);
         const double wtb = !db ? 0.0 : stacked ? pb.invMass : generalizedInverseMass(pb, pc, t);
-        const double mus = 0.5 * (staticFriction_[a] + staticFriction_[b]);
-        const double muk = 0.5 * (dynamicFriction_[a] + dynamicFriction_[b]);
+        double mus = 0.0, muk = 0.0;
+        bodyPairFriction(a, b, mus, muk);
         if (wta + wtb > 0.0) {
           const double lambdaT = coulomb(len / (wta + wtb), lambdaN, mus, muk);
           // On a flat patch friction acts through the bodies' centres: its torque about the

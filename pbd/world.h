@@ -259,6 +259,10 @@ class PbdWorld final : public Solver {
   std::vector<double> invMass_;             // 1/kg, whole body
   std::vector<Mat3> inertiaRest_, invInertiaRest_;  // rest frame (kg m^2 and inverse)
   std::vector<double> staticFriction_, dynamicFriction_;  // mass-weighted means over the body's materials
+  // The body's Material::FrictionRule when all its materials share one (a tool's), else kMean.
+  std::vector<Material::FrictionRule> frictionRule_;
+  // The pair's coefficients at body level (pairFriction on the bodies' means and rules).
+  void bodyPairFriction(std::size_t a, std::size_t b, double& mus, double& muk) const;
   std::vector<double> restitution_;         // mass-weighted mean over the body's materials
   std::vector<double> reach_;               // m, max |rest offset| + particle radius
   std::vector<Eigen::AlignedBox3d> restBox_;  // per body: the box of its rest offsets (m), grown by r

@@ -639,8 +639,9 @@ void PbdWorld::particleContact() {
     rel -= n.dot(rel) * n;
     const Material& mi = materials_[std::size_t(parts_.material[i])];
     const Material& mjm = materials_[std::size_t(parts_.material[j])];
-    const Vec3 f = frictionCorrection(rel, pen, 0.5 * (mi.staticFriction + mjm.staticFriction),
-                                      0.5 * (mi.dynamicFriction + mjm.dynamicFriction));
+    double mus = 0.0, muk = 0.0;
+    pairFriction(mi, mjm, mus, muk);
+    const Vec3 f = frictionCorrection(rel, pen, mus, muk);
     newI -= (wi / (wi + wj)) * f;
     put(px_, py_, pz_, i, newI);
     if (rigidJ) {

@@ -12,7 +12,10 @@ void addToolMaterials(std::vector<Material>& materials, sketch::Sketch& sketch) 
     if (op.kind != RuntimeOp::Kind::kTool) continue;
     Material m;
     m.name = "tool " + std::to_string(op.op);
+    // friction=mu decides the tool's contacts; without it the touched material's own coefficients
+    // do (docs/formats.md, "Tool strokes").
     if (op.friction) m.staticFriction = m.dynamicFriction = *op.friction;
+    m.frictionRule = op.friction ? Material::FrictionRule::kOwn : Material::FrictionRule::kOther;
     m.color = {0.35f, 0.35f, 0.4f};
     const auto index = static_cast<std::int16_t>(materials.size());
     materials.push_back(m);

@@ -431,12 +431,43 @@ TEST(RuntimeTool, FrictionIsTheStrokes) {
   EXPECT_DOUBLE_EQ(m[2].staticFriction, 1.7);
   EXPECT_DOUBLE_EQ(m[2].dynamicFriction, 1.7);
   EXPECT_EQ(r.sketch.runtime[0].particles.material.front(), 2);
-  // Without friction= the rigid default. (A physical check that friction= changes what the tool
-  // drags is left undone: a grazing sweep moved the box about equally for friction 0 and 2.)
+  EXPECT_EQ(m[2].frictionRule, Material::FrictionRule::kOwn);  // it decides its contacts
+  // Without friction= the touched material's coefficients decide (AToolsFrictionDecidesWhatItDrags
+  // checks both physically).
   Sim plain(sweptBox("wood", true));
   std::vector<Material> mp = materials();
   app::addToolMaterials(mp, plain.sketch);
-  EXPECT_DOUBLE_EQ(mp[2].staticFriction, Material{}.staticFriction);
+  EXPECT_EQ(mp[2].frictionRule, Material::FrictionRule::kOther);
+}
+
+// friction=mu decides the tool's contacts (docs/formats.md). In zero gravity a cube tool comes down
+// onto the top of a floating box (4 cm/s) while sliding along +x (8 cm/s): the contact normal is
+// vertical, so only friction moves the box along x. friction=0: no tangential impulse, the box only
+// moves down; friction=2: the tangential impulse may reach 2x the normal one (the box's whole
+// downward momentum), enough to carry it along x. Before the tool's mu decided, the pair took the
+// mean of the tool's and the box's (0.25 for friction=0).
+TEST(RuntimeTool, AToolsFrictionDecidesWhatItDrags) {
+  const auto moved = [](const std::string& options) {
+    pbd::PbdParams p = fine();
+    p.gravity = Vec3::Zero();
+    Sim r("primitive box wood 0  0 0.3 0  0.1 0.1 0.1\nplay 0\nstroke tool cube 0.06 " + options +
+              "\nsample 0.1 -0.02 0.39 0\nsample 0.6 0.02 0.37 0\n",
+          p);
+    const Vec3 c0 = r.centre(0);
+    r.steps(40);  // t = 0.4
+    return Vec3(r.centre(0) - c0);
+  };
+  const Vec3 none = moved("friction=0"), grip = moved("friction=2"), own = moved("");
+  std::printf("box moved (x, y): (%.4f, %.4f) m friction=0, (%.4f, %.4f) friction=2, (%.4f, %.4f) the box's own 0.5\n",
+              none.x(), none.y(), grip.x(), grip.y(), own.x(), own.y());
+  ASSERT_LT(none.y(), -0.002);  // the tool reached the box and pushed it down
+  // Along x: friction=0 moves it 0.15 mm (contact normals between voxelized cubes are tilted at
+  // their edges), friction=2 6.5 mm and the box's own 0.5 3.2 mm (measured); a tenth of the
+  // gripped motion separates "no friction" from any friction in the pair.
+  EXPECT_LT(std::abs(none.x()), 0.1 * grip.x());
+  EXPECT_GT(grip.x(), 0.004);
+  EXPECT_GT(grip.x(), 1.5 * own.x());
+  EXPECT_GT(own.x(), 4.0 * std::abs(none.x()));
 }
 
 TEST(RuntimeTool, DeterministicForOneAndTwoThreads) {
