@@ -61,6 +61,10 @@ struct Material {
   // with friction=mu); kOther, the other material's decide (a tool stroke without it).
   enum class FrictionRule : std::uint8_t { kMean, kOwn, kOther };
   FrictionRule frictionRule = FrictionRule::kMean;
+  // Rendering only: how frames draw its particles: a surface (kMesh) or Gaussian splats (kSplats,
+  // `look=splats`; physketch run --look splats draws every material so).
+  enum class Look : std::uint8_t { kMesh, kSplats };
+  Look look = Look::kMesh;
 
   // Young's modulus and friends: soft (E only), elastic, sand, snow, plasticine.
   struct Elastic {

@@ -39,6 +39,7 @@ std::vector<ParamSpec> buildTable() {
   t.push_back(number("all", "restitution", "-", 0, closed(0, 1), P, PHYSKETCH_FIELD(restitution)));
   t.push_back({"all", "color", ParamType::kColor, "-", 0.7, nullptr, closed(0, 1), nullptr, B, nullptr});
   t.push_back(number("all", "roughness", "-", 0.5, closed(0, 1), B, PHYSKETCH_FIELD(roughness)));
+  t.push_back(choice("all", "look", "mesh|splats", true, B));
   // soft (pbd: clustered shape matching; mpm runs it as elastic).
   t.push_back(number("soft", "E", "Pa", 5e5, openLo(0, 1e12), B, PHYSKETCH_FIELD(elastic.youngs)));
   t.push_back(choice("soft", "preset", "soft|medium|hard", false, B));
@@ -118,6 +119,7 @@ std::string num(double v) {
 // Sets a choice parameter by its index in the row's choices.
 void setChoice(Material& m, const std::string& key, int index) {
   if (key == "model") m.elastic.model = static_cast<ElasticModel>(index);
+  else if (key == "look") m.look = static_cast<Material::Look>(index);
   else if (key == "preset") {
     m.elastic.preset = static_cast<StiffnessPreset>(index);
     m.elastic.youngs = presetYoungsModulus(m.elastic.preset);
@@ -316,6 +318,8 @@ Material asRunBy(const Material& m, SolverKind solver) {
   out.restitution = m.restitution;
   out.color = m.color;
   out.roughness = m.roughness;
+  out.look = m.look;
+  out.frictionRule = m.frictionRule;
   out.given = m.given;
   if (m.kind == MaterialKind::kRigid) {
     out.elastic.preset = StiffnessPreset::kHard;  // rigid under mpm: a stiff elastic

@@ -67,7 +67,9 @@ FrameWriter::FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapp
   if (options.draw) renderer_ = std::make_unique<render::OffscreenRenderer>(scene.width, scene.height);
   passMesh_ = profile_.add("mesh");
   passDraw_ = profile_.add("draw");
-  if (options.splats) passSplats_ = profile_.add("splats");
+  // Splats for every material (--look splats) or for those whose look is splats.
+  for (const Material& m : scene.materials) anySplatLook_ = anySplatLook_ || m.look == Material::Look::kSplats;
+  if (options.splats || anySplatLook_) passSplats_ = profile_.add("splats");
   passPng_ = profile_.add("png");
 }
 
@@ -106,6 +108,9 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
   bool deforming = false;
   const Vec3 origin = mapping_.toWorld(Vec3i(0, 0, 0));
   for (const auto& [material, ids] : byMaterial(solver, b)) {
+    // A material drawn as splats needs no surface, unless --export mesh keeps the meshes.
+    if (scene_.materials[static_cast<std::size_t>(material)].look == Material::Look::kSplats && !options_.keepMeshes)
+      continue;
     const render::SurfaceKind surface = surfaceOf(scene_.materials[static_cast<std::size_t>(material)].kind, scene_.solver);
     render::TriangleMesh mesh;
     if (surface == render::SurfaceKind::kRigidRestMesh) {
@@ -175,7 +180,7 @@ void FrameWriter::update(const Solver& solver, const std::vector<Vec3i>& restCel
   dirty_.clear();
 }
 
-std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing) {
+std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing, bool splatLookOnly) {
   const ParticleArrays& p = solver.particles();
   const double sigma0 = kSplatSigma * spacing;
   std::vector<render::Splat> out;
@@ -183,6 +188,7 @@ std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& 
     if (solver.mode(b) == BodyMode::kEmpty) continue;
     for (const auto& [material, ids] : byMaterial(solver, b)) {
       const Material& mat = scene.materials[static_cast<std::size_t>(material)];
+      if (splatLookOnly && mat.look != Material::Look::kSplats) continue;
       render::Splat s;
       s.color = mat.color;
       s.opacity = kSplatOpacity;
@@ -222,9 +228,9 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
   // Splats need no meshes; --export mesh still does.
   if (!options_.splats || options_.keepMeshes) update(solver, restCells);
   std::vector<render::Splat> splats;
-  if (options_.splats) {
+  if (options_.splats || anySplatLook_) {
     ScopedPass t(profile_, passSplats_);
-    splats = particleSplats(scene_, solver, mapping_.voxelSize());
+    splats = particleSplats(scene_, solver, mapping_.voxelSize(), /*splatLookOnly=*/!options_.splats);
   }
 
   render::Image img;
@@ -248,13 +254,14 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
     renderer_->beginFrame(sc.camera, sky, render::clipRangeFor(sc.camera, box));
     renderer_->drawGround(sc.groundY, sc.workspaceCenter.x(), sc.workspaceCenter.z(), half, {0.55f, 0.57f, 0.55f});
     trianglesLastFrame_ = 0;
-    if (options_.splats) renderer_->drawSplats(splats);
+    // Opaque surfaces (bodies, colliders) first, then the splats, blended over them (depth-tested).
     for (const auto& [b, parts] : meshes_) {
       if (options_.splats) break;
       if (solver.mode(b) == BodyMode::kEmpty) continue;
       const Mat4f model = solver.pose(b).model();
       for (const MeshPart& m : parts) {
         const Material& mat = sc.materials[static_cast<std::size_t>(m.material)];
+        if (mat.look == Material::Look::kSplats) continue;  // kept for --export mesh only
         // A deforming surface was meshed where the particles are: no pose to apply.
         renderer_->drawMesh(m.handle, m.surface == render::SurfaceKind::kRigidRestMesh ? model : Mat4f::Identity(),
                             mat.color, static_cast<float>(mat.roughness));
@@ -270,10 +277,11 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
       model.topRightCorner<3, 1>() = at.cast<float>();
       renderer_->drawMesh(colliderHandles_[c], model, {0.6f, 0.62f, 0.66f});
     }
+    if (!splats.empty()) renderer_->drawSplats(splats);  // last: blended over everything opaque
     img = renderer_->endFrame();
   }
   ++frames_;
-  if (img.meshSamples == 0 && !meshes_.empty() && !options_.splats) framesWithNothingInView_.push_back(frames_ - 1);
+  if (img.meshSamples == 0 && trianglesLastFrame_ > 0 && splats.empty()) framesWithNothingInView_.push_back(frames_ - 1);
   ScopedPass t(profile_, passPng_);
   render::writePng(path, img);
 }

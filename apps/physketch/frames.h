@@ -40,7 +40,10 @@ struct FrameOptions {
 // behind the others and get no splat.
 constexpr double kSplatSigma = 0.5;
 constexpr float kSplatOpacity = 0.9f;
-std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing);
+// splatLookOnly: only the materials whose look is splats (`look=splats`), for a frame that draws
+// the others as surfaces.
+std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing,
+                                          bool splatLookOnly = false);
 
 // The fluid surfaces meshed in a run (anisotropic kernels): how far their enclosed volume was
 // from the fluid's (particles * spacing^3).
@@ -117,6 +120,7 @@ class FrameWriter {
   int meshedBodies_ = 0;                         // bodies 0..meshedBodies_-1 have been meshed once
   Profile profile_;
   int passMesh_, passDraw_, passPng_, passSplats_ = -1;
+  bool anySplatLook_ = false;  // some material's look is splats
   std::size_t trianglesLastFrame_ = 0, trianglesMeshed_ = 0;
   int frames_ = 0;
   std::vector<int> framesWithNothingInView_;

@@ -75,7 +75,7 @@ int main(int argc, char** argv) {
   runCmd->add_option("--look", run.look,
                      "How bodies are drawn: 'meshes' (surfaces: rigid rest meshes, deforming cells, rope tubes, fluid kernels) or "
                      "'splats' (one Gaussian splat per particle, stretched by the solver's deformation gradient F under "
-                     "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md)")
+                     "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md). Per material: look=splats in its record")
       ->capture_default_str()
       ->check(CLI::IsMember({"meshes", "splats"}));
   runCmd->add_option("--guard", run.guard,

@@ -657,6 +657,25 @@ TEST(Cli, ASceneWithSolverMpmRunsElasticSandAndFluidToFramesAndReport) {
   EXPECT_NE(splatPasses.find("render.splats"), std::string::npos) << splatPasses;
   EXPECT_EQ(splatPasses.find("render.mesh"), std::string::npos) << splatPasses;
   EXPECT_TRUE(fs::exists(dir / "s" / "frames" / "frame_0001.png"));
+  // look=splats on one material: that material is drawn as splats and not meshed (no fluid surface
+  // for the water), the others stay surfaces (the mesh pass runs, triangles drawn); --export mesh
+  // still meshes it (the meshes are written for other tools).
+  std::string perMaterial = mats;
+  perMaterial.replace(perMaterial.find("bulk_modulus=2e4"), 16, "bulk_modulus=2e4 look=splats");
+  writeText(dir / "l.scene", head + "solver mpm\nsubsteps auto\n" + perMaterial);
+  r = runCli("run '" + (dir / "l.scene").string() + "' -q --frames 2 --out '" + (dir / "l").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto lookReport = readJson(dir / "l" / "report.json");
+  std::string lookPasses;
+  for (const auto& e : lookReport["passes"]) lookPasses += e["pass"].get<std::string>() + " ";
+  EXPECT_NE(lookPasses.find("render.splats"), std::string::npos) << lookPasses;
+  EXPECT_NE(lookPasses.find("render.mesh"), std::string::npos) << lookPasses;
+  EXPECT_FALSE(lookReport["frames"].contains("fluid_surface")) << lookReport["frames"];
+  EXPECT_GT(lookReport["frames"]["triangles"].get<long>(), 0);
+  EXPECT_LT(lookReport["frames"]["triangles"].get<long>(), rep["frames"]["triangles"].get<long>());  // the water's are gone
+  r = runCli("run '" + (dir / "l.scene").string() + "' -q --frames 2 --export mesh --out '" + (dir / "le").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(readJson(dir / "le" / "report.json")["frames"]["fluid_surface"]["surfaces"], 2);
   r = runCli("run '" + (dir / "m.scene").string() + "' -q --fluid-surface blobs --out '" + (dir / "b").string() + "'", dir);
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("--fluid-surface"), std::string::npos) << r.err;
