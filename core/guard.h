@@ -74,6 +74,63 @@ class GuardLog {
   long counts_[8] = {};
 };
 
+// One solver step under the guard, the control flow both solvers share. The solver supplies:
+//   run(checkEachPass) -> bool   the step's passes; with checks after every pass it stops at the
+//                                first failing one, sets `guard` and returns false
+//   endChecks() -> GuardRecord   the end-of-step checks (unvalidated steps)
+//   wholeChecks() -> GuardRecord checks with no pass of their own (energy), after a validated step
+//   restore()                    back to the state at the step's start
+//   settle()                     what follows the passes (carried bodies come to rest at targets)
+//   finish()                     completes a tripped record: material, "Fix:" advice
+// An unvalidated step that trips is replayed with a check after every pass, so the record names
+// the pass (the step is deterministic). Under policy warn a recoverable record is logged, the step
+// completed unchecked (rerun from its start when the guard stopped it midway) and the function
+// returns true; a kind already logged is only counted (no replay). Returns whether the run goes on.
+template <class Run, class EndChecks, class WholeChecks, class Restore, class Settle, class Finish>
+bool guardedStep(GuardRecord& guard, GuardLog& log, bool validate, bool checks, std::int64_t step, Run run,
+                 EndChecks endChecks, WholeChecks wholeChecks, Restore restore, Settle settle, Finish finish) {
+  bool midway = false;  // the guard stopped the step at a pass: the state is not the step's end
+  const auto trip = [&](GuardRecord r) {
+    r.pass = "guard";
+    r.step = step;
+    guard = std::move(r);
+  };
+  if (validate) {
+    if (!run(true)) midway = true;
+    else if (checks) {
+      GuardRecord r = wholeChecks();
+      if (r.tripped()) trip(std::move(r));
+    }
+  } else {
+    run(false);
+    GuardRecord r = checks ? endChecks() : GuardRecord{};
+    if (r.tripped()) {
+      if (log.warns(r.kind) && log.seen(r.kind)) {
+        trip(std::move(r));  // logged in full before: counted, the step kept as it ran
+      } else {
+        restore();
+        midway = true;
+        if (run(true)) {  // cannot happen for a deterministic step; keep the first record
+          trip(std::move(r));
+          midway = false;
+        }
+      }
+    }
+  }
+  settle();
+  if (!guard.tripped()) return true;
+  finish();
+  if (!log.warns(guard.kind)) return false;
+  log.add(guard);
+  guard = GuardRecord{};
+  if (midway) {
+    restore();
+    run(false);
+    settle();
+  }
+  return true;
+}
+
 // The checks every solver shares, over particles in id order; returns the first
 // offender (kind kNone if all pass) with its particle, body, stroke, value, bound and
 // hint filled in (pass, step, substep and material are the caller's to fill).

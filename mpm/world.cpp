@@ -694,85 +694,41 @@ bool MpmWorld::step() {
     energy_.arm(energySums(parts_, params_.gravity), params_.gravity, params_.spacing);
   // The start of the step: to replay it with a check after every pass (naming the pass that
   // produced a bad value), and under policy warn to complete a step the guard stopped midway.
-  const bool warn = guardLog_.policy == GuardPolicy::kWarn;
   std::optional<Saved> start;
-  if (!validate_ || warn)
+  if (!validate_ || guardLog_.policy == GuardPolicy::kWarn)
     start = Saved{parts_.x, parts_.y, parts_.z, parts_.vx, parts_.vy, parts_.vz, plastic_, C_, F_, atEdge_, firstEdge_};
   const auto restoreStart = [&] {
     parts_.x = start->x, parts_.y = start->y, parts_.z = start->z;
     parts_.vx = start->vx, parts_.vy = start->vy, parts_.vz = start->vz;
     plastic_ = start->plastic, C_ = start->C, F_ = start->F, atEdge_ = start->atEdge, firstEdge_ = start->firstEdge;
   };
-  bool midway = false;  // the guard stopped the step at a pass: the state is not the step's end
-  if (validate_) {
-    if (runStep(substeps, true)) {
-      if (work_[std::size_t(MpmPass::kGuard)]) {
-        GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
-        if (r.tripped()) {
-          r.pass = "guard";
-          r.step = steps_;
-          guard_ = std::move(r);
-        }
-      }
-    } else {
-      midway = true;
-    }
-  } else {
-    runStep(substeps, false);
-    if (work_[std::size_t(MpmPass::kGuard)]) {
-      GuardRecord r;
-      {
-        ScopedPass t(profile_, MpmPass::kGuard);
-        r = check(MpmPass::kGuard);
-        if (!r.tripped()) r = checkEnergy();
-      }
-      if (r.tripped()) {
-        r.pass = "guard";
-        r.step = steps_;
-        if (guardLog_.warns(r.kind) && guardLog_.seen(r.kind)) {
-          guard_ = std::move(r);  // logged in full before: counted, the step kept as it ran
-        } else {
-          // Replay the step from its start with a check after every pass, so the record names
-          // the pass that produced the bad value (the step is deterministic).
-          restoreStart();
-          midway = true;
-          if (runStep(substeps, true)) {
-            guard_ = std::move(r);
-            midway = false;
-          }
-        }
-      }
-    }
-  }
+  const bool checks = work_[std::size_t(MpmPass::kGuard)];
+  const auto endChecks = [&] {
+    ScopedPass t(profile_, MpmPass::kGuard);
+    GuardRecord r = check(MpmPass::kGuard);
+    if (!r.tripped()) r = checkEnergy();
+    return r;
+  };
   // A carried body moved to its target: it stays there until given the next one.
-  const auto stopCarried = [&] {
+  const auto settle = [&] {
     for (std::size_t b = 0; b < members_.size(); ++b)
       if (mode_[b] == BodyMode::kKinematic)
         for (std::int32_t i : members_[b]) parts_.vx[std::size_t(i)] = parts_.vy[std::size_t(i)] = parts_.vz[std::size_t(i)] = 0.0f;
   };
-  stopCarried();
-  if (!guard_.tripped()) {
-    ++steps_;
-    return true;
-  }
-  if (guard_.particle >= 0)
-    guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
-  KnobState knobs;
-  knobs.substeps = substeps;
-  knobs.substepsAuto = params_.substeps == 0;
-  knobs.cfl = params_.waveCourant;
-  guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
-  if (!guardLog_.warns(guard_.kind)) return false;
-  // Policy warn: log the event, finish the step as an unchecked one would, and go on; the
-  // energy watch takes a new reference at the next step.
-  guardLog_.add(guard_);
-  guard_ = GuardRecord{};
-  if (midway) {
-    restoreStart();
-    runStep(substeps, false);
-    stopCarried();
-  }
-  energy_.reset();
+  const auto finish = [&] {
+    if (guard_.particle >= 0)
+      guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+    KnobState knobs;
+    knobs.substeps = substeps;
+    knobs.substepsAuto = params_.substeps == 0;
+    knobs.cfl = params_.waveCourant;
+    guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
+  };
+  const long logged = guardLog_.total();
+  if (!guardedStep(guard_, guardLog_, validate_, checks, steps_, [&](bool check) { return runStep(substeps, check); },
+                   endChecks, [&] { return checkEnergy(); }, restoreStart, settle, finish))
+    return false;
+  if (guardLog_.total() != logged) energy_.reset();  // warned: a new reference next step
   ++steps_;
   return true;
 }

@@ -898,11 +898,10 @@ bool PbdWorld::step() {
     energy_.arm(energyNow(), params_.gravity, 2.0 * params_.particleRadius);
   // The start of the step: to replay it with a check after every pass (naming the pass that
   // produced a bad value), and under policy warn to complete a step the guard stopped midway.
-  const bool warn = guardLog_.policy == GuardPolicy::kWarn;
   std::vector<Motion> start;
   std::vector<GroundCache> cacheStart;
   std::vector<float> looseStart;  // particle-level state (only when there is some)
-  if (!validate_ || warn) {
+  if (!validate_ || guardLog_.policy == GuardPolicy::kWarn) {
     start = motion_;  // per body: cheap to keep
     cacheStart = groundCache_;
     if (!loose_.empty()) {
@@ -918,72 +917,33 @@ bool PbdWorld::step() {
     for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
       for (std::int32_t i : loose_) (*a)[std::size_t(i)] = looseStart[at++];
   };
-  bool midway = false;  // the guard stopped the step at a pass: the state is not the step's end
-  if (validate_) {
-    if (runStep(true)) {
-      if (work_[std::size_t(PbdPass::kGuard)]) {
-        GuardRecord r = checkEnergy();  // a whole-step check: no pass of its own to name
-        if (r.tripped()) {
-          r.pass = "guard";
-          r.step = steps_;
-          guard_ = std::move(r);
-        }
-      }
-    } else {
-      midway = true;
-    }
-  } else {
-    runStep(false);
-    if (work_[std::size_t(PbdPass::kGuard)]) {
-      GuardRecord r;
-      {
-        ScopedPass t(profile_, PbdPass::kGuard);
-        // write_particles summarized what it wrote: scan particle by particle only when
-        // that summary is suspect (or nothing was written this step).
-        if (writtenSuspect_ || !work_[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
-        if (!r.tripped() && work_[std::size_t(PbdPass::kDensity)]) r = checkCompression();
-        if (!r.tripped()) r = checkEnergy();
-      }
-      if (r.tripped()) {
-        r.pass = "guard";
-        r.step = steps_;
-        if (guardLog_.warns(r.kind) && guardLog_.seen(r.kind)) {
-          guard_ = std::move(r);  // logged in full before: counted, the step kept as it ran
-        } else {
-          // Replay the step from its start with a check after every pass, so the record
-          // names the pass that produced the bad value (the step is deterministic).
-          restoreStart();
-          midway = true;
-          if (runStep(true)) {  // cannot happen for a deterministic step; keep the first record
-            guard_ = std::move(r);
-            midway = false;
-          }
-        }
-      }
-    }
-  }
-  for (Motion& mo : motion_) mo.kinStart = mo.kinTarget = mo.c;
-  if (!guard_.tripped()) {
-    ++steps_;
-    return true;
-  }
-  if (guard_.particle >= 0)
-    guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
-  KnobState knobs;
-  knobs.substeps = params_.substeps;
-  knobs.iterations = params_.iterations;
-  guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
-  if (!guardLog_.warns(guard_.kind)) return false;
-  // Policy warn: log the event, finish the step as an unchecked one would, and go on; the
-  // energy watch takes a new reference at the next step.
-  guardLog_.add(guard_);
-  guard_ = GuardRecord{};
-  if (midway) {
-    restoreStart();
-    runStep(false);
+  const bool checks = work_[std::size_t(PbdPass::kGuard)];
+  const auto endChecks = [&] {
+    ScopedPass t(profile_, PbdPass::kGuard);
+    GuardRecord r;
+    // write_particles summarized what it wrote: scan particle by particle only when that summary
+    // is suspect (or nothing was written this step).
+    if (writtenSuspect_ || !work_[std::size_t(PbdPass::kWriteParticles)]) r = checkImplied(false, true);
+    if (!r.tripped() && work_[std::size_t(PbdPass::kDensity)]) r = checkCompression();
+    if (!r.tripped()) r = checkEnergy();
+    return r;
+  };
+  const auto settle = [&] {
     for (Motion& mo : motion_) mo.kinStart = mo.kinTarget = mo.c;
-  }
-  energy_.reset();
+  };
+  const auto finish = [&] {
+    if (guard_.particle >= 0)
+      guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+    KnobState knobs;
+    knobs.substeps = params_.substeps;
+    knobs.iterations = params_.iterations;
+    guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
+  };
+  const long logged = guardLog_.total();
+  if (!guardedStep(guard_, guardLog_, validate_, checks, steps_, [&](bool check) { return runStep(check); }, endChecks,
+                   [&] { return checkEnergy(); }, restoreStart, settle, finish))
+    return false;
+  if (guardLog_.total() != logged) energy_.reset();  // warned: a new reference next step
   ++steps_;
   return true;
 }
