@@ -180,7 +180,6 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   reach_.push_back(0.0);
   restBox_.emplace_back();
   mode_.push_back(mode);
-  groundCache_.emplace_back();
   return members_.size() - 1;
 }
 
@@ -448,7 +447,7 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
   for (int b : changed) {
     const auto bb = static_cast<std::size_t>(b);
     auto& mem = members_[bb];
-    groundCache_[bb].valid = false;
+    if (bb < groundCache_.size()) groundCache_[bb].valid = false;
     mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
     if (!isRigid(bb)) {
       // Particle-level bodies keep their index: their constraints to removed particles go
@@ -1118,6 +1117,8 @@ void PbdWorld::kinematic(int substep) {
 // change) less than half of it. A particle that still ends below is found by the next
 // full scan.
 void PbdWorld::findContacts() {
+  // Per body, made when the pass first runs: a scene without dynamic rigid bodies holds none.
+  if (groundCache_.size() < members_.size()) groundCache_.resize(members_.size());
   BodyPlaneContacts& bp = contacts_.bodyPlane;
   contacts_.clearFound();
   const double r = params_.particleRadius, h = params_.dt / params_.substeps;

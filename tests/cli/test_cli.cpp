@@ -380,6 +380,10 @@ TEST(Cli, PlansOfRepresentativeScenesListOnlyTheirPasses) {
     EXPECT_FALSE(on(fluid, pass)) << pass << ": " << fluid.at(pass);
   }
   EXPECT_NE(fluid.at("(footer)").find("no meshes and no GL context"), std::string::npos) << fluid.at("(footer)");
+  for (const auto& [pass, line] : fluid)  // nothing is allocated for a pass that is off
+    if (line.rfind("off", 0) == 0) {
+      EXPECT_NE(line.find("nothing allocated"), std::string::npos) << pass << ": " << line;
+    }
   const auto mixed = planOf("mpm", "solver mpm\nsubsteps auto\nmaterial water fluid\nmaterial grit sand\n",
                             "primitive box water 0  0 0.2 0  0.1 0.1 0.1\nprimitive box grit 0  0.2 0.2 0  0.1 0.1 0.1\n");
   ASSERT_TRUE(on(mixed, "plasticity"));
