@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/guard.h"
+#include "core/node_field.h"
 #include "core/particles.h"
 #include "core/profile.h"
 
@@ -65,6 +66,12 @@ class Solver {
   // F), for looks that follow it (Gaussian splats: Sigma = F Sigma0 F^T). Identity where the
   // solver keeps none (pbd); solver mpm: F, and J^(1/3) I for fluids (which keep only J).
   virtual Mat3 deformationGradient(std::int32_t /*i*/) const { return Mat3::Identity(); }
+  // The mass (kg) the solver's background grid receives from particles `ids` alone, as its own
+  // particle-to-grid transfer weighs it (MPM: quadratic B-splines on nodes dx apart), on a box of
+  // nodes that reaches one node past every stencil (so the field is 0 on the box's faces). The
+  // renderer meshes a level of it (PhyVR §4.1: grid mass over particle mass is a particle count,
+  // thresholded). Returns false, leaving `out` alone, where the solver has no grid (pbd).
+  virtual bool massField(const std::vector<std::int32_t>& /*ids*/, NodeField& /*out*/) const { return false; }
 
   // --- changes while the simulation runs (sketching after play) -------------
   // Appends a body made of `particles` (positions at rest, stroke and material set; a rope's

@@ -547,8 +547,6 @@ std::vector<PlanEntry> MpmWorld::plan() const {
   return out;
 }
 
-// The Tait equation of state of a fluid particle (plasticity.h, fluidKirchhoff): p = K / gamma
-// (J^-gamma - 1), J the particle's volume ratio.
 Mat3 MpmWorld::deformationGradient(std::int32_t i) const {
   const auto k = std::size_t(i);
   if (k >= parts_.size()) throw RuntimeError("MpmWorld::deformationGradient: no particle " + std::to_string(i));
@@ -557,6 +555,60 @@ Mat3 MpmWorld::deformationGradient(std::int32_t i) const {
   return F_[k].cast<double>();
 }
 
+// P2G's mass transfer alone, for the given particles: the same stencil (stencilBase, the same
+// float offsets and B-spline weights), summed in double in the order of `ids` on a dense box one
+// node wider than the stencils on every side.
+bool MpmWorld::massField(const std::vector<std::int32_t>& ids, NodeField& out) const {
+  using detail::bsplineWeights;
+  using detail::stencilBase;
+  const float inv = float(1.0 / dx_);
+  const float o[3] = {float(origin_.x()), float(origin_.y()), float(origin_.z())};
+  const float* pos[3] = {parts_.x.data(), parts_.y.data(), parts_.z.data()};
+  std::vector<std::int32_t> live;
+  live.reserve(ids.size());
+  Vec3i lo = Vec3i::Constant(n_), hi = Vec3i::Constant(-1);
+  for (std::int32_t i : ids) {
+    if (i < 0 || std::size_t(i) >= parts_.size() || !alive(i)) continue;
+    live.push_back(i);
+    for (int a = 0; a < 3; ++a) {
+      const int base = stencilBase(pos[a][std::size_t(i)] - o[a], inv, n_);
+      lo[a] = std::min(lo[a], base);
+      hi[a] = std::max(hi[a], base + 2);
+    }
+  }
+  out.spacing = dx_;
+  out.values.clear();
+  if (live.empty()) {
+    out.origin = origin_;
+    out.size = Vec3i::Zero();
+    return true;
+  }
+  lo -= Vec3i::Ones();  // a node of zero mass past every stencil: the field closes inside the box
+  hi += Vec3i::Ones();
+  out.origin = origin_ + dx_ * lo.cast<double>();
+  out.size = hi - lo + Vec3i::Ones();
+  std::vector<double> acc(std::size_t(out.size.prod()), 0.0);
+  for (std::int32_t i : live) {
+    const auto k = std::size_t(i);
+    int base[3];
+    float w[3][3];
+    for (int a = 0; a < 3; ++a) {
+      base[a] = stencilBase(pos[a][k] - o[a], inv, n_);
+      bsplineWeights((pos[a][k] - o[a]) * inv - float(base[a]), w[a]);
+      base[a] -= lo[a];
+    }
+    const double m = parts_.mass[k];
+    for (int c = 0; c < 3; ++c)
+      for (int b = 0; b < 3; ++b)
+        for (int a = 0; a < 3; ++a)
+          acc[out.index(base[0] + a, base[1] + b, base[2] + c)] += m * double(w[0][a] * w[1][b] * w[2][c]);
+  }
+  out.values.assign(acc.begin(), acc.end());
+  return true;
+}
+
+// The Tait equation of state of a fluid particle (plasticity.h, fluidKirchhoff): p = K / gamma
+// (J^-gamma - 1), J the particle's volume ratio.
 double MpmWorld::pressure(std::int32_t i) const {
   const auto k = std::size_t(i);
   if (k >= parts_.size() || !phase::dynamic(parts_.phase[k])) return std::numeric_limits<double>::quiet_NaN();

@@ -137,6 +137,7 @@ class MpmWorld final : public Solver {
   // sand's accumulated plastic strain q, fluid J).
   Eigen::Matrix3f deformation(std::int32_t i) const { return F_.at(std::size_t(i)); }
   Mat3 deformationGradient(std::int32_t i) const override;
+  bool massField(const std::vector<std::int32_t>& ids, NodeField& out) const override;
   float plasticScalar(std::int32_t i) const { return plastic_.at(std::size_t(i)); }
   // Particle-substeps at the domain's edge (within 1.5 dx of one of its six walls, where the
   // wall's nodes act on the particle; a ground the scene sets is not an edge), since the start,

@@ -373,6 +373,81 @@ TriangleMesh meshKernelField(const FluidKernels& kernels, double voxelSize, doub
   return meshLevelSet(grid.get(), 0.0, iso);
 }
 
+TriangleMesh meshNodeField(const NodeField& field, double iso, double targetVolume, double* levelUsed) {
+  if (!(field.spacing > 0.0) || !std::isfinite(field.spacing)) throw RuntimeError("meshNodeField: spacing must be finite and > 0 m");
+  if (!(iso > 0.0) || !std::isfinite(iso)) throw RuntimeError("meshNodeField: iso must be finite and > 0");
+  if (!field.origin.allFinite()) throw RuntimeError("meshNodeField: origin must be finite");
+  if ((field.size.array() < 0).any() || field.values.size() != std::size_t(field.size.cast<std::int64_t>().prod()))
+    throw RuntimeError("meshNodeField: " + std::to_string(field.values.size()) + " values for a box of " +
+                       std::to_string(field.size.x()) + " x " + std::to_string(field.size.y()) + " x " +
+                       std::to_string(field.size.z()) + " nodes");
+  if (!(targetVolume >= 0.0) || !std::isfinite(targetVolume)) throw RuntimeError("meshNodeField: target volume must be finite and >= 0");
+  if (levelUsed) *levelUsed = iso;
+  if (field.values.empty()) return {};
+  initializeOpenVdbOnce();
+  // Stored as it is (background 0, inside above iso), as meshKernelField's field.
+  openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
+  openvdb::FloatGrid::Accessor acc = grid->getAccessor();
+  for (int k = 0; k < field.size.z(); ++k)
+    for (int j = 0; j < field.size.y(); ++j)
+      for (int i = 0; i < field.size.x(); ++i) {
+        const float v = field.at(i, j, k);
+        if (!std::isfinite(v))
+          throw RuntimeError("meshNodeField: value at node (" + std::to_string(i) + ", " + std::to_string(j) + ", " +
+                             std::to_string(k) + ") is not finite");
+        if (v != 0.0f) acc.setValue(openvdb::Coord(i, j, k), v);
+      }
+  openvdb::math::Transform::Ptr xf = openvdb::math::Transform::createLinearTransform(field.spacing);
+  xf->postTranslate(openvdb::Vec3d(field.origin.x(), field.origin.y(), field.origin.z()));
+  grid->setTransform(xf);
+  TriangleMesh mesh = meshLevelSet(grid.get(), 0.0, iso);
+  if (targetVolume <= 0.0) return mesh;
+  // The enclosed volume falls as the level rises: regula falsi (Illinois) on V(level) - target
+  // within [iso / 2, 3 iso / 2], from iso, to 0.2 % of the target or 6 more meshings.
+  const auto miss = [&](const TriangleMesh& m) { return enclosedVolume(m) - targetVolume; };
+  double a = iso, fa = miss(mesh);
+  const double tolerance = 2e-3 * targetVolume;
+  if (std::abs(fa) <= tolerance) return mesh;
+  double b = fa > 0.0 ? 1.5 * iso : 0.5 * iso;
+  TriangleMesh mb = meshLevelSet(grid.get(), 0.0, b);
+  double fb = miss(mb);
+  if ((fa > 0.0) == (fb > 0.0)) {  // the range's end still misses: the nearer one
+    if (levelUsed) *levelUsed = std::abs(fb) < std::abs(fa) ? b : a;
+    return std::abs(fb) < std::abs(fa) ? mb : mesh;
+  }
+  double best = b, fbest = fb;
+  TriangleMesh mbest = std::move(mb);
+  if (std::abs(fa) < std::abs(fb)) {
+    best = a;
+    fbest = fa;
+    mbest = std::move(mesh);
+  }
+  int side = 0;
+  for (int it = 0; it < 6 && std::abs(fbest) > tolerance; ++it) {
+    const double c = (a * fb - b * fa) / (fb - fa);
+    TriangleMesh mc = meshLevelSet(grid.get(), 0.0, c);
+    const double fc = miss(mc);
+    if ((fc > 0.0) == (fb > 0.0)) {
+      b = c;
+      fb = fc;
+      if (side == -1) fa *= 0.5;
+      side = -1;
+    } else {
+      a = c;
+      fa = fc;
+      if (side == 1) fb *= 0.5;
+      side = 1;
+    }
+    if (std::abs(fc) < std::abs(fbest)) {
+      best = c;
+      fbest = fc;
+      mbest = std::move(mc);
+    }
+  }
+  if (levelUsed) *levelUsed = best;
+  return mbest;
+}
+
 std::vector<std::uint64_t> writeLevelSetsVdb(const std::string& path, const std::vector<LevelSetGrid>& grids,
                                              double voxelSize, const Vec3& origin) {
   initializeOpenVdbOnce();

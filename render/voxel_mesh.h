@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/math.h"
+#include "core/node_field.h"
 #include "render/mesh.h"
 
 namespace physketch::render {
@@ -85,6 +86,21 @@ std::vector<Vec3i> particleCells(const std::vector<Vec3>& positions, double part
 // splats) can leave it out. Throws RuntimeError as particleCells does.
 std::vector<std::uint8_t> enclosedParticles(const std::vector<Vec3>& positions, double particleSpacing,
                                             const Vec3& latticeOrigin);
+
+// The surface where a node field (an MPM grid's mass, Solver::massField) crosses `iso`, inside
+// where it is larger: PhyVR §4.1's surface of elastic objects straight from the grid mass (a
+// node's mass over a particle's is a particle count; nodes above the threshold are inside). The
+// field is copied into an OpenVDB grid of the field's spacing (nodes at voxel centres) and meshed
+// by volumeToMesh (adaptivity 0), whose edge interpolation places the surface between nodes. A
+// field that is below iso on its box's faces gives a closed mesh, normals outward. A pure
+// function of the values: the same field gives the same mesh for any thread count.
+// With targetVolume > 0 (m^3), the level is moved within [iso / 2, 3 iso / 2] until the mesh
+// encloses that volume (to 0.2 %, by regula falsi on the meshed volume: a few more meshings):
+// the half-density level rounds a body's edges and corners off, which loses volume (7 % of a
+// cube 10 nodes wide). levelUsed, when given, receives the level meshed.
+// Throws RuntimeError for a spacing or iso that is not finite and > 0, a non-finite origin or
+// value, a negative target, or a value count that is not size.prod().
+TriangleMesh meshNodeField(const NodeField& field, double iso, double targetVolume = 0.0, double* levelUsed = nullptr);
 
 // One level set of a .vdb file: the union of `cells` (centres at origin + h * cell) turned into a
 // signed distance field exactly as meshVoxels / meshParticles do before meshing, placed in the

@@ -25,6 +25,7 @@ struct RunOptions {
   bool video = false;            // DIR/video.mp4 through ffmpeg, when it is on PATH
   int smooth = 0;                // smoothing iterations of deforming surfaces (ParticleMeshOptions)
   std::string fluidSurface = "kernels";  // --fluid-surface: kernels (meshFluid) or cells (meshParticles)
+  std::string solidSurface = "cells";    // --solid-surface: cells (meshParticles) or grid (the solver's grid mass)
   double meshResolution = 0.5;   // --mesh-resolution: fluid surfaces' field voxels, in particle spacings
   std::string look = "meshes";           // --look: meshes or splats (Gaussian splats per particle)
   std::string guard = "stop";    // --guard: stop at the first trip, or warn and go on (recoverable kinds)

@@ -40,7 +40,31 @@ render::TriangleMesh ropeTube(const std::vector<std::int32_t>& ids, const std::v
   return render::tubeMesh(chains, 0.5 * spacing);
 }
 
+// The surface of particles `ids` from the solver's grid mass (--solid-surface grid): the level
+// of half their rest density, moved until the mesh encloses their current volume (spacing^3 times
+// the sum of det F: what the material occupies now). `volume` receives that volume.
+render::TriangleMesh gridMassMesh(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing,
+                                  double* volume = nullptr) {
+  NodeField field;
+  if (!solver.massField(ids, field))
+    throw RuntimeError(std::string("--solid-surface grid: solver ") + solver.name() + " has no grid mass");
+  double mass = 0.0, sumJ = 0.0;
+  for (std::int32_t i : ids) {
+    mass += double(solver.particles().mass[static_cast<std::size_t>(i)]);
+    sumJ += solver.deformationGradient(i).determinant();
+  }
+  const double target = sumJ * spacing * spacing * spacing;
+  if (volume) *volume = target;
+  if (!(mass > 0.0) || !(target > 0.0)) return {};  // nothing to threshold
+  return render::meshNodeField(field, gridMassLevel(mass, ids.size(), spacing, field.spacing), target);
+}
+
 }  // namespace
+
+double gridMassLevel(double mass, std::size_t count, double particleSpacing, double spacing) {
+  const double density = mass / (double(count) * std::pow(particleSpacing, 3));
+  return 0.5 * density * std::pow(spacing, 3);
+}
 
 std::string frameName(int index) { return frameStem(index) + ".png"; }
 
@@ -111,7 +135,8 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
     // A material drawn as splats needs no surface, unless --export mesh keeps the meshes.
     if (scene_.materials[static_cast<std::size_t>(material)].look == Material::Look::kSplats && !options_.keepMeshes)
       continue;
-    const render::SurfaceKind surface = surfaceOf(scene_.materials[static_cast<std::size_t>(material)].kind, scene_.solver);
+    const MaterialKind kind = scene_.materials[static_cast<std::size_t>(material)].kind;
+    const render::SurfaceKind surface = surfaceOf(kind, scene_.solver);
     render::TriangleMesh mesh;
     if (surface == render::SurfaceKind::kRigidRestMesh) {
       std::vector<Vec3i> cells;
@@ -124,12 +149,12 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       render::FluidSurfaceOptions fo;
       fo.voxelFraction = options_.fluidVoxelFraction;
       mesh = render::meshFluid(positionsOf(p, ids), mapping_.voxelSize(), fo, &report);
-      if (report.particleVolume > 0.0) {
-        const double change = (report.meshVolume - report.particleVolume) / report.particleVolume;
-        ++fluid_.meshes;
-        fluid_.maxAbsChange = std::max(fluid_.maxAbsChange, std::abs(change));
-        fluid_.sumChange += change;
-      }
+      if (report.particleVolume > 0.0) fluid_.add((report.meshVolume - report.particleVolume) / report.particleVolume);
+    } else if (options_.solidGrid && kind != MaterialKind::kRope && kind != MaterialKind::kCloth) {
+      deforming = true;
+      double volume = 0.0;
+      mesh = gridMassMesh(solver, ids, mapping_.voxelSize(), &volume);
+      if (volume > 0.0) grid_.add((render::enclosedVolume(mesh) - volume) / volume);
     } else {
       deforming = true;
       render::ParticleMeshOptions opt;
@@ -137,16 +162,12 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       opt.smoothIterations = options_.smoothIterations;
       render::SmoothingReport report;
       const std::vector<Vec3> pos = positionsOf(p, ids);
-      if (scene_.materials[static_cast<std::size_t>(material)].kind == MaterialKind::kRope) {
+      if (kind == MaterialKind::kRope) {
         mesh = ropeTube(ids, pos, mapping_.voxelSize());
       } else {
         mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
       }
-      if (options_.smoothIterations > 0 && report.volumeBefore > 0.0) {
-        ++smoothing_.meshes;
-        smoothing_.maxAbsChange = std::max(smoothing_.maxAbsChange, std::abs(report.relativeChange()));
-        smoothing_.sumChange += report.relativeChange();
-      }
+      if (options_.smoothIterations > 0 && report.volumeBefore > 0.0) smoothing_.add(report.relativeChange());
     }
     trianglesMeshed_ += mesh.triangleCount();
     int handle = -1;
@@ -363,7 +384,7 @@ render::ParticleCloud particleCloud(const SceneDesc& scene, const Solver& solver
 
 void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping, const Solver& solver,
                      const std::vector<Vec3i>& restCells, const std::vector<std::string>& bodyNames,
-                     int smoothIterations, bool fluidCells, const std::string& path) {
+                     const FrameOptions& surfaces, const std::string& path) {
   const Vec3 origin = mapping.toWorld(Vec3i(0, 0, 0));
   const ParticleArrays& p = solver.particles();
   std::vector<render::LevelSetGrid> grids;
@@ -380,17 +401,21 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
       if (surface == render::SurfaceKind::kRigidRestMesh) {
         for (std::int32_t i : ids) g.cells.push_back(restCells[static_cast<std::size_t>(i)]);
         g.model = model.cast<double>();
-      } else if (surface == render::SurfaceKind::kFluid && !fluidCells) {
+      } else if (surface == render::SurfaceKind::kFluid && !surfaces.fluidCells) {
         // The surface the frames show (meshFluid), turned into a level set.
-        g.mesh = render::meshFluid(positionsOf(p, ids), mapping.voxelSize());
+        render::FluidSurfaceOptions fo;
+        fo.voxelFraction = surfaces.fluidVoxelFraction;
+        g.mesh = render::meshFluid(positionsOf(p, ids), mapping.voxelSize(), fo);
       } else if (mat.kind == MaterialKind::kRope) {
         g.mesh = ropeTube(ids, positionsOf(p, ids), mapping.voxelSize());  // the frames' tube
+      } else if (surfaces.solidGrid && mat.kind != MaterialKind::kCloth) {
+        g.mesh = gridMassMesh(solver, ids, mapping.voxelSize());  // the frames' grid-mass surface
       } else {
         // As meshParticles does it (render/voxel_mesh.h).
         const render::ParticleMeshOptions defaults;
         g.cells = render::particleCells(positionsOf(p, ids), mapping.voxelSize(), origin);
         g.surface = defaults.surface;
-        g.smoothIterations = smoothIterations;
+        g.smoothIterations = surfaces.smoothIterations;
       }
       grids.push_back(std::move(g));
     }

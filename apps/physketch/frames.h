@@ -3,6 +3,8 @@
 // that a cut or a new stroke reshapes is re-meshed once, at the next frame.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <map>
 #include <memory>
 #include <string>
@@ -29,7 +31,15 @@ struct FrameOptions {
   // --mesh-resolution: the edge of a fluid surface's field voxels, in particle spacings
   // (render::FluidSurfaceOptions::voxelFraction), 0.1..1
   double fluidVoxelFraction = render::FluidSurfaceOptions{}.voxelFraction;
+  // --solid-surface grid: deforming solids (not fluids, ropes or cloth) meshed from the solver's
+  // grid mass (Solver::massField, PhyVR §4.1) at half the particles' rest density; needs a solver
+  // with a grid (mpm). Off: from the particles' cells (meshParticles).
+  bool solidGrid = false;
 };
+
+// Half the mass a node of `spacing` holds inside material of the particles' rest density
+// (mass / (count * particleSpacing^3)): the level meshNodeField meshes a grid-mass field at.
+double gridMassLevel(double mass, std::size_t count, double particleSpacing, double spacing);
 
 // Gaussian splats of every body's particles (--look splats), in body and id order: centre at the
 // particle, covariance sigma0^2 F F^T with sigma0 = kSplatSigma spacings and F the solver's
@@ -45,19 +55,19 @@ constexpr float kSplatOpacity = 0.9f;
 std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing,
                                           bool splatLookOnly = false);
 
-// The fluid surfaces meshed in a run (anisotropic kernels): how far their enclosed volume was
-// from the fluid's (particles * spacing^3).
-struct FluidSurfaceStats {
+// How far the surfaces of one kind meshed in a run were from a reference volume: a fluid's
+// kernels and a grid-mass surface from the particles' (particles * spacing^3), the smoothing
+// knob from the surface before it.
+struct VolumeChangeStats {
   long meshes = 0;
-  double maxAbsChange = 0.0;  // largest |mesh - particles| / particles
-  double sumChange = 0.0;     // sum of (mesh - particles) / particles, for the mean
-};
-
-// The volume change the smoothing knob made, over every deforming surface meshed in a run.
-struct SmoothingStats {
-  long meshes = 0;              // surfaces smoothed
-  double maxAbsChange = 0.0;    // largest |after - before| / before
-  double sumChange = 0.0;       // sum of (after - before) / before, for the mean
+  double maxAbsChange = 0.0;  // largest |mesh - reference| / reference
+  double sumChange = 0.0;     // sum of (mesh - reference) / reference, for the mean
+  void add(double change) {
+    ++meshes;
+    maxAbsChange = std::max(maxAbsChange, std::abs(change));
+    sumChange += change;
+  }
+  double mean() const { return meshes > 0 ? sumChange / double(meshes) : 0.0; }
 };
 
 class FrameWriter {
@@ -83,8 +93,9 @@ class FrameWriter {
   // Every body's surfaces as last meshed by update() (needs options.keepMeshes), in world
   // coordinates: rigid meshes moved by the body's pose. Body index -> one mesh per material.
   std::map<int, std::vector<render::MaterialMesh>> worldMeshes(const Solver& solver) const;
-  const SmoothingStats& smoothing() const { return smoothing_; }
-  const FluidSurfaceStats& fluidSurfaces() const { return fluid_; }
+  const VolumeChangeStats& smoothing() const { return smoothing_; }
+  const VolumeChangeStats& fluidSurfaces() const { return fluid_; }
+  const VolumeChangeStats& gridSurfaces() const { return grid_; }
 
   const Profile& profile() const { return profile_; }
   std::size_t trianglesLastFrame() const { return trianglesLastFrame_; }
@@ -112,8 +123,7 @@ class FrameWriter {
   const sketch::GridMapping& mapping_;
   FrameOptions options_;
   std::unique_ptr<render::OffscreenRenderer> renderer_;  // null without options.draw
-  SmoothingStats smoothing_;
-  FluidSurfaceStats fluid_;
+  VolumeChangeStats smoothing_, fluid_, grid_;
   std::map<int, std::vector<MeshPart>> meshes_;  // body -> one mesh per material
   std::vector<int> dirty_;                       // bodies to (re)mesh before the next frame
   std::vector<int> deforming_;                   // bodies with a deforming surface: re-meshed every frame
@@ -135,11 +145,12 @@ std::vector<render::ExportMaterial> exportMaterials(const SceneDesc& scene);
 // Every live particle with its velocity, body, material and stroke (--export particles).
 render::ParticleCloud particleCloud(const SceneDesc& scene, const Solver& solver);
 // The level set of every body's surface, one grid per body and material, as meshed for frames
-// (rigid: rest cells moved by the pose; deforming: the particles' cells, smoothed), written to
-// one .vdb file (--export vdb). Grids are named "NNNN_NAME/MATERIAL".
+// (rigid: rest cells moved by the pose; deforming: the particles' cells, smoothed, or the grid-mass
+// surface; fluids: their kernel surface), as `surfaces` says, written to one .vdb file (--export
+// vdb). Grids are named "NNNN_NAME/MATERIAL".
 void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping, const Solver& solver,
                      const std::vector<Vec3i>& restCells, const std::vector<std::string>& bodyNames,
-                     int smoothIterations, bool fluidCells, const std::string& path);
+                     const FrameOptions& surfaces, const std::string& path);
 // How a material's particles become a surface under a solver: kinds it runs as rigid keep their rest mesh and move
 // with the body pose; kinds it runs as fluid are meshed from anisotropic kernels each frame; every other kind deforms
 // and is meshed from its particles' cells each frame.

@@ -67,6 +67,12 @@ int main(int argc, char** argv) {
                      "particles' cells, as deforming solids, cheaper and blocky)")
       ->capture_default_str()
       ->check(CLI::IsMember({"kernels", "cells"}));
+  runCmd->add_option("--solid-surface", run.solidSurface,
+                     "How deforming solids are meshed: 'cells' (the particles' lattice cells; --smooth smooths them) or "
+                     "'grid' (solver mpm only: a level of the MPM grid's mass, PhyVR 4.1: smooth and cheap, rounder "
+                     "at edges, one grid spacing of detail; report.json: frames.solid_surface)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"cells", "grid"}));
   runCmd->add_option("--mesh-resolution", run.meshResolution,
                      "Voxel edge of a fluid surface's kernel field, in particle spacings: smaller is finer and slower "
                      "(docs/accuracy.md, \"Meshing knobs\"; the study knob mesh_resolution)")

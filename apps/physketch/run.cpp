@@ -84,6 +84,17 @@ std::vector<std::string> bodyNames(const sketch::Sketch& sk, const Solver& solve
   return names;
 }
 
+// How the run's surfaces are meshed (--smooth, --fluid-surface, --mesh-resolution, --solid-surface, --look).
+FrameOptions surfaceOptions(const RunOptions& opt) {
+  FrameOptions fo;
+  fo.smoothIterations = opt.smooth;
+  fo.fluidCells = opt.fluidSurface == "cells";
+  fo.fluidVoxelFraction = opt.meshResolution;
+  fo.solidGrid = opt.solidSurface == "grid";
+  fo.splats = opt.look == "splats";
+  return fo;
+}
+
 // --export: this frame's files.
 void writeExports(const RunOptions& opt, const Prepared& p, const Solver& solver, const FrameWriter* frameWriter,
                   const std::vector<Vec3i>& restCells, const fs::path& out, int frame) {
@@ -96,7 +107,7 @@ void writeExports(const RunOptions& opt, const Prepared& p, const Solver& solver
   }
   if (opt.exportParticles) render::writeParticlesPly((out / "particles" / (stem + ".ply")).string(), particleCloud(p.scene, solver));
   if (opt.exportVdb)
-    exportLevelSets(p.scene, p.sketch->mapping, solver, restCells, names, opt.smooth, opt.fluidSurface == "cells", (out / "vdb" / (stem + ".vdb")).string());
+    exportLevelSets(p.scene, p.sketch->mapping, solver, restCells, names, surfaceOptions(opt), (out / "vdb" / (stem + ".vdb")).string());
 }
 
 // --video: DIR/video.mp4, or why there is none (said once on stderr; the run goes on).
@@ -335,6 +346,13 @@ void printBudget(const BudgetChoice& b, double budgetMs, int threads) {
                  budgetMs);
 }
 
+// A run's tally of surface volume changes, as report.json states it.
+json volumeChangeJson(const VolumeChangeStats& st) {
+  return {{"surfaces", st.meshes},
+          {"max_volume_change_percent", 100.0 * st.maxAbsChange},
+          {"mean_volume_change_percent", 100.0 * st.mean()}};
+}
+
 json budgetJson(const BudgetChoice& b, double budgetMs, double measuredMs, double measuredError) {
   json tried = json::array();
   for (const BudgetCandidate& c : b.candidates)
@@ -397,19 +415,20 @@ int runScene(const RunOptions& opt) {
     const int frames = opt.frames > 0 ? opt.frames : sc.frameCount();
     solver->setValidate(opt.validate);
     solver->setGuardPolicy(opt.guard == "warn" ? GuardPolicy::kWarn : GuardPolicy::kStop);
+    if (opt.solidSurface == "grid" && sc.solver != SolverKind::kMpm) {
+      throw InputError(sc.path, 0, "solver",
+                       "--solid-surface grid meshes the MPM grid's mass, and this scene runs solver pbd, which has no "
+                       "grid (use 'solver mpm' or --solid-surface cells)");
+    }
     if (opt.video && !sc.writeFrames) {
       throw InputError(sc.path, 0, "output", "--video needs frames, and this scene's 'output' record leaves them out");
     }
     // Rendering set-up before anything is written: an EGL failure leaves no output folder.
     std::unique_ptr<FrameWriter> frameWriter;
     if (sc.writeFrames || opt.exportMesh) {
-      FrameOptions fo;
+      FrameOptions fo = surfaceOptions(opt);
       fo.draw = sc.writeFrames;
       fo.keepMeshes = opt.exportMesh;
-      fo.smoothIterations = opt.smooth;
-      fo.fluidCells = opt.fluidSurface == "cells";
-      fo.fluidVoxelFraction = opt.meshResolution;
-      fo.splats = opt.look == "splats";
       frameWriter = std::make_unique<FrameWriter>(sc, sk.mapping, fo);
       frameWriter->setColliders(p.colliderMeshes);
     }
@@ -503,18 +522,16 @@ int runScene(const RunOptions& opt) {
                      {"folder", sc.writeFrames ? (out / "frames").string() : ""},
                      {"device", frameWriter ? frameWriter->device() : ""}};
     if (opt.smooth > 0) {
-      const SmoothingStats& st = frameWriter ? frameWriter->smoothing() : SmoothingStats{};
-      rep["frames"]["smoothing"] = {{"iterations", opt.smooth},
-                                    {"surfaces", st.meshes},
-                                    {"max_volume_change_percent", 100.0 * st.maxAbsChange},
-                                    {"mean_volume_change_percent", st.meshes ? 100.0 * st.sumChange / double(st.meshes) : 0.0}};
+      rep["frames"]["smoothing"] = volumeChangeJson(frameWriter ? frameWriter->smoothing() : VolumeChangeStats{});
+      rep["frames"]["smoothing"]["iterations"] = opt.smooth;
     }
     if (frameWriter && frameWriter->fluidSurfaces().meshes > 0) {
-      const FluidSurfaceStats& st = frameWriter->fluidSurfaces();
-      rep["frames"]["fluid_surface"] = {{"method", opt.fluidSurface},
-                                        {"surfaces", st.meshes},
-                                        {"max_volume_change_percent", 100.0 * st.maxAbsChange},
-                                        {"mean_volume_change_percent", 100.0 * st.sumChange / double(st.meshes)}};
+      rep["frames"]["fluid_surface"] = volumeChangeJson(frameWriter->fluidSurfaces());
+      rep["frames"]["fluid_surface"]["method"] = opt.fluidSurface;
+    }
+    if (frameWriter && frameWriter->gridSurfaces().meshes > 0) {
+      rep["frames"]["solid_surface"] = volumeChangeJson(frameWriter->gridSurfaces());
+      rep["frames"]["solid_surface"]["method"] = opt.solidSurface;
     }
     if (!video.is_null()) rep["frames"]["video"] = video;
     if (budget) {

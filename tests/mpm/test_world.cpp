@@ -331,6 +331,51 @@ TEST(MpmWorld, RemovedParticlesLeaveTheirBodyAndTheSimulation) {
   EXPECT_EQ(w.mode(0), BodyMode::kEmpty);
 }
 
+// The grid mass field of one body (Solver::massField, for the renderer): P2G's mass transfer of
+// that body alone. Oracles: mass conservation (the B-spline weights of a particle sum to 1, so
+// the nodes hold the body's mass; float weights: 1e-6 relative), the closed-form interior value
+// (particles at dx/2 on each axis: sum over particles of a 1-D B-spline sampled every half node
+// is exactly 2 at any offset, so a node deep inside holds 8 m_p = rho dx^3; 1e-5 relative for the
+// float weights), zero on the box's faces (the field closes inside its box), and a removed
+// particle's mass leaving the field.
+TEST(MpmWorld, TheMassFieldOfABodyHoldsItsMassAndRhoDx3Inside) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.305, 0.405, 0.305), 12, 10, 8, h, 0);
+  addBox(p, bodies, Vec3(0.425, 0.405, 0.305), 4, 4, 4, h, 0);  // next to body 0's x+ side
+  MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));
+  const auto& ids = w.bodyParticles(0);
+  const double mp = w.particles().mass[0];
+  NodeField f;
+  ASSERT_TRUE(w.massField(ids, f));
+  EXPECT_DOUBLE_EQ(f.spacing, w.dx());
+  double sum = 0.0, faces = 0.0, peak = 0.0;
+  for (int k = 0; k < f.size.z(); ++k)
+    for (int j = 0; j < f.size.y(); ++j)
+      for (int i = 0; i < f.size.x(); ++i) {
+        sum += f.at(i, j, k);
+        peak = std::max(peak, double(f.at(i, j, k)));
+        if (i == 0 || j == 0 || k == 0 || i == f.size.x() - 1 || j == f.size.y() - 1 || k == f.size.z() - 1)
+          faces += f.at(i, j, k);
+      }
+  EXPECT_NEAR(sum, mp * double(ids.size()), 1e-6 * mp * double(ids.size()));  // body 1's mass left out
+  EXPECT_EQ(faces, 0.0);
+  // Body 0 spans 0.305-0.415, 0.405-0.495, 0.305-0.375: the node at (0.36, 0.46, 0.34) has all
+  // its stencil's reach (1.5 dx = 0.03) inside it.
+  const Vec3 node = (Vec3(0.36, 0.46, 0.34) - f.origin) / f.spacing;
+  const Vec3i n = node.array().round().cast<int>();
+  ASSERT_LT((node - n.cast<double>()).norm(), 1e-6);
+  EXPECT_NEAR(f.at(n.x(), n.y(), n.z()), 8.0 * mp, 1e-5 * 8.0 * mp);
+  EXPECT_NEAR(peak, 8.0 * mp, 1e-5 * 8.0 * mp);
+  w.removeParticles({ids[0], ids[1], ids[2]});
+  NodeField g;
+  ASSERT_TRUE(w.massField(w.bodyParticles(0), g));
+  double after = 0.0;
+  for (float v : g.values) after += v;
+  EXPECT_NEAR(sum - after, 3.0 * mp, 1e-5 * sum);
+}
+
 // Sketching after play through the Solver interface: a body being drawn is held (kinematic:
 // it does not fall), a carried body moves to its target in one step, a released one keeps
 // the velocity of its carried motion, and vel=/spin= come back as the body's velocity and
