@@ -303,6 +303,8 @@ layout(location = 1) in vec3 aCovA;    // covariance xx, xy, xz (m^2)
 layout(location = 2) in vec3 aCovB;    // yy, yz, zz
 layout(location = 3) in vec3 aColor;   // linear RGB
 layout(location = 4) in float aOpacity;
+layout(location = 5) in vec3 aNormal;  // unit, or zero: unlit
+uniform vec3 uLightDir;                // unit, towards the light
 uniform mat4 uView;
 uniform mat4 uProj;
 uniform vec2 uViewport;                // pixels
@@ -315,7 +317,8 @@ void main() {
   float z = -t.z;                      // depth in front of the eye
   vOffset = vec2(0.0);
   vConic = vec3(0.0);
-  vColor = aColor;
+  // The mesh shader's ambient + diffuse, once per splat.
+  vColor = dot(aNormal, aNormal) > 0.25 ? aColor * (0.25 + 0.75 * max(dot(aNormal, uLightDir), 0.0)) : aColor;
   vOpacity = 0.0;
   if (z <= 0.0) {                      // behind the eye: a degenerate quad, drawn nowhere
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
@@ -546,7 +549,8 @@ struct OffscreenRenderer::Impl {
   GLint uLightMvp = -1;
   GLint uTop = -1, uBottom = -1, uHeight = -1, uBgInvGamma = -1;
   GLuint splatProgram = 0, splatVao = 0, splatVbo = 0;
-  GLint uSplatView = -1, uSplatProj = -1, uSplatViewport = -1, uSplatInvGamma = -1;
+  GLint uSplatView = -1, uSplatProj = -1, uSplatViewport = -1, uSplatInvGamma = -1, uSplatLightDir = -1;
+  static constexpr int kSplatFloats = 16;
   std::vector<Splat> splats;  // the frame's, in call order
   std::vector<GpuMesh> meshes;  // indexed by handle; freed slots stay (handles are never reused)
   GpuMesh ground;  // unit square [-1, 1]^2 in x/z at y = 0, normal +y
@@ -734,15 +738,16 @@ void OffscreenRenderer::Impl::createProgram() {
   uSplatProj = glGetUniformLocation(splatProgram, "uProj");
   uSplatViewport = glGetUniformLocation(splatProgram, "uViewport");
   uSplatInvGamma = glGetUniformLocation(splatProgram, "uInvGamma");
-  // 13 floats per splat, one instance each: centre, covariance (6), colour, opacity.
+  uSplatLightDir = glGetUniformLocation(splatProgram, "uLightDir");
+  // 16 floats per splat, one instance each: centre, covariance (6), colour, opacity, normal.
   glGenVertexArrays(1, &splatVao);
   glGenBuffers(1, &splatVbo);
   glBindVertexArray(splatVao);
   glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
-  const GLsizei splatStride = 13 * sizeof(float);
-  const int sizes[5] = {3, 3, 3, 3, 1};
+  const GLsizei splatStride = kSplatFloats * sizeof(float);
+  const int sizes[6] = {3, 3, 3, 3, 1, 3};
   std::size_t offset = 0;
-  for (GLuint loc = 0; loc < 5; ++loc) {
+  for (GLuint loc = 0; loc < 6; ++loc) {
     glEnableVertexAttribArray(loc);
     glVertexAttribPointer(loc, sizes[loc], GL_FLOAT, GL_FALSE, splatStride, reinterpret_cast<const void*>(offset));
     glVertexAttribDivisor(loc, 1);
@@ -1079,6 +1084,8 @@ void OffscreenRenderer::drawSplats(const std::vector<Splat>& splats) {
     for (float v : s.color)
       if (!(v >= 0.0f && v <= 1.0f)) fail("colour must be in [0, 1]");
     if (!(s.opacity > 0.0f && s.opacity <= 1.0f)) fail("opacity must be in (0, 1]");
+    const float n2 = s.normal.squaredNorm();
+    if (!(n2 == 0.0f || std::abs(n2 - 1.0f) < 1e-3f)) fail("normal must be zero (unlit) or unit");
   }
   r.splats.insert(r.splats.end(), splats.begin(), splats.end());
 }
@@ -1095,13 +1102,14 @@ void OffscreenRenderer::Impl::drawSplats() {
   }
   std::sort(order.begin(), order.end());
   std::vector<float> data;
-  data.reserve(13 * n);
+  data.reserve(kSplatFloats * n);
   for (const auto& o : order) {
     const Splat& s = splats[o.second];
     const Eigen::Matrix3f& c = s.covariance;
-    const float row[13] = {s.centre.x(), s.centre.y(), s.centre.z(), c(0, 0), c(0, 1), c(0, 2), c(1, 1), c(1, 2),
-                           c(2, 2), s.color[0], s.color[1], s.color[2], s.opacity};
-    data.insert(data.end(), row, row + 13);
+    const float row[kSplatFloats] = {s.centre.x(), s.centre.y(), s.centre.z(), c(0, 0),    c(0, 1),    c(0, 2),
+                                     c(1, 1),      c(1, 2),      c(2, 2),      s.color[0], s.color[1], s.color[2],
+                                     s.opacity,    s.normal.x(), s.normal.y(), s.normal.z()};
+    data.insert(data.end(), row, row + kSplatFloats);
   }
   glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
   glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(data.size() * sizeof(float)), data.data(), GL_STREAM_DRAW);
@@ -1111,6 +1119,8 @@ void OffscreenRenderer::Impl::drawSplats() {
   glUniformMatrix4fv(uSplatProj, 1, GL_FALSE, proj.data());
   glUniform2f(uSplatViewport, static_cast<float>(width), static_cast<float>(height));
   glUniform1f(uSplatInvGamma, 1.0f / kGamma);
+  const Vec3f light = lightDirection().cast<float>();
+  glUniform3f(uSplatLightDir, light.x(), light.y(), light.z());
   glEnable(GL_DEPTH_TEST);
   glDepthMask(GL_FALSE);
   glEnable(GL_BLEND);

@@ -128,6 +128,9 @@ struct Splat {
   Eigen::Matrix3f covariance = Eigen::Matrix3f::Identity();  // m^2, symmetric positive definite
   Color color{1.0f, 1.0f, 1.0f};                        // linear RGB in [0, 1]
   float opacity = 1.0f;                                 // (0, 1]
+  // Unit outward normal of the surface the splat is part of: lit as a mesh's diffuse part,
+  // colour x (0.25 + 0.75 max(n . light, 0)) (no specular, no shadow). Zero: unlit, the colour as given.
+  Vec3f normal = Vec3f::Zero();
 };
 
 // One EGL context per renderer, rendering into its own framebuffer. The EGL display is the
@@ -184,12 +187,12 @@ class OffscreenRenderer {
   // Lighting: one directional light (lightDirection()) plus ambient, normalised Blinn-Phong with
   // `roughness` (see kDefaultRoughness), shadows from Looks, gamma 2.2.
   void drawMesh(int handle, const Mat4f& model, const Color& color, float roughness = kDefaultRoughness);
-  // Draws Gaussian splats (unlit: their colour as given) after every mesh of the frame: sorted
+  // Draws Gaussian splats (lit by their normal, or unlit without one) after every mesh of the frame: sorted
   // back to front by their centre's depth (ties by order of the calls, then of the list) and
   // blended over what is drawn ("over", premultiplied alpha); meshes and the ground hide them
   // (depth test) but they do not hide each other or cast shadows. Not counted in meshSamples.
   // Throws RuntimeError for a non-finite centre, a covariance that is not symmetric positive
-  // definite, or a colour or opacity out of range, naming the splat.
+  // definite, a colour or opacity out of range, or a normal neither zero nor unit, naming the splat.
   void drawSplats(const std::vector<Splat>& splats);
   // Draws the frame (shadow map, background, ground, meshes), resolves the samples and reads it
   // back (top row first), with Image::meshSamples.

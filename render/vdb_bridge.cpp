@@ -208,29 +208,66 @@ std::vector<Vec3i> particleCells(const std::vector<Vec3>& positions, double part
   return cells;
 }
 
+namespace {
+
+// The lattice cells particles mark (particleCells), as a sorted set. Cells within +-2^20 of the
+// origin pack into 63 bits; farther ones are left out (a particle 2^20 spacings out is spray, not
+// part of a body's surface).
+class CellSet {
+ public:
+  explicit CellSet(const std::vector<Vec3i>& cells) {
+    keys_.reserve(cells.size());
+    for (const Vec3i& c : cells)
+      if (inRange(c)) keys_.push_back(key(c));
+    std::sort(keys_.begin(), keys_.end());
+  }
+  static bool inRange(const Vec3i& c) { return c.cwiseAbs().maxCoeff() < kReach - 1; }
+  bool has(const Vec3i& c) const { return std::binary_search(keys_.begin(), keys_.end(), key(c)); }
+
+ private:
+  static constexpr int kReach = 1 << 20;
+  static std::uint64_t key(const Vec3i& c) {
+    return (std::uint64_t(c.x() + kReach) << 42) | (std::uint64_t(c.y() + kReach) << 21) | std::uint64_t(c.z() + kReach);
+  }
+  std::vector<std::uint64_t> keys_;
+};
+
+}  // namespace
+
 std::vector<std::uint8_t> enclosedParticles(const std::vector<Vec3>& positions, double particleSpacing,
                                             const Vec3& latticeOrigin) {
   const std::vector<Vec3i> cells = particleCells(positions, particleSpacing, latticeOrigin);
-  // Cells within +-2^20 of the origin pack into 63 bits; farther ones are never enclosed (a
-  // particle 2^20 spacings out is spray, not the inside of a body).
-  constexpr int kReach = 1 << 20;
-  auto inRange = [](const Vec3i& c) { return c.cwiseAbs().maxCoeff() < kReach - 1; };
-  auto key = [](const Vec3i& c) {
-    return (std::uint64_t(c.x() + kReach) << 42) | (std::uint64_t(c.y() + kReach) << 21) | std::uint64_t(c.z() + kReach);
-  };
-  std::vector<std::uint64_t> occupied;
-  occupied.reserve(cells.size());
-  for (const Vec3i& c : cells)
-    if (inRange(c)) occupied.push_back(key(c));
-  std::sort(occupied.begin(), occupied.end());
-  auto has = [&](const Vec3i& c) { return std::binary_search(occupied.begin(), occupied.end(), key(c)); };
+  const CellSet set(cells);
   std::vector<std::uint8_t> enclosed(cells.size(), 0);
   for (std::size_t i = 0; i < cells.size(); ++i) {
     const Vec3i& c = cells[i];
-    enclosed[i] = inRange(c) && has(c + Vec3i(1, 0, 0)) && has(c - Vec3i(1, 0, 0)) && has(c + Vec3i(0, 1, 0)) &&
-                  has(c - Vec3i(0, 1, 0)) && has(c + Vec3i(0, 0, 1)) && has(c - Vec3i(0, 0, 1));
+    enclosed[i] = CellSet::inRange(c) && set.has(c + Vec3i(1, 0, 0)) && set.has(c - Vec3i(1, 0, 0)) &&
+                  set.has(c + Vec3i(0, 1, 0)) && set.has(c - Vec3i(0, 1, 0)) && set.has(c + Vec3i(0, 0, 1)) &&
+                  set.has(c - Vec3i(0, 0, 1));
   }
   return enclosed;
+}
+
+std::vector<Vec3> particleNormals(const std::vector<Vec3>& positions, double particleSpacing, const Vec3& latticeOrigin,
+                                  const std::vector<std::uint8_t>* skip) {
+  const std::vector<Vec3i> cells = particleCells(positions, particleSpacing, latticeOrigin);
+  if (skip && skip->size() != cells.size()) throw RuntimeError("particleNormals: skip and positions differ in length");
+  const CellSet set(cells);
+  std::vector<Vec3> normals(cells.size(), Vec3::Zero());
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    if (!CellSet::inRange(cells[i]) || (skip && (*skip)[i])) continue;
+    Vec3 sum = Vec3::Zero();
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const Vec3i d(dx, dy, dz);
+          if (d == Vec3i::Zero() || set.has(cells[i] + d)) continue;
+          sum += d.cast<double>().normalized();
+        }
+    // Empty cells all round cancel (a lone particle, a sheet one cell thick): no direction.
+    if (sum.norm() > 1e-6) normals[i] = sum.normalized();
+  }
+  return normals;
 }
 
 TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSpacing,

@@ -102,6 +102,14 @@ std::vector<std::uint8_t> enclosedParticles(const std::vector<Vec3>& positions, 
 // value, a negative target, or a value count that is not size.prod().
 TriangleMesh meshNodeField(const NodeField& field, double iso, double targetVolume = 0.0, double* levelUsed = nullptr);
 
+// Per particle, the direction out of the particles' surface there: the normalised sum of the unit
+// directions to the empty cells among its 26 neighbour cells (cells as particleCells marks them).
+// Zero where no neighbour cell is empty (inside) or the empty ones cancel (a lone particle, a
+// sheet one cell thick), and for the particles `skip` marks (not computed). For lit splats.
+// Throws RuntimeError as particleCells does, or for a skip list of another length.
+std::vector<Vec3> particleNormals(const std::vector<Vec3>& positions, double particleSpacing, const Vec3& latticeOrigin,
+                                  const std::vector<std::uint8_t>* skip = nullptr);
+
 // One level set of a .vdb file: the union of `cells` (centres at origin + h * cell) turned into a
 // signed distance field exactly as meshVoxels / meshParticles do before meshing, placed in the
 // world by `model` (a rigid body's pose, rest -> world; identity for a deforming surface, whose

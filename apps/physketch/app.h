@@ -27,6 +27,7 @@ struct RunOptions {
   std::string fluidSurface = "kernels";  // --fluid-surface: kernels (meshFluid) or cells (meshParticles)
   std::string solidSurface = "cells";    // --solid-surface: cells (meshParticles) or grid (the solver's grid mass)
   double meshResolution = 0.5;   // --mesh-resolution: fluid surfaces' field voxels, in particle spacings
+  int splatDetail = 1;                   // --splat-detail: splats per particle along each axis (1..4)
   std::string look = "meshes";           // --look: meshes or splats (Gaussian splats per particle)
   std::string guard = "stop";    // --guard: stop at the first trip, or warn and go on (recoverable kinds)
   double budgetMs = 0.0;         // --budget: solver ms per frame to fit (0: the scene's settings)

@@ -201,28 +201,47 @@ void FrameWriter::update(const Solver& solver, const std::vector<Vec3i>& restCel
   dirty_.clear();
 }
 
-std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing, bool splatLookOnly) {
+std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing, bool splatLookOnly,
+                                          int detail) {
+  if (detail < 1 || detail > kMaxSplatDetail)
+    throw RuntimeError("particleSplats: detail " + std::to_string(detail) + " is outside 1.." + std::to_string(kMaxSplatDetail));
   const ParticleArrays& p = solver.particles();
   const double sigma0 = kSplatSigma * spacing;
+  // A particle's appearance particles: detail^3 offsets on a lattice of spacing / detail across
+  // its cell, in the rest frame (mapped by G below).
+  std::vector<Vec3> offsets;
+  const double step = spacing / detail, mid = 0.5 * (detail - 1);
+  for (int c = 0; c < detail; ++c)
+    for (int b = 0; b < detail; ++b)
+      for (int a = 0; a < detail; ++a) offsets.push_back(step * Vec3(a - mid, b - mid, c - mid));
   std::vector<render::Splat> out;
+  render::Splat s;
+  s.opacity = kSplatOpacity;
+  // A particle at x whose rest neighbourhood G maps to the current one: its splats at x + G o,
+  // covariance (sigma0 / detail)^2 G G^T.
+  const auto emit = [&](const Vec3& x, const Mat3& G, const Vec3& normal) {
+    const Mat3 cov = (sigma0 / detail) * (sigma0 / detail) * G * G.transpose();
+    s.covariance = cov.cast<float>();
+    s.normal = normal.cast<float>();
+    for (const Vec3& o : offsets) {
+      s.centre = (x + G * o).cast<float>();
+      out.push_back(s);
+    }
+  };
   for (int b = 0; b < solver.bodyCount(); ++b) {
     if (solver.mode(b) == BodyMode::kEmpty) continue;
     for (const auto& [material, ids] : byMaterial(solver, b)) {
       const Material& mat = scene.materials[static_cast<std::size_t>(material)];
       if (splatLookOnly && mat.look != Material::Look::kSplats) continue;
-      render::Splat s;
       s.color = mat.color;
-      s.opacity = kSplatOpacity;
       const std::vector<Vec3> pos = positionsOf(p, ids);
       if (surfaceOf(mat.kind, scene.solver) == render::SurfaceKind::kFluid) {
         const render::FluidKernels k = render::fluidKernels(pos, spacing);
-        const double scale = sigma0 / (render::FluidSurfaceOptions{}.kernelRadius * spacing);
+        const std::vector<Vec3> normals = render::particleNormals(pos, spacing, Vec3::Zero(), &k.interior);
+        const double scale = 1.0 / (render::FluidSurfaceOptions{}.kernelRadius * spacing);
         for (std::size_t j = 0; j < ids.size(); ++j) {
           if (k.interior[j]) continue;  // deep inside: hidden behind the splats around it
-          const Mat3 axes = scale * k.inverseAxes[j].inverse();
-          s.centre = k.centre[j].cast<float>();
-          s.covariance = (axes * axes.transpose()).cast<float>();
-          out.push_back(s);
+          emit(k.centre[j], scale * k.inverseAxes[j].inverse(), normals[j]);
         }
         continue;
       }
@@ -230,15 +249,9 @@ std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& 
       // the splats around it (opacity 0.9 each) hide it, so it is not drawn (a fifth to a third of
       // a solid's particles are drawn; llvmpipe's cost is the overdraw).
       const std::vector<std::uint8_t> hidden = render::enclosedParticles(pos, spacing, Vec3::Zero());
-      for (std::size_t j = 0; j < ids.size(); ++j) {
-        if (hidden[j]) continue;
-        const std::int32_t i = ids[j];
-        const auto q = static_cast<std::size_t>(i);
-        const Mat3 F = solver.deformationGradient(i);
-        s.centre = Vec3f(p.x[q], p.y[q], p.z[q]);
-        s.covariance = (sigma0 * sigma0 * F * F.transpose()).cast<float>();
-        out.push_back(s);
-      }
+      const std::vector<Vec3> normals = render::particleNormals(pos, spacing, Vec3::Zero(), &hidden);
+      for (std::size_t j = 0; j < ids.size(); ++j)
+        if (!hidden[j]) emit(pos[j], solver.deformationGradient(ids[j]), normals[j]);
     }
   }
   return out;
@@ -251,7 +264,7 @@ void FrameWriter::write(const Solver& solver, const std::vector<Vec3i>& restCell
   std::vector<render::Splat> splats;
   if (options_.splats || anySplatLook_) {
     ScopedPass t(profile_, passSplats_);
-    splats = particleSplats(scene_, solver, mapping_.voxelSize(), /*splatLookOnly=*/!options_.splats);
+    splats = particleSplats(scene_, solver, mapping_.voxelSize(), /*splatLookOnly=*/!options_.splats, options_.splatDetail);
   }
 
   render::Image img;

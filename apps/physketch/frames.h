@@ -35,6 +35,7 @@ struct FrameOptions {
   // grid mass (Solver::massField, PhyVR §4.1) at half the particles' rest density; needs a solver
   // with a grid (mpm). Off: from the particles' cells (meshParticles).
   bool solidGrid = false;
+  int splatDetail = 1;  // --splat-detail: appearance particles per particle along each axis (particleSplats)
 };
 
 // Half the mass a node of `spacing` holds inside material of the particles' rest density
@@ -45,15 +46,22 @@ double gridMassLevel(double mass, std::size_t count, double particleSpacing, dou
 // particle, covariance sigma0^2 F F^T with sigma0 = kSplatSigma spacings and F the solver's
 // deformation gradient (PhysGaussian's Sigma' = F Sigma F^T); a fluid's splats take their
 // kernel's shape instead (render/fluid_surface.h: thin across its surface, wide along it),
-// scaled so an undeformed kernel is the same ball. Colour: the material's; opacity kSplatOpacity.
+// scaled so an undeformed kernel is the same ball. Colour: the material's; opacity kSplatOpacity;
+// normal: render::particleNormals of the group's particles (lit; zero, unlit, where it has none).
 // Particles inside a body (all six neighbour cells occupied; a fluid's deep particles) are hidden
 // behind the others and get no splat.
+// detail (--splat-detail, 1..kMaxSplatDetail): appearance particles per simulation particle along
+// each axis (VR-Doh's decoupling of the two): each drawn particle becomes detail^3 splats at
+// x + F o, o on a lattice of spacing / detail centred in its cell, each of covariance
+// (sigma0 / detail)^2 F F^T (a fluid's: its kernel's shape in place of F). Throws RuntimeError
+// for a detail out of range.
 constexpr double kSplatSigma = 0.5;
 constexpr float kSplatOpacity = 0.9f;
+constexpr int kMaxSplatDetail = 4;
 // splatLookOnly: only the materials whose look is splats (`look=splats`), for a frame that draws
 // the others as surfaces.
 std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& solver, double spacing,
-                                          bool splatLookOnly = false);
+                                          bool splatLookOnly = false, int detail = 1);
 
 // How far the surfaces of one kind meshed in a run were from a reference volume: a fluid's
 // kernels and a grid-mass surface from the particles' (particles * spacing^3), the smoothing

@@ -81,9 +81,15 @@ int main(int argc, char** argv) {
   runCmd->add_option("--look", run.look,
                      "How bodies are drawn: 'meshes' (surfaces: rigid rest meshes, deforming cells, rope tubes, fluid kernels) or "
                      "'splats' (one Gaussian splat per particle, stretched by the solver's deformation gradient F under "
-                     "mpm, by its kernel for a fluid; unlit, no shadows; docs/formats.md). Per material: look=splats in its record")
+                     "mpm, by its kernel for a fluid; lit by the surface's normal, casting no shadow; docs/formats.md). Per material: look=splats in its record")
       ->capture_default_str()
       ->check(CLI::IsMember({"meshes", "splats"}));
+  runCmd->add_option("--splat-detail", run.splatDetail,
+                     "Splats per particle along each axis (1-4): each drawn particle becomes N^3 smaller splats "
+                     "across its cell, placed and stretched by F (appearance particles finer than the simulation's, "
+                     "as VR-Doh decouples them); costs N^3 the drawing")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4));
   runCmd->add_option("--guard", run.guard,
                      "When the stability guard trips: 'stop' the run (exit 2, report.json: guard), or 'warn': log the "
                      "event and go on where the state can go on (a particle too fast or too deep, fluid compression, "

@@ -92,6 +92,7 @@ FrameOptions surfaceOptions(const RunOptions& opt) {
   fo.fluidVoxelFraction = opt.meshResolution;
   fo.solidGrid = opt.solidSurface == "grid";
   fo.splats = opt.look == "splats";
+  fo.splatDetail = opt.splatDetail;
   return fo;
 }
 

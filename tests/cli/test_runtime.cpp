@@ -307,6 +307,55 @@ TEST(Frames, SplatsFollowTheDeformationGradientAndAFluidsKernels) {
   EXPECT_LT(c(1, 1), 0.8f * c(2, 2));
 }
 
+// Lit splats: each splat's normal points out of its body. On the unstretched 8^3 cube the oracle
+// is symmetry: a particle in the middle of the top face has (0, 1, 0), a corner particle the
+// diagonal out of its three faces. Appearance particles (--splat-detail 2): each drawn particle
+// becomes 8 splats whose centres average to the particle (to float round-off) with the second
+// moment of offsets +-h/4 mapped by F (closed form: (h/4)^2 F F^T), each of covariance
+// (sigma0/2)^2 F F^T; detail 0 or 5 is an error.
+TEST(Frames, SplatsAreLitByTheirBodysNormalAndSplitIntoAppearanceParticles) {
+  SceneDesc sc;
+  Material soft;
+  soft.name = "jelly";
+  soft.kind = MaterialKind::kSoft;
+  sc.materials = {soft};
+  const double h = kMap.voxelSize(), s0 = app::kSplatSigma * h;
+  StretchingBlock cube(kMap);
+  const std::vector<render::Splat> one = app::particleSplats(sc, cube, h);
+  const ParticleArrays& p = cube.particles();
+  const auto splatOf = [&](std::size_t particle) {
+    for (const render::Splat& s : one)
+      if (s.centre == Vec3f(p.x[particle], p.y[particle], p.z[particle])) return s;
+    ADD_FAILURE() << "no splat at particle " << particle;
+    return render::Splat{};
+  };
+  const std::size_t top = (4 * 8 + 7) * 8 + 4;  // i = 4, j = 7, k = 4
+  EXPECT_LT((splatOf(top).normal - Vec3f(0.0f, 1.0f, 0.0f)).norm(), 1e-6f);
+  EXPECT_LT((splatOf(0).normal + Vec3f(1.0f, 1.0f, 1.0f).normalized()).norm(), 1e-6f);
+
+  cube.step();  // F = diag(1.5, 1, 1)
+  const std::vector<render::Splat> coarse = app::particleSplats(sc, cube, h);
+  const std::vector<render::Splat> fine = app::particleSplats(sc, cube, h, false, 2);
+  ASSERT_EQ(fine.size(), 8 * coarse.size());
+  Mat3 FFt = Mat3::Identity();
+  FFt(0, 0) = 1.5 * 1.5;
+  for (std::size_t k = 0; k < coarse.size(); ++k) {
+    Vec3 mean = Vec3::Zero();
+    Mat3 second = Mat3::Zero();
+    for (int j = 0; j < 8; ++j) mean += fine[8 * k + std::size_t(j)].centre.cast<double>() / 8.0;
+    for (int j = 0; j < 8; ++j) {
+      const Vec3 d = fine[8 * k + std::size_t(j)].centre.cast<double>() - coarse[k].centre.cast<double>();
+      second += d * d.transpose() / 8.0;
+      EXPECT_LT((fine[8 * k + std::size_t(j)].covariance.cast<double>() - 0.25 * s0 * s0 * FFt).norm(), 1e-6 * s0 * s0);
+      EXPECT_EQ(fine[8 * k + std::size_t(j)].normal, coarse[k].normal);
+    }
+    EXPECT_LT((mean - coarse[k].centre.cast<double>()).norm(), 1e-4 * h);  // float positions: 1e-5 h near 1 m
+    EXPECT_LT((second - (h / 4) * (h / 4) * FFt).norm(), 1e-5 * h * h);
+  }
+  EXPECT_THROW(app::particleSplats(sc, cube, h, false, 0), RuntimeError);
+  EXPECT_THROW(app::particleSplats(sc, cube, h, false, 5), RuntimeError);
+}
+
 TEST(Frames, ADeformingMaterialIsMeshedFromItsParticlesEveryFrameInPlace) {
   // Rigid kinds keep their rest mesh; any other kind deforms, so FrameWriter meshes it
   // from the current particles every frame, updating one GL mesh in place. A block of

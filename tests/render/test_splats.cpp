@@ -55,7 +55,7 @@ double widthAt(const Image& img, bool alongX, double level) {
   return crossing(kSize / 2, 1) - crossing(kSize / 2 - 1, -1);
 }
 
-Image renderOne(const Eigen::Matrix3f& covariance) {
+Image renderOne(const Eigen::Matrix3f& covariance, const Vec3f& normal = Vec3f::Zero()) {
   Looks looks;
   looks.samples = 1;  // one sample at each pixel's centre: the closed form holds per pixel
   looks.shadows = false;
@@ -63,6 +63,7 @@ Image renderOne(const Eigen::Matrix3f& covariance) {
   r.beginFrame(frontCamera(), Color{0.0f, 0.0f, 0.0f}, ClipRange{0.1, 10.0});
   Splat s;
   s.covariance = covariance;
+  s.normal = normal;
   r.drawSplats({s});
   return r.endFrame();
 }
@@ -119,6 +120,24 @@ TEST(Splats, AStretchedSplatFollowsItsDeformationGradient) {
   const double angle = 0.5 * std::atan2(2.0 * sxy, sxx - syy);
   std::printf("tilted: long axis at %.2f degrees (want 30)\n", angle * 180.0 / kPi);
   EXPECT_NEAR(angle, kPi / 6.0, 1.0 * kPi / 180.0);
+}
+
+// A splat with a normal is lit as a mesh's diffuse part: a white splat's centre pixel (alpha at
+// its 0.99 cap there) is 255 * 0.99 * (0.25 + 0.75 max(n . l, 0))^(1 / 2.2) on black: 252 facing
+// the light, 1/4 of the light's share (134) facing away or side-on, and 252 again without a
+// normal (unlit). Tolerance 1.5 levels: 8-bit rounding of the colour and of the blend.
+TEST(Splats, ASplatWithANormalIsLitAsAMeshsDiffusePart) {
+  const Eigen::Matrix3f sigma = Eigen::Matrix3f::Identity() * float(kSigma * kSigma);
+  const Vec3f l = lightDirection().cast<float>();
+  const Vec3f side = l.cross(Vec3f::UnitZ()).normalized();
+  const auto centre = [&](const Vec3f& n) { return double(pixelAt(renderOne(sigma, n), kSize / 2, kSize / 2)[0]); };
+  const auto expected = [](double shade) { return 255.0 * 0.99 * std::pow(shade, 1.0 / 2.2); };
+  EXPECT_NEAR(centre(l), expected(1.0), 1.5);
+  EXPECT_NEAR(centre(-l), expected(0.25), 1.5);
+  EXPECT_NEAR(centre(side), expected(0.25), 1.5);
+  const Vec3f halfway = (l + side).normalized();  // 45 degrees from the light
+  EXPECT_NEAR(centre(halfway), expected(0.25 + 0.75 * std::sqrt(0.5)), 1.5);
+  EXPECT_NEAR(centre(Vec3f::Zero()), expected(1.0), 1.5);
 }
 
 // Splats are drawn back to front over the meshes: a red splat behind a green one shows green in
@@ -180,6 +199,9 @@ TEST(Splats, BadSplatsAreClearErrors) {
   Splat dim;
   dim.opacity = 0.0f;
   EXPECT_THROW(r.drawSplats({dim}), RuntimeError);
+  Splat longNormal;
+  longNormal.normal = Vec3f(0.0f, 2.0f, 0.0f);
+  EXPECT_THROW(r.drawSplats({longNormal}), RuntimeError);
   r.endFrame();
   EXPECT_THROW(r.drawSplats({Splat{}}), RuntimeError);  // outside a frame
 }
