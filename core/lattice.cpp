@@ -1,6 +1,7 @@
 #include "core/lattice.h"
 
 #include <algorithm>
+#include <map>
 #include <numeric>
 
 namespace physketch {
@@ -101,6 +102,34 @@ std::vector<std::int32_t> componentLabels26(const std::vector<Vec3i>& cells, int
   }
   if (componentCount) *componentCount = count;
   return label;
+}
+
+std::vector<std::vector<std::int32_t>> cutPieces(const std::vector<std::int32_t>& members, const std::vector<Vec3i>& cells,
+                                                 const std::vector<std::int32_t>& design) {
+  int count = 0;
+  const std::vector<std::int32_t> label = componentLabels26(cells, &count);
+  std::vector<std::vector<std::int32_t>> comp(static_cast<std::size_t>(count));
+  for (std::size_t k = 0; k < members.size(); ++k) comp[std::size_t(label[k])].push_back(members[k]);
+  // A component lies inside one design piece (a removal never connects anything).
+  std::map<std::int32_t, int> fragmentsOf;
+  for (const auto& c : comp) ++fragmentsOf[design[std::size_t(c.front())]];
+  std::vector<std::int32_t> keep;
+  std::vector<std::vector<std::int32_t>> out(1), fragments;
+  for (auto& c : comp) {
+    if (fragmentsOf[design[std::size_t(c.front())]] == 1) keep.insert(keep.end(), c.begin(), c.end());
+    else fragments.push_back(std::move(c));
+  }
+  std::stable_sort(fragments.begin(), fragments.end(), [](const auto& a, const auto& c) {
+    return a.size() != c.size() ? a.size() > c.size() : a.front() < c.front();
+  });
+  if (keep.empty() && !fragments.empty()) {
+    keep = std::move(fragments.front());
+    fragments.erase(fragments.begin());
+  }
+  std::sort(keep.begin(), keep.end());
+  out[0] = std::move(keep);
+  for (auto& f : fragments) out.push_back(std::move(f));
+  return out;
 }
 
 }  // namespace physketch

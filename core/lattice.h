@@ -17,4 +17,14 @@ namespace physketch {
 // (O(n + box)); a box too large to allocate falls back to a sorted search (O(n log n)).
 std::vector<std::int32_t> componentLabels26(const std::vector<Vec3i>& cells, int* componentCount = nullptr);
 
+// The bodies a body that lost particles becomes (docs/formats.md, "cut"; the same rule before
+// play and after, in both solvers). members: its remaining particle ids, ascending; cells[k]:
+// member k's cell in the body's rest lattice; design[id]: per particle id, the design piece (the
+// connected part of the body when it was made) it belongs to. Design pieces still connected stay
+// together as the body; every fragment of a design piece that broke becomes a body of its own;
+// when no design piece is whole, the largest fragment keeps the body. Returns the body's new
+// members first (ascending), then the fragments, largest first (ties: smallest first id).
+std::vector<std::vector<std::int32_t>> cutPieces(const std::vector<std::int32_t>& members, const std::vector<Vec3i>& cells,
+                                                 const std::vector<std::int32_t>& design);
+
 }  // namespace physketch

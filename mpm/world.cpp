@@ -10,6 +10,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/lattice.h"
 #include "core/material_table.h"
 #include "mpm/constitutive.h"
 #include "mpm/kernels.h"
@@ -148,6 +149,7 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     mode_.push_back(BodyMode::kDynamic);
     carry_.push_back(Vec3::Zero());
     for (std::int32_t i : ids) parts_.phase[std::size_t(i)] = phase::make(b);
+    recordRestLattice(ids);
     if (br.init.fixed) setMode(b, BodyMode::kFixed);
     else applyInit(ids, br.init);
   }
@@ -302,6 +304,7 @@ int MpmWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
   members_.push_back(ids);
   mode_.push_back(BodyMode::kDynamic);
   carry_.push_back(Vec3::Zero());
+  recordRestLattice(ids);
   if (kinematic) setMode(b, BodyMode::kKinematic);
   else if (init.fixed) setMode(b, BodyMode::kFixed);
   else applyInit(ids, init);
@@ -359,6 +362,61 @@ void MpmWorld::setKinematicTarget(int body, const Vec3& centre) {
   }
 }
 
+// The cells of a new body's particles in its rest lattice (offsets from its first particle in
+// spacings, rounded: they are sketched on the lattice) and its design pieces (their
+// 26-connected components), kept for cuts.
+void MpmWorld::recordRestLattice(const std::vector<std::int32_t>& ids) {
+  restCell_.resize(parts_.size(), Vec3i::Zero());
+  design_.resize(parts_.size(), 0);
+  if (ids.empty()) return;
+  const double inv = 1.0 / params_.spacing;
+  const auto f = std::size_t(ids.front());
+  std::vector<Vec3i> cells(ids.size());
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    const auto i = std::size_t(ids[k]);
+    cells[k] = Vec3i(int(std::lround((double(parts_.x[i]) - parts_.x[f]) * inv)),
+                     int(std::lround((double(parts_.y[i]) - parts_.y[f]) * inv)),
+                     int(std::lround((double(parts_.z[i]) - parts_.z[f]) * inv)));
+    restCell_[i] = cells[k];
+  }
+  const std::vector<std::int32_t> label = componentLabels26(cells);
+  for (std::size_t k = 0; k < ids.size(); ++k) design_[std::size_t(ids[k])] = label[k];
+}
+
+// A body a removal disconnected in its rest lattice becomes several (core/lattice.h cutPieces,
+// the rule of PBD's rigid bodies and of cuts before play): the pieces that stay whole keep the
+// index, each fragment is appended as a body in the body's mode (a carried body's fragments are
+// released with the carried velocity: only the piece on the brush stays on it). Fluid bodies
+// are not split (a fluid has no shape to cut). Returns the bodies appended.
+std::vector<int> MpmWorld::splitCut(int body) {
+  const auto b = std::size_t(body);
+  auto& mem = members_[b];
+  if (mem.empty()) return {};
+  bool solid = false;
+  for (std::int32_t i : mem) solid = solid || models_[std::size_t(parts_.material[std::size_t(i)])].kind != MaterialKind::kFluid;
+  if (!solid) return {};
+  std::vector<Vec3i> cells(mem.size());
+  for (std::size_t k = 0; k < mem.size(); ++k) cells[k] = restCell_[std::size_t(mem[k])];
+  auto pieces = cutPieces(mem, cells, design_);
+  if (pieces.size() == 1) return {};
+  mem = std::move(pieces[0]);
+  const BodyMode mode = mode_[b];
+  std::vector<int> added;
+  for (std::size_t p = 1; p < pieces.size(); ++p) {
+    const int nb = static_cast<int>(members_.size());
+    for (std::int32_t i : pieces[p]) {
+      parts_.phase[std::size_t(i)] = phase::make(nb, parts_.phase[std::size_t(i)] & ~phase::kGroupMask);
+      design_[std::size_t(i)] = 0;  // a fragment is one connected piece
+    }
+    members_.push_back(std::move(pieces[p]));
+    mode_.push_back(mode);
+    carry_.push_back(carry_[b]);
+    if (mode == BodyMode::kKinematic) setMode(nb, BodyMode::kDynamic);
+    added.push_back(nb);
+  }
+  return added;
+}
+
 std::vector<int> MpmWorld::removeParticles(const std::vector<std::int32_t>& ids) {
   energy_.reset();
   std::vector<int> changed;
@@ -371,12 +429,19 @@ std::vector<int> MpmWorld::removeParticles(const std::vector<std::int32_t>& ids)
     if (b >= 0 && std::find(changed.begin(), changed.end(), b) == changed.end()) changed.push_back(b);
   }
   std::sort(changed.begin(), changed.end());
+  std::vector<int> out = changed;
   for (int b : changed) {
     auto& mem = members_[std::size_t(b)];
     mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
-    if (mem.empty()) mode_[std::size_t(b)] = BodyMode::kEmpty;
+    if (mem.empty()) {
+      mode_[std::size_t(b)] = BodyMode::kEmpty;
+      continue;
+    }
+    const std::vector<int> added = splitCut(b);
+    out.insert(out.end(), added.begin(), added.end());
   }
-  return changed;
+  std::sort(out.begin(), out.end());
+  return out;
 }
 
 // --- time step bounds --------------------------------------------------------------

@@ -109,8 +109,9 @@ class MpmWorld final : public Solver {
   void setMode(int body, BodyMode mode) override;
   void setKinematicTarget(int body, const Vec3& centre) override;
   void setVelocity(int body, const Vec3& velocity, const Vec3& angularVelocity) override;
-  // Marks the particles removed; bodies keep the rest (MPM material is not split into bodies
-  // by connectivity: a cut body stays one group). Returns the bodies that lost particles.
+  // Marks the particles removed; a body they disconnect in its rest lattice is split as
+  // Solver::removeParticles says (fluid bodies are not split). Returns the bodies changed or
+  // created, ascending.
   std::vector<int> removeParticles(const std::vector<std::int32_t>& ids) override;
 
   // The scene's mesh colliders (static or keyframed), meshes[i] for descs[i]: each becomes a
@@ -179,6 +180,8 @@ class MpmWorld final : public Solver {
   void initGrid();
   void initParticle(std::size_t i);
   void applyInit(const std::vector<std::int32_t>& ids, const BodyInit& init);
+  void recordRestLattice(const std::vector<std::int32_t>& ids);
+  std::vector<int> splitCut(int body);
   Vec3 centreOfMass(std::size_t body) const;
   std::vector<bool> work() const;
   std::string reason(MpmPass pass, bool on) const;
@@ -208,6 +211,8 @@ class MpmWorld final : public Solver {
   std::vector<float> plastic_;
   // Per body.
   std::vector<std::vector<std::int32_t>> members_;
+  std::vector<Vec3i> restCell_;          // per particle: its cell in its body's rest lattice (cuts)
+  std::vector<std::int32_t> design_;     // per particle: its design piece within its body (cuts)
   std::vector<BodyMode> mode_;
   std::vector<Vec3> carry_;  // m/s, a kinematic body's velocity this step (kept when released)
 

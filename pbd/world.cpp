@@ -375,8 +375,8 @@ void PbdWorld::recentre(std::size_t b) {
 
 // A body's particles in its rest lattice (rest offsets are whole multiples of the particle
 // spacing apart: offsets from the first member, rounded; float rounding is far below
-// half a spacing), labelled by 26-connected component.
-std::vector<std::int32_t> PbdWorld::restComponents(std::size_t b, int& count) const {
+// half a spacing).
+std::vector<Vec3i> PbdWorld::restCells(std::size_t b) const {
   const auto& mem = members_[b];
   const double inv = 1.0 / (2.0 * params_.particleRadius);
   const auto f = std::size_t(mem.front());
@@ -386,47 +386,17 @@ std::vector<std::int32_t> PbdWorld::restComponents(std::size_t b, int& count) co
     cells[k] = Vec3i(int(std::lround((double(rx_[i]) - rx_[f]) * inv)), int(std::lround((double(ry_[i]) - ry_[f]) * inv)),
                      int(std::lround((double(rz_[i]) - rz_[f]) * inv)));
   }
-  return componentLabels26(cells, &count);
+  return cells;
 }
 
-// The bodies a body with fewer particles becomes (docs/formats.md, the same rule as a cut
-// before play): its design pieces (the connected parts it had when made: a named body or
-// a mirrored stroke may have several) that are still connected stay together as the
-// body; every fragment of a design piece that broke becomes a body of its own. When no
-// design piece is whole, the largest fragment keeps the body. Returns the body's new
-// members first, then the fragments, largest first (ties: smallest first id).
+// The bodies a body with fewer particles becomes: core/lattice.h's cutPieces on its rest lattice.
 std::vector<std::vector<std::int32_t>> PbdWorld::pieces(std::size_t b) const {
-  const auto& mem = members_[b];
-  int count = 0;
-  const std::vector<std::int32_t> label = restComponents(b, count);
-  std::vector<std::vector<std::int32_t>> comp(static_cast<std::size_t>(count));
-  for (std::size_t k = 0; k < mem.size(); ++k) comp[std::size_t(label[k])].push_back(mem[k]);
-  // A component lies inside one design piece (a removal never connects anything).
-  std::map<std::int32_t, int> fragmentsOf;
-  for (const auto& c : comp) ++fragmentsOf[design_[std::size_t(c.front())]];
-  std::vector<std::int32_t> keep;
-  std::vector<std::vector<std::int32_t>> out(1), fragments;
-  for (auto& c : comp) {
-    if (fragmentsOf[design_[std::size_t(c.front())]] == 1) keep.insert(keep.end(), c.begin(), c.end());
-    else fragments.push_back(std::move(c));
-  }
-  std::stable_sort(fragments.begin(), fragments.end(), [](const auto& a, const auto& c) {
-    return a.size() != c.size() ? a.size() > c.size() : a.front() < c.front();
-  });
-  if (keep.empty()) {
-    keep = std::move(fragments.front());
-    fragments.erase(fragments.begin());
-  }
-  std::sort(keep.begin(), keep.end());
-  out[0] = std::move(keep);
-  for (auto& f : fragments) out.push_back(std::move(f));
-  return out;
+  return cutPieces(members_[b], restCells(b), design_);
 }
 
 // Labels the design pieces of a body as it is now (when it is made, or a fragment of one).
 void PbdWorld::labelDesignPieces(std::size_t b) {
-  int count = 0;
-  const std::vector<std::int32_t> label = restComponents(b, count);
+  const std::vector<std::int32_t> label = componentLabels26(restCells(b));
   const auto& mem = members_[b];
   for (std::size_t k = 0; k < mem.size(); ++k) design_[std::size_t(mem[k])] = label[k];
 }

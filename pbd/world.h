@@ -241,7 +241,7 @@ class PbdWorld final : public Solver {
   void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode, MaterialKind kind);
   void refreshMassProperties(std::size_t body);
   void recentre(std::size_t body);
-  std::vector<std::int32_t> restComponents(std::size_t body, int& count) const;
+  std::vector<Vec3i> restCells(std::size_t body) const;
   std::vector<std::vector<std::int32_t>> pieces(std::size_t body) const;
   void labelDesignPieces(std::size_t body);
 

@@ -331,6 +331,45 @@ TEST(MpmWorld, RemovedParticlesLeaveTheirBodyAndTheSimulation) {
   EXPECT_EQ(w.mode(0), BodyMode::kEmpty);
 }
 
+// A cut that disconnects a body splits it (the PBD rule, core/lattice.h cutPieces): a bar of
+// 12 x 4 x 4 particles loses its slab at x index 6; one design piece broke, so the larger part
+// (x 0-5, 96 particles) keeps body 0 and the other (x 7-11, 80) becomes body 1, its particles
+// in group 1. A carried (kinematic) body cut in two keeps the larger piece on the brush; the
+// other is released and falls. A fluid body is not split.
+TEST(MpmWorld, ACutThatDisconnectsABodySplitsItAndOnlyTheLargerPieceStaysCarried) {
+  const double h = 0.01;
+  const auto slab = [](int first) {
+    std::vector<std::int32_t> ids;
+    for (int j = 0; j < 4; ++j)
+      for (int k = 0; k < 4; ++k) ids.push_back(first + (6 * 4 + j) * 4 + k);  // addBox order: i, then j, then k
+    return ids;
+  };
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.405, 0.505, 0.405), 12, 4, 4, h, 0);
+  addBox(p, bodies, Vec3(0.405, 0.305, 0.605), 12, 4, 4, h, 1);  // water
+  MpmWorld w(p, bodies, {elastic(5e4), makeMaterial(MaterialKind::kFluid, "water")}, unitDomain(h, 0));
+  w.setMode(0, BodyMode::kKinematic);
+  EXPECT_EQ(w.removeParticles(slab(0)), (std::vector<int>{0, 2}));
+  ASSERT_EQ(w.bodyCount(), 3);
+  EXPECT_EQ(w.bodyParticles(0).size(), 96u);
+  EXPECT_EQ(w.bodyParticles(2).size(), 80u);
+  EXPECT_EQ(w.bodyParticles(0).back(), 6 * 16 - 1);  // x index 5's last particle
+  EXPECT_EQ(w.bodyParticles(2).front(), 7 * 16);
+  EXPECT_EQ(w.particles().group(std::size_t(7 * 16)), 2);
+  EXPECT_EQ(w.mode(0), BodyMode::kKinematic);
+  EXPECT_EQ(w.mode(2), BodyMode::kDynamic);
+  const float y0 = w.particles().y[0], y2 = w.particles().y[7 * 16];
+  w.setKinematicTarget(0, w.pose(0).centre);
+  for (int s = 0; s < 6; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  EXPECT_EQ(w.particles().y[0], y0);        // held on the brush
+  EXPECT_LT(w.particles().y[7 * 16], y2 - 0.005f);  // released: falls (g t^2 / 2 = 0.02 m in 0.1 s)
+  // The water bar cut the same way stays one body.
+  EXPECT_EQ(w.removeParticles(slab(192)), (std::vector<int>{1}));
+  EXPECT_EQ(w.bodyCount(), 3);
+  EXPECT_EQ(w.bodyParticles(1).size(), 176u);
+}
+
 // The grid mass field of one body (Solver::massField, for the renderer): P2G's mass transfer of
 // that body alone. Oracles: mass conservation (the B-spline weights of a particle sum to 1, so
 // the nodes hold the body's mass; float weights: 1e-6 relative), the closed-form interior value
