@@ -213,7 +213,7 @@ void MpmWorld::gridUpdate(float h) {
       } else {
         if (held_[node] == 2) {
           // The tool's own friction where it names one, else the touched material's.
-          const bool own = !hmus_.empty() && hmus_[node] == hmus_[node];
+          const bool own = !hmus_.empty() && !std::isnan(hmus_[node]);
           const float mus = own ? hmus_[node] : mixedFriction_ ? gfs_[node] / m : uniformMus_;
           const float muk = own ? hmuk_[node] : mixedFriction_ ? gfk_[node] / m : uniformMuk_;
           pushOnly(v, hx_[node], hy_[node], hz_[node], &hn_[3 * node], mus, muk);

@@ -32,7 +32,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps"},
     {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
-    {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution"},
+    {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution; soft bodies bounce at their centre of mass"},
     {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), when set"},
     {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched the ground or each other leave at e times their approach speed (Müller 2020 Eq. 34; a pair: the mean of their e)"},
@@ -755,7 +755,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
       return b;
     }
     case PbdPass::kColliderContact: return surface(contacts_.particleMesh);
-    case PbdPass::kParticleUpdate: return heldBytes(groundApproach_);
+    case PbdPass::kParticleUpdate: return heldBytes(groundApproach_) + heldBytes(softBounce_);
     case PbdPass::kWriteParticles: return heldBytes(rx_, ry_, rz_);
     default: return 0;
   }

@@ -31,7 +31,7 @@
 //                      cloth stretch and bending, attachments to bodies, tethers)
 //                      and density (PBF: Jacobi lambda and dp; solids in range take their
 //                      share, rigid bodies as an impulse, so a light body floats)
-//     particle_update  v = (p - x) / h, x = p; ground restitution
+//     particle_update  v = (p - x) / h, x = p; ground restitution; soft bodies' restitution
 //     fluid_velocity   XSPH viscosity, vorticity confinement, cohesion (when set)
 //     plasticity       soft materials with plastic_creep > 0: cluster rest shapes creep
 //
@@ -325,6 +325,25 @@ class PbdWorld final : public Solver {
   };
   std::vector<Tether> tethers_;
   std::vector<float> groundApproach_;
+  // Soft bodies that bounce (dynamic, restitution > 0): contact is resolved particle by particle,
+  // which stops the touching layer and lets shape matching average the rest, so they would not
+  // bounce; restitution acts on the body instead (Müller 2020 Eq. 34 at the centre of mass, as
+  // for rigid bodies). Per body, this substep: the centre-of-mass velocity after predict, and
+  // the contacts with the ground, static or keyframed colliders and fixed bodies (the sum of
+  // their normals, of the pair's e and of the surface's velocity, and their count). Sized to
+  // the bodies while some soft body bounces, else empty.
+  struct SoftBounce {
+    Vec3 vBefore = Vec3::Zero();
+    Vec3 nSum = Vec3::Zero(), vSurface = Vec3::Zero();
+    double eSum = 0.0;
+    int count = 0;
+  };
+  std::vector<SoftBounce> softBounce_;
+  bool bouncySoft(std::size_t b) const {
+    return kind_[b] == MaterialKind::kSoft && mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0;
+  }
+  Vec3 centreVelocity(std::size_t b) const;
+  void softBodyRestitution(double h);
   bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level
   void ensureParticleLevel();
   bool pinnedAt(std::size_t k) const { return particleLevel_ && pinned_[k]; }

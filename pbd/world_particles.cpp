@@ -487,6 +487,60 @@ void PbdWorld::predict(double h) {
   });
   distances_.resetMultipliers();
   std::fill(clusters_.lambda.begin(), clusters_.lambda.end(), 0.0f);
+  bool bouncy = false;
+  for (std::size_t b = 0; b < members_.size() && !bouncy; ++b) bouncy = bouncySoft(b);
+  if (!bouncy) {
+    std::vector<SoftBounce>().swap(softBounce_);
+    return;
+  }
+  softBounce_.assign(members_.size(), SoftBounce{});
+  for (std::size_t b = 0; b < members_.size(); ++b)
+    if (bouncySoft(b)) softBounce_[b].vBefore = centreVelocity(b);
+}
+
+// The mass-weighted mean velocity of a particle-level body's particles (serial, in id order).
+Vec3 PbdWorld::centreVelocity(std::size_t b) const {
+  Vec3 mv = Vec3::Zero();
+  double m = 0.0;
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    mv += double(parts_.mass[k]) * Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
+    m += parts_.mass[k];
+  }
+  return m > 0.0 ? Vec3(mv / m) : Vec3::Zero();
+}
+
+// Soft bodies' restitution (SoftBounce above): a body that touched something this substep
+// while its centre approached it faster than 2 g h (a resting body does not bounce) leaves at
+// e times that approach speed along the mean contact normal, relative to the surface: every
+// particle gets the same velocity change, so the body's shape is untouched. e: the pair's mean
+// with a fixed body, the body's own against the ground and colliders (which have none).
+void PbdWorld::softBodyRestitution(double h) {
+  if (softBounce_.empty()) return;
+  const double slow = 2.0 * params_.gravity.norm() * h;
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    if (!bouncySoft(b)) continue;
+    SoftBounce& sb = softBounce_[b];
+    for (std::int32_t i : members_[b]) {
+      if (groundApproach_[std::size_t(i)] == 0.0f) continue;
+      sb.nSum += Vec3::UnitY();
+      sb.eSum += restitution_[b];
+      ++sb.count;
+    }
+    if (sb.count == 0 || !(sb.nSum.norm() > 1e-9)) continue;
+    const Vec3 n = sb.nSum.normalized(), surface = sb.vSurface / sb.count;
+    const double e = sb.eSum / sb.count;
+    const double u = (sb.vBefore - surface).dot(n);
+    if (u >= -slow) continue;
+    const double dv = -e * u - (centreVelocity(b) - surface).dot(n);
+    if (dv <= 0.0) continue;
+    const Vec3f kick = (dv * n).cast<float>();
+    for (std::int32_t i : members_[b]) {
+      const auto k = std::size_t(i);
+      if (invMassP_[k] == 0.0f || pinned_[k]) continue;
+      parts_.vx[k] += kick.x(), parts_.vy[k] += kick.y(), parts_.vz[k] += kick.z();
+    }
+  }
 }
 
 void PbdWorld::kinematicParticles(std::size_t b, const Vec3& delta) {
@@ -630,6 +684,15 @@ void PbdWorld::particleContact() {
                              : double(invMassP_[j]);
     if (wi + wj <= 0.0) continue;
     const double lambda = pen / (wi + wj);
+    if (!softBounce_.empty() && rigidJ && mode_[bj] == BodyMode::kFixed) {
+      const auto bi = std::size_t(parts_.group(i));
+      if (bouncySoft(bi)) {
+        SoftBounce& sb = softBounce_[bi];
+        sb.nSum += n;
+        sb.eSum += 0.5 * (restitution_[bi] + restitution_[bj]);
+        ++sb.count;
+      }
+    }
     Vec3 newI = pi + (wi * lambda) * n;
     Vec3 newJ = pj - (wj * lambda) * n;
     // Friction: relative tangential displacement over the substep.
@@ -836,12 +899,13 @@ void PbdWorld::particleUpdate(double h) {
       }
       parts_.x[i] = px_[i], parts_.y[i] = py_[i], parts_.z[i] = pz_[i];
       const float u = groundApproach_[i];
-      if (u < -slow) {
+      if (u < -slow && (softBounce_.empty() || !bouncySoft(std::size_t(parts_.group(i))))) {
         const float e = static_cast<float>(materials_[std::size_t(parts_.material[i])].restitution);
         parts_.vy[i] = std::max(parts_.vy[i], -e * u);
       }
     }
   });
+  softBodyRestitution(h);
 }
 
 // Plastic creep (Müller et al. 2005 §4.4, in the rest offsets of each cluster): where the
@@ -1077,6 +1141,16 @@ void PbdWorld::looseColliderContact() {
     p += pen * c.normal;
     const Material& m = materials_[std::size_t(parts_.material[i])];
     const auto& fr = colliders_->collider(std::size_t(c.collider)).friction;
+    if (!softBounce_.empty()) {
+      const auto bi = std::size_t(parts_.group(i));
+      if (bouncySoft(bi)) {
+        SoftBounce& sb = softBounce_[bi];
+        sb.nSum += c.normal;
+        sb.vSurface += colliders_->surfaceVelocity(std::size_t(c.collider), c.point);
+        sb.eSum += restitution_[bi];
+        ++sb.count;
+      }
+    }
     Vec3 rel = (p - at(parts_.x, parts_.y, parts_.z, i)) - colliders_->surfaceVelocity(std::size_t(c.collider), c.point) * h;
     rel -= rel.dot(c.normal) * c.normal;
     p -= frictionCorrection(rel, pen, fr ? *fr : m.staticFriction, fr ? *fr : m.dynamicFriction);
