@@ -329,14 +329,21 @@ class PbdWorld final : public Solver {
   // which stops the touching layer and lets shape matching average the rest, so they would not
   // bounce; restitution acts on the body instead (Müller 2020 Eq. 34 at the centre of mass, as
   // for rigid bodies). Per body, this substep: the centre-of-mass velocity after predict, and
-  // the contacts with the ground, static or keyframed colliders and fixed bodies (the sum of
-  // their normals, of the pair's e and of the surface's velocity, and their count). Sized to
+  // the contacts with the ground, static or keyframed colliders, fixed bodies and one dynamic
+  // rigid body (the sum of their normals, of the pair's e and of the surface's velocity, and
+  // their count). Sized to
   // the bodies while some soft body bounces, else empty.
+  // A dynamic rigid body touched is the pair's other side (partner; -2 when several were
+  // touched: the contact stays inelastic), with its contact points and its point velocities
+  // when recorded (before the solve).
   struct SoftBounce {
     Vec3 vBefore = Vec3::Zero();
     Vec3 nSum = Vec3::Zero(), vSurface = Vec3::Zero();
     double eSum = 0.0;
     int count = 0;
+    std::int32_t partner = -1;
+    int partnerCount = 0;
+    Vec3 partnerPoints = Vec3::Zero(), partnerVBefore = Vec3::Zero();
   };
   std::vector<SoftBounce> softBounce_;
   bool bouncySoft(std::size_t b) const {

@@ -514,7 +514,8 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
 // while its centre approached it faster than 2 g h (a resting body does not bounce) leaves at
 // e times that approach speed along the mean contact normal, relative to the surface: every
 // particle gets the same velocity change, so the body's shape is untouched. e: the pair's mean
-// with a fixed body, the body's own against the ground and colliders (which have none).
+// with a rigid body, the body's own against the ground and colliders (which have none). A
+// dynamic rigid body takes the opposite impulse (momentum is kept).
 void PbdWorld::softBodyRestitution(double h) {
   if (softBounce_.empty()) return;
   const double slow = 2.0 * params_.gravity.norm() * h;
@@ -528,12 +529,39 @@ void PbdWorld::softBodyRestitution(double h) {
       ++sb.count;
     }
     if (sb.count == 0 || !(sb.nSum.norm() > 1e-9)) continue;
-    const Vec3 n = sb.nSum.normalized(), surface = sb.vSurface / sb.count;
+    // A dynamic rigid body shares the bounce only when it is all the body touched (one
+    // partner, no other contact); otherwise that contact stays inelastic.
+    const bool pair = sb.partnerCount > 0;
+    if (pair && (sb.partner < 0 || sb.partnerCount != sb.count)) continue;
+    const Vec3 n = sb.nSum.normalized();
     const double e = sb.eSum / sb.count;
-    const double u = (sb.vBefore - surface).dot(n);
+    Vec3 before = sb.vSurface / sb.count, after = before;
+    Vec3 point = Vec3::Zero();
+    if (pair) {
+      const Motion& mo = motion_[std::size_t(sb.partner)];
+      point = sb.partnerPoints / sb.partnerCount;
+      before = sb.partnerVBefore / sb.partnerCount;
+      after = mo.v + mo.w.cross(point - mo.c);
+    }
+    const double u = (sb.vBefore - before).dot(n);
     if (u >= -slow) continue;
-    const double dv = -e * u - (centreVelocity(b) - surface).dot(n);
+    double dv = -e * u - (centreVelocity(b) - after).dot(n);
     if (dv <= 0.0) continue;
+    if (pair) {
+      // Through both sides' inverse masses (the body's whole mass; the partner's generalized
+      // inverse mass at the mean contact point), as bodyRestitution does for two rigid bodies.
+      const auto r = std::size_t(sb.partner);
+      Motion& mo = motion_[r];
+      double mass = 0.0;
+      for (std::int32_t i : members_[b]) mass += parts_.mass[std::size_t(i)];
+      const RigidPose pose{mo.c, mo.q, invMass_[r], invInertiaRest_[r]};
+      const double wr = generalizedInverseMass(pose, point, n);
+      const double impulse = dv / (1.0 / mass + wr);
+      const Mat3 R = mo.q.toRotationMatrix();
+      mo.v -= (impulse * invMass_[r]) * n;
+      mo.w -= R * invInertiaRest_[r] * R.transpose() * (point - mo.c).cross(impulse * n);
+      dv = impulse / mass;
+    }
     const Vec3f kick = (dv * n).cast<float>();
     for (std::int32_t i : members_[b]) {
       const auto k = std::size_t(i);
@@ -684,13 +712,19 @@ void PbdWorld::particleContact() {
                              : double(invMassP_[j]);
     if (wi + wj <= 0.0) continue;
     const double lambda = pen / (wi + wj);
-    if (!softBounce_.empty() && rigidJ && mode_[bj] == BodyMode::kFixed) {
+    if (!softBounce_.empty() && rigidJ && (mode_[bj] == BodyMode::kFixed || mode_[bj] == BodyMode::kDynamic)) {
       const auto bi = std::size_t(parts_.group(i));
       if (bouncySoft(bi)) {
         SoftBounce& sb = softBounce_[bi];
         sb.nSum += n;
         sb.eSum += 0.5 * (restitution_[bi] + restitution_[bj]);
         ++sb.count;
+        if (mode_[bj] == BodyMode::kDynamic) {
+          sb.partner = sb.partner == -1 || sb.partner == std::int32_t(bj) ? std::int32_t(bj) : -2;
+          ++sb.partnerCount;
+          sb.partnerPoints += pj;
+          sb.partnerVBefore += mj->v + mj->w.cross(pj - mj->c);
+        }
       }
     }
     Vec3 newI = pi + (wi * lambda) * n;
