@@ -130,6 +130,7 @@ int main(int argc, char** argv) {
       const std::vector<Vec3> pos = deformedBall(centres[b], perBody, 0.3 * rep + double(b));
       render::ParticleMeshOptions options;
       options.smoothIterations = smooth;
+      options.targetVolume = double(pos.size()) * kH * kH * kH;  // as FrameWriter holds a body's surface
       meshes[b] = render::meshParticles(pos, kH, options, nullptr, &times[b]);
     });
     // Stage times are summed over bodies: with bodies in parallel they add up to more than the
@@ -275,6 +276,7 @@ int main(int argc, char** argv) {
     knobRows("mesh_smoothing_" + std::to_string(s), [&] {
       render::ParticleMeshOptions o;
       o.smoothIterations = s;
+      o.targetVolume = double(ball.size()) * kH * kH * kH;
       return render::meshParticles(ball, kH, o);
     });
   }

@@ -96,6 +96,17 @@ double enclosedVolume(const TriangleMesh& mesh) {
   return v;
 }
 
+double surfaceArea(const TriangleMesh& mesh) {
+  double a = 0.0;
+  for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+    const Vec3 p0 = mesh.positions[mesh.indices[t]].cast<double>();
+    const Vec3 p1 = mesh.positions[mesh.indices[t + 1]].cast<double>();
+    const Vec3 p2 = mesh.positions[mesh.indices[t + 2]].cast<double>();
+    a += 0.5 * (p1 - p0).cross(p2 - p0).norm();
+  }
+  return a;
+}
+
 void writeObj(const std::string& path, const TriangleMesh& mesh) {
   const std::size_t n = mesh.positions.size();
   if (!mesh.normals.empty() && mesh.normals.size() != n) {

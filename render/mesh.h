@@ -24,6 +24,9 @@ struct TriangleMesh {
 // Negative for a mesh wound the other way.
 double enclosedVolume(const TriangleMesh& mesh);
 
+// Total area of the triangles (m^2).
+double surfaceArea(const TriangleMesh& mesh);
+
 // A closed tube of `radius` (m) around each chain of points (a rope's particles in chain order):
 // a ring of `sides` vertices around every point, in the plane normal to the chain's direction
 // there (central differences), turned from ring to ring by parallel transport so the tube does

@@ -40,21 +40,23 @@ render::TriangleMesh ropeTube(const std::vector<std::int32_t>& ids, const std::v
   return render::tubeMesh(chains, 0.5 * spacing);
 }
 
+// What particles `ids` occupy now (m^3): spacing^3 times the sum of their volume ratios det F
+// (1 where the solver keeps no F: pbd). The volume their surfaces are made to enclose.
+double particleVolume(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing) {
+  double sumJ = 0.0;
+  for (std::int32_t i : ids) sumJ += solver.deformationGradient(i).determinant();
+  return sumJ * spacing * spacing * spacing;
+}
+
 // The surface of particles `ids` from the solver's grid mass (--solid-surface grid): the level
-// of half their rest density, moved until the mesh encloses their current volume (spacing^3 times
-// the sum of det F: what the material occupies now). `volume` receives that volume.
-render::TriangleMesh gridMassMesh(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing,
-                                  double* volume = nullptr) {
+// of half their rest density, moved until the mesh encloses their particleVolume.
+render::TriangleMesh gridMassMesh(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing) {
   NodeField field;
   if (!solver.massField(ids, field))
     throw RuntimeError(std::string("--solid-surface grid: solver ") + solver.name() + " has no grid mass");
-  double mass = 0.0, sumJ = 0.0;
-  for (std::int32_t i : ids) {
-    mass += double(solver.particles().mass[static_cast<std::size_t>(i)]);
-    sumJ += solver.deformationGradient(i).determinant();
-  }
-  const double target = sumJ * spacing * spacing * spacing;
-  if (volume) *volume = target;
+  double mass = 0.0;
+  for (std::int32_t i : ids) mass += double(solver.particles().mass[static_cast<std::size_t>(i)]);
+  const double target = particleVolume(solver, ids, spacing);
   if (!(mass > 0.0) || !(target > 0.0)) return {};  // nothing to threshold
   return render::meshNodeField(field, gridMassLevel(mass, ids.size(), spacing, field.spacing), target);
 }
@@ -152,9 +154,9 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       if (report.particleVolume > 0.0) fluid_.add((report.meshVolume - report.particleVolume) / report.particleVolume);
     } else if (options_.solidGrid && kind != MaterialKind::kRope && kind != MaterialKind::kCloth) {
       deforming = true;
-      double volume = 0.0;
-      mesh = gridMassMesh(solver, ids, mapping_.voxelSize(), &volume);
-      if (volume > 0.0) grid_.add((render::enclosedVolume(mesh) - volume) / volume);
+      mesh = gridMassMesh(solver, ids, mapping_.voxelSize());
+      const double volume = particleVolume(solver, ids, mapping_.voxelSize());
+      if (volume > 0.0) solid_.add((render::enclosedVolume(mesh) - volume) / volume);
     } else {
       deforming = true;
       render::ParticleMeshOptions opt;
@@ -165,7 +167,11 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       if (kind == MaterialKind::kRope) {
         mesh = ropeTube(ids, pos, mapping_.voxelSize());
       } else {
+        // A cloth is a sheet one particle thick: held to its particles' volume it would thin
+        // into holes; its cells' surface is kept as it is.
+        if (kind != MaterialKind::kCloth) opt.targetVolume = particleVolume(solver, ids, mapping_.voxelSize());
         mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
+        if (opt.targetVolume > 0.0) solid_.add((render::enclosedVolume(mesh) - opt.targetVolume) / opt.targetVolume);
       }
       if (options_.smoothIterations > 0 && report.volumeBefore > 0.0) smoothing_.add(report.relativeChange());
     }
@@ -429,6 +435,7 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
         g.cells = render::particleCells(positionsOf(p, ids), mapping.voxelSize(), origin);
         g.surface = defaults.surface;
         g.smoothIterations = surfaces.smoothIterations;
+        if (mat.kind != MaterialKind::kCloth) g.targetVolume = particleVolume(solver, ids, mapping.voxelSize());
       }
       grids.push_back(std::move(g));
     }

@@ -64,8 +64,8 @@ std::vector<render::Splat> particleSplats(const SceneDesc& scene, const Solver& 
                                           bool splatLookOnly = false, int detail = 1);
 
 // How far the surfaces of one kind meshed in a run were from a reference volume: a fluid's
-// kernels and a grid-mass surface from the particles' (particles * spacing^3), the smoothing
-// knob from the surface before it.
+// kernels and a deforming solid's surface (cells or grid mass) from the particles' (spacing^3
+// each, times det F), the smoothing knob from the surface before it.
 struct VolumeChangeStats {
   long meshes = 0;
   double maxAbsChange = 0.0;  // largest |mesh - reference| / reference
@@ -103,7 +103,8 @@ class FrameWriter {
   std::map<int, std::vector<render::MaterialMesh>> worldMeshes(const Solver& solver) const;
   const VolumeChangeStats& smoothing() const { return smoothing_; }
   const VolumeChangeStats& fluidSurfaces() const { return fluid_; }
-  const VolumeChangeStats& gridSurfaces() const { return grid_; }
+  // Deforming solids' surfaces (cells or grid) against their particles' volume.
+  const VolumeChangeStats& solidSurfaces() const { return solid_; }
 
   const Profile& profile() const { return profile_; }
   std::size_t trianglesLastFrame() const { return trianglesLastFrame_; }
@@ -131,7 +132,7 @@ class FrameWriter {
   const sketch::GridMapping& mapping_;
   FrameOptions options_;
   std::unique_ptr<render::OffscreenRenderer> renderer_;  // null without options.draw
-  VolumeChangeStats smoothing_, fluid_, grid_;
+  VolumeChangeStats smoothing_, fluid_, solid_;
   std::map<int, std::vector<MeshPart>> meshes_;  // body -> one mesh per material
   std::vector<int> dirty_;                       // bodies to (re)mesh before the next frame
   std::vector<int> deforming_;                   // bodies with a deforming surface: re-meshed every frame

@@ -530,8 +530,8 @@ int runScene(const RunOptions& opt) {
       rep["frames"]["fluid_surface"] = volumeChangeJson(frameWriter->fluidSurfaces());
       rep["frames"]["fluid_surface"]["method"] = opt.fluidSurface;
     }
-    if (frameWriter && frameWriter->gridSurfaces().meshes > 0) {
-      rep["frames"]["solid_surface"] = volumeChangeJson(frameWriter->gridSurfaces());
+    if (frameWriter && frameWriter->solidSurfaces().meshes > 0) {
+      rep["frames"]["solid_surface"] = volumeChangeJson(frameWriter->solidSurfaces());
       rep["frames"]["solid_surface"]["method"] = opt.solidSurface;
     }
     if (!video.is_null()) rep["frames"]["video"] = video;
