@@ -344,11 +344,12 @@ class PbdWorld final : public Solver {
     std::int32_t partner = -1;
     int partnerCount = 0;
     Vec3 partnerPoints = Vec3::Zero(), partnerVBefore = Vec3::Zero();
+    std::int32_t softPartner = -1;  // another soft body touched (-2: several)
+    int softCount = 0;
   };
   std::vector<SoftBounce> softBounce_;
-  bool bouncySoft(std::size_t b) const {
-    return kind_[b] == MaterialKind::kSoft && mode_[b] == BodyMode::kDynamic && restitution_[b] > 0.0;
-  }
+  bool dynamicSoft(std::size_t b) const { return kind_[b] == MaterialKind::kSoft && mode_[b] == BodyMode::kDynamic; }
+  bool bouncySoft(std::size_t b) const { return dynamicSoft(b) && restitution_[b] > 0.0; }
   Vec3 centreVelocity(std::size_t b) const;
   void softBodyRestitution(double h);
   bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level

@@ -495,7 +495,7 @@ void PbdWorld::predict(double h) {
   }
   softBounce_.assign(members_.size(), SoftBounce{});
   for (std::size_t b = 0; b < members_.size(); ++b)
-    if (bouncySoft(b)) softBounce_[b].vBefore = centreVelocity(b);
+    if (dynamicSoft(b)) softBounce_[b].vBefore = centreVelocity(b);  // a bouncy one's partner too
 }
 
 // The mass-weighted mean velocity of a particle-level body's particles (serial, in id order).
@@ -514,11 +514,26 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
 // while its centre approached it faster than 2 g h (a resting body does not bounce) leaves at
 // e times that approach speed along the mean contact normal, relative to the surface: every
 // particle gets the same velocity change, so the body's shape is untouched. e: the pair's mean
-// with a rigid body, the body's own against the ground and colliders (which have none). A
-// dynamic rigid body takes the opposite impulse (momentum is kept).
+// with a body, the body's own against the ground and colliders (which have none). A dynamic
+// rigid body or another soft body shares the bounce when it is all the body touched (one
+// partner, nothing else), taking the opposite impulse (momentum is kept); a body that touched a
+// dynamic partner and something else stays inelastic. Serial over bodies: deterministic.
 void PbdWorld::softBodyRestitution(double h) {
   if (softBounce_.empty()) return;
   const double slow = 2.0 * params_.gravity.norm() * h;
+  const auto massOf = [&](std::size_t b) {
+    double m = 0.0;
+    for (std::int32_t i : members_[b]) m += parts_.mass[std::size_t(i)];
+    return m;
+  };
+  const auto kick = [&](std::size_t b, const Vec3& dv) {
+    const Vec3f k = dv.cast<float>();
+    for (std::int32_t i : members_[b]) {
+      const auto q = std::size_t(i);
+      if (invMassP_[q] == 0.0f || pinned_[q]) continue;
+      parts_.vx[q] += k.x(), parts_.vy[q] += k.y(), parts_.vz[q] += k.z();
+    }
+  };
   for (std::size_t b = 0; b < members_.size(); ++b) {
     if (!bouncySoft(b)) continue;
     SoftBounce& sb = softBounce_[b];
@@ -528,13 +543,32 @@ void PbdWorld::softBodyRestitution(double h) {
       sb.eSum += restitution_[b];
       ++sb.count;
     }
+  }
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    if (!dynamicSoft(b)) continue;
+    const SoftBounce& sb = softBounce_[b];
     if (sb.count == 0 || !(sb.nSum.norm() > 1e-9)) continue;
-    // A dynamic rigid body shares the bounce only when it is all the body touched (one
-    // partner, no other contact); otherwise that contact stays inelastic.
-    const bool pair = sb.partnerCount > 0;
-    if (pair && (sb.partner < 0 || sb.partnerCount != sb.count)) continue;
     const Vec3 n = sb.nSum.normalized();
     const double e = sb.eSum / sb.count;
+    if (sb.softCount > 0) {
+      // Two soft bodies that touched only each other, once per pair (from the lower index).
+      if (sb.softPartner < 0 || sb.softCount != sb.count || std::size_t(sb.softPartner) < b) continue;
+      const auto o = std::size_t(sb.softPartner);
+      const SoftBounce& so = softBounce_[o];
+      if (so.softPartner != std::int32_t(b) || so.softCount != so.count) continue;
+      const double u = (sb.vBefore - so.vBefore).dot(n);
+      if (u >= -slow) continue;
+      const double dv = -e * u - (centreVelocity(b) - centreVelocity(o)).dot(n);
+      if (dv <= 0.0) continue;
+      const double mb = massOf(b), mo = massOf(o);
+      const double impulse = dv / (1.0 / mb + 1.0 / mo);
+      kick(b, (impulse / mb) * n);
+      kick(o, (-impulse / mo) * n);
+      continue;
+    }
+    if (!bouncySoft(b)) continue;
+    const bool pair = sb.partnerCount > 0;
+    if (pair && (sb.partner < 0 || sb.partnerCount != sb.count)) continue;
     Vec3 before = sb.vSurface / sb.count, after = before;
     Vec3 point = Vec3::Zero();
     if (pair) {
@@ -552,8 +586,7 @@ void PbdWorld::softBodyRestitution(double h) {
       // inverse mass at the mean contact point), as bodyRestitution does for two rigid bodies.
       const auto r = std::size_t(sb.partner);
       Motion& mo = motion_[r];
-      double mass = 0.0;
-      for (std::int32_t i : members_[b]) mass += parts_.mass[std::size_t(i)];
+      const double mass = massOf(b);
       const RigidPose pose{mo.c, mo.q, invMass_[r], invInertiaRest_[r]};
       const double wr = generalizedInverseMass(pose, point, n);
       const double impulse = dv / (1.0 / mass + wr);
@@ -562,12 +595,7 @@ void PbdWorld::softBodyRestitution(double h) {
       mo.w -= R * invInertiaRest_[r] * R.transpose() * (point - mo.c).cross(impulse * n);
       dv = impulse / mass;
     }
-    const Vec3f kick = (dv * n).cast<float>();
-    for (std::int32_t i : members_[b]) {
-      const auto k = std::size_t(i);
-      if (invMassP_[k] == 0.0f || pinned_[k]) continue;
-      parts_.vx[k] += kick.x(), parts_.vy[k] += kick.y(), parts_.vz[k] += kick.z();
-    }
+    kick(b, dv * n);
   }
 }
 
@@ -725,6 +753,22 @@ void PbdWorld::particleContact() {
           sb.partnerPoints += pj;
           sb.partnerVBefore += mj->v + mj->w.cross(pj - mj->c);
         }
+      }
+    }
+    if (!softBounce_.empty() && !rigidJ) {
+      const auto bi = std::size_t(parts_.group(i));
+      if (bi != bj && dynamicSoft(bi) && dynamicSoft(bj) && restitution_[bi] + restitution_[bj] > 0.0) {
+        const double e = 0.5 * (restitution_[bi] + restitution_[bj]);
+        const auto note = [&](std::size_t self, std::size_t other, const Vec3& normal) {
+          SoftBounce& sb = softBounce_[self];
+          sb.nSum += normal;
+          sb.eSum += e;
+          ++sb.count;
+          ++sb.softCount;
+          sb.softPartner = sb.softPartner == -1 || sb.softPartner == std::int32_t(other) ? std::int32_t(other) : -2;
+        };
+        note(bi, bj, n);
+        note(bj, bi, -n);
       }
     }
     Vec3 newI = pi + (wi * lambda) * n;
