@@ -85,26 +85,26 @@ TriangleMesh tubeMesh(const std::vector<std::vector<Vec3>>& chains, double radiu
   return mesh;
 }
 
+namespace {
+// The sum of f(p0, p1, p2) over the mesh's triangles, in double, in index order.
+template <class F>
+double sumOverTriangles(const TriangleMesh& mesh, F f) {
+  double sum = 0.0;
+  for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3)
+    sum += f(mesh.positions[mesh.indices[t]].cast<double>(), mesh.positions[mesh.indices[t + 1]].cast<double>(),
+             mesh.positions[mesh.indices[t + 2]].cast<double>());
+  return sum;
+}
+}  // namespace
+
 double enclosedVolume(const TriangleMesh& mesh) {
-  double v = 0.0;
-  for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
-    const Vec3 p0 = mesh.positions[mesh.indices[t]].cast<double>();
-    const Vec3 p1 = mesh.positions[mesh.indices[t + 1]].cast<double>();
-    const Vec3 p2 = mesh.positions[mesh.indices[t + 2]].cast<double>();
-    v += p0.dot(p1.cross(p2)) / 6.0;
-  }
-  return v;
+  return sumOverTriangles(mesh, [](const Vec3& p0, const Vec3& p1, const Vec3& p2) { return p0.dot(p1.cross(p2)) / 6.0; });
 }
 
 double surfaceArea(const TriangleMesh& mesh) {
-  double a = 0.0;
-  for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
-    const Vec3 p0 = mesh.positions[mesh.indices[t]].cast<double>();
-    const Vec3 p1 = mesh.positions[mesh.indices[t + 1]].cast<double>();
-    const Vec3 p2 = mesh.positions[mesh.indices[t + 2]].cast<double>();
-    a += 0.5 * (p1 - p0).cross(p2 - p0).norm();
-  }
-  return a;
+  return sumOverTriangles(mesh, [](const Vec3& p0, const Vec3& p1, const Vec3& p2) {
+    return 0.5 * (p1 - p0).cross(p2 - p0).norm();
+  });
 }
 
 void writeObj(const std::string& path, const TriangleMesh& mesh) {

@@ -2,11 +2,13 @@
 // the test spacing, as the sketch would make them.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
 #include "core/material.h"
 #include "core/particles.h"
+#include "pbd/world.h"
 
 namespace physketch::pbd::test {
 
@@ -69,6 +71,21 @@ inline BodyRange addBall(ParticleArrays& p, const Vec3& centre, int cells, int s
   b.count = static_cast<std::int32_t>(p.size()) - b.first;
   b.stroke = stroke;
   return b;
+}
+
+// Steps until the body, having bounced (its centre moving up faster than `rising` m/s), starts
+// down again: the top of its first bounce above `rest` (m), or -1 if it never moved up within
+// 2 s (or the guard stopped it). A soft body's centre wobbles: its tests ask for a clear rise.
+inline double firstBounceApex(PbdWorld& w, int body, double rest, double rising = 0.0) {
+  bool bounced = false;
+  double apex = 0.0;
+  for (int s = 0; s < 120; ++s) {
+    if (!w.step()) return -1.0;
+    if (!bounced && w.velocity(body).y() > rising) bounced = true;
+    if (bounced) apex = std::max(apex, w.pose(body).centre.y() - rest);
+    if (bounced && w.velocity(body).y() < 0.0) break;  // past the top of the first bounce
+  }
+  return bounced ? apex : -1.0;
 }
 
 }  // namespace physketch::pbd::test

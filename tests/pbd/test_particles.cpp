@@ -311,21 +311,6 @@ TEST(Soft, CubeOnTheGroundKeepsItsShapeAndSoftOneSags) {
   EXPECT_LT(soft, stiff - kSpacing) << "E = 500 Pa should sag by a spacing or more";
 }
 
-namespace {
-// Steps until the body, having bounced (its centre moving up), starts down again: the top of
-// its first bounce above `rest` (m), or -1 if it never moved up within 2 s.
-double firstApex(PbdWorld& w, int body, double rest) {
-  bool bounced = false;
-  double apex = 0.0;
-  for (int s = 0; s < 120; ++s) {
-    if (!w.step()) return -1.0;
-    if (!bounced && w.velocity(body).y() > 0.05) bounced = true;
-    if (bounced) apex = std::max(apex, w.pose(body).centre.y() - rest);
-    if (bounced && w.velocity(body).y() < 0.0) break;
-  }
-  return bounced ? apex : -1.0;
-}
-}  // namespace
 
 // Restitution of soft bodies (issue 8: "a ball bounces", every kind). A stiff soft ball
 // (E = 5e5 Pa) of e = 0.8 dropped h0 = 0.2 m rises to e^2 h0 (closed form, as a rigid ball):
@@ -358,7 +343,7 @@ TEST(Soft, ASoftBallBouncesOffTheGroundABodyAndAMeshFloor) {
       c.name = "floor";
       w.setColliders(ColliderSet({c}, {s}));
     }
-    return firstApex(w, 0, w.pose(0).centre.y() - 0.2);
+    return firstBounceApex(w, 0, w.pose(0).centre.y() - 0.2, /*rising=*/0.05);
   };
   const double ground = apex(kGround, 0.0), slab = apex(kSlab, 0.8), mesh = apex(kMesh, 0.0), dull = apex(kSlab, 0.0);
   std::printf("soft ball e 0.8 from 0.2 m: apex %.4f (ground), %.4f (slab e 0.8), %.4f (mesh floor), %.4f (slab e 0; "

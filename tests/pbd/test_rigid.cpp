@@ -497,21 +497,6 @@ TEST(RigidBody, ANamedBodyOfSeparatePartsSplitsOnlyWhereAPartIsCut) {
   EXPECT_EQ(w.bodyParticles(1).size() + w.bodyParticles(2).size(), 40u - 1 - 4);
 }
 
-namespace {
-// Steps until the body, having bounced (moving up), starts down again: the top of its first
-// bounce above `rest` (m), or -1 if it never moved up within 2 s (or the guard stopped it).
-double firstBounceApex(PbdWorld& w, int body, double rest) {
-  bool bounced = false;
-  double apex = 0.0;
-  for (int s = 0; s < 120; ++s) {
-    if (!w.step()) return -1.0;
-    if (!bounced && w.velocity(body).y() > 0.0) bounced = true;
-    if (bounced) apex = std::max(apex, w.pose(body).centre.y() - rest);
-    if (bounced && w.velocity(body).y() < 0.0) break;  // past the top of the first bounce
-  }
-  return bounced ? apex : -1.0;
-}
-}  // namespace
 
 TEST(RigidBody, ABallBouncesToRestitutionSquaredTimesItsDropHeight) {
   // A ball dropped from rest h0 = 0.3 m above the ground (lowest particle) with
