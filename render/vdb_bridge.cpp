@@ -103,6 +103,22 @@ TriangleMesh assemble(const std::vector<openvdb::Vec3s>& points, const std::vect
   return mesh;
 }
 
+// Moves the level set's surface along its normal until it encloses `target` (m^3): adding d to
+// every distance moves the surface by -d, and dV = A dn, so d = (V - target) / A, twice (the
+// second pass corrects the first's change of area). Area and volume in one measure per pass.
+void offsetToVolume(openvdb::FloatGrid& sdf, double target) {
+  for (int pass = 0; pass < 2; ++pass) {
+    openvdb::tools::LevelSetMeasure<openvdb::FloatGrid> measure(sdf);
+    const double area = measure.area(), volume = measure.volume();
+    if (!(area > 0.0)) return;
+    // A shifted distance field is still one, so this is a plain add over the band, not
+    // LevelSetFilter's offset, whose renormalization cost as much as a smoothing iteration
+    // (13 ms on a 20k-cell ball) and changes nothing here.
+    const float d = static_cast<float>((volume - target) / area);
+    for (auto it = sdf.beginValueOn(); it; ++it) it.setValue(*it + d);
+  }
+}
+
 // Mean-curvature flow on the level set, then a dilation by the lost volume over the area
 // (dV = A dn for a small normal offset dn), applied twice so the second corrects the first's
 // change of area. Serial per grid in a fixed order of operations; LevelSetFilter's parallel
@@ -112,33 +128,10 @@ void smoothLevelSet(openvdb::FloatGrid& sdf, int iterations, SmoothingReport* re
   const double before = openvdb::tools::levelSetVolume(sdf);
   openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(sdf);
   for (int i = 0; i < iterations; ++i) filter.meanCurvature();
-  for (int pass = 0; pass < 2; ++pass) {
-    const double volume = openvdb::tools::levelSetVolume(sdf);
-    const double area = openvdb::tools::levelSetArea(sdf);
-    if (!(area > 0.0)) break;
-    // Adding d to every distance moves the surface by -d (negative d: outwards). A shifted
-    // distance field is still one, so this is a plain add over the band, not LevelSetFilter's
-    // offset, whose renormalization cost as much as a smoothing iteration (13 ms on a 20k-cell
-    // ball) and changes nothing here.
-    const float d = static_cast<float>(-(before - volume) / area);
-    for (auto it = sdf.beginValueOn(); it; ++it) it.setValue(*it + d);
-  }
+  offsetToVolume(sdf, before);
   if (report) {
     report->volumeBefore = before;
     report->volumeAfter = openvdb::tools::levelSetVolume(sdf);
-  }
-}
-
-// Moves the level set's surface along its normal until it encloses `target` (m^3): adding d to
-// every distance moves the surface by -d, and dV = A dn, so d = (V - target) / A, twice (the
-// second pass corrects the first's change of area). Area and volume in one measure per pass.
-void offsetToVolume(openvdb::FloatGrid& sdf, double target) {
-  for (int pass = 0; pass < 2; ++pass) {
-    openvdb::tools::LevelSetMeasure<openvdb::FloatGrid> measure(sdf);
-    const double area = measure.area(), volume = measure.volume();
-    if (!(area > 0.0)) return;
-    const float d = static_cast<float>((volume - target) / area);
-    for (auto it = sdf.beginValueOn(); it; ++it) it.setValue(*it + d);
   }
 }
 

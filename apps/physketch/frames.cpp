@@ -49,14 +49,14 @@ double particleVolume(const Solver& solver, const std::vector<std::int32_t>& ids
 }
 
 // The surface of particles `ids` from the solver's grid mass (--solid-surface grid): the level
-// of half their rest density, moved until the mesh encloses their particleVolume.
-render::TriangleMesh gridMassMesh(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing) {
+// of half their rest density, moved until the mesh encloses `target`, their particleVolume.
+render::TriangleMesh gridMassMesh(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing,
+                                  double target) {
   NodeField field;
   if (!solver.massField(ids, field))
     throw RuntimeError(std::string("--solid-surface grid: solver ") + solver.name() + " has no grid mass");
   double mass = 0.0;
   for (std::int32_t i : ids) mass += double(solver.particles().mass[static_cast<std::size_t>(i)]);
-  const double target = particleVolume(solver, ids, spacing);
   if (!(mass > 0.0) || !(target > 0.0)) return {};  // nothing to threshold
   return render::meshNodeField(field, gridMassLevel(mass, ids.size(), spacing, field.spacing), target);
 }
@@ -154,8 +154,8 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       if (report.particleVolume > 0.0) fluid_.add((report.meshVolume - report.particleVolume) / report.particleVolume);
     } else if (options_.solidGrid && kind != MaterialKind::kRope && kind != MaterialKind::kCloth) {
       deforming = true;
-      mesh = gridMassMesh(solver, ids, mapping_.voxelSize());
       const double volume = particleVolume(solver, ids, mapping_.voxelSize());
+      mesh = gridMassMesh(solver, ids, mapping_.voxelSize(), volume);
       if (volume > 0.0) solid_.add((render::enclosedVolume(mesh) - volume) / volume);
     } else {
       deforming = true;
@@ -428,7 +428,7 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
       } else if (mat.kind == MaterialKind::kRope) {
         g.mesh = ropeTube(ids, positionsOf(p, ids), mapping.voxelSize());  // the frames' tube
       } else if (surfaces.solidGrid && mat.kind != MaterialKind::kCloth) {
-        g.mesh = gridMassMesh(solver, ids, mapping.voxelSize());  // the frames' grid-mass surface
+        g.mesh = gridMassMesh(solver, ids, mapping.voxelSize(), particleVolume(solver, ids, mapping.voxelSize()));  // as the frames
       } else {
         // As meshParticles does it (render/voxel_mesh.h).
         const render::ParticleMeshOptions defaults;
