@@ -417,7 +417,7 @@ int runScene(const RunOptions& opt) {
     solver->setValidate(opt.validate);
     solver->setGuardPolicy(opt.guard == "warn" ? GuardPolicy::kWarn : GuardPolicy::kStop);
     if (opt.solidSurface == "grid" && sc.solver != SolverKind::kMpm) {
-      throw InputError(sc.path, 0, "solver",
+      throw InputError(sc.path, sc.solverLine, "solver",
                        "--solid-surface grid meshes the MPM grid's mass, and this scene runs solver pbd, which has no "
                        "grid (use 'solver mpm' or --solid-surface cells)");
     }

@@ -191,6 +191,7 @@ TEST(CliSolidSurface, GridMeshesMpmSolidsFromTheGridMassAndPbdHasNone) {
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("--solid-surface grid"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("solver pbd"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("hello.scene:5: field 'solver'"), std::string::npos) << r.err;  // its solver record
   EXPECT_FALSE(fs::exists(dir / "pbd"));
   fs::remove_all(dir);
 }
