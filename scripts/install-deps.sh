@@ -23,6 +23,7 @@ PACKAGES=(
   libcairo2-dev   # physketch study draws study.png with Cairo (found through pkg-config 'cairo')
   libgtest-dev
   nlohmann-json3-dev libcli11-dev
+  libzip-dev      # physketch import-tilt reads .tilt sketches (zip archives); pulls in zlib1g-dev
   python3         # scripts/hard.py runs the hard-case suite (ctest hard_scenes, make hard)
 )
 

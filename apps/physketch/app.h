@@ -1,8 +1,12 @@
 // The physketch command line: subcommands run, plan, lint and study (see --help; study: study.h).
 #pragma once
 
+#include <iostream>
 #include <string>
 #include <vector>
+
+#include "core/error.h"
+#include "core/math.h"
 
 namespace physketch::app {
 
@@ -10,6 +14,21 @@ namespace physketch::app {
 constexpr int kExitOk = 0;
 constexpr int kExitBadInput = 1;
 constexpr int kExitRuntime = 2;
+
+// Runs a subcommand body and maps its exceptions to the CLI's exit codes:
+// InputError -> 1 (bad input, message names file:line:field), anything else -> 2.
+template <class F>
+int withExitCodes(F&& body) {
+  try {
+    return body();
+  } catch (const InputError& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return kExitRuntime;
+  }
+}
 
 struct RunOptions {
   std::string scene;
@@ -43,5 +62,21 @@ struct PlanOptions {
 int printPlan(const PlanOptions& options);
 // Parse and voxelize only: particles per operation, material and body, memory estimate, warnings.
 int lintScene(const std::string& scene);
+
+// physketch import-tilt: an Open Brush / Tilt Brush sketch -> a stroke file and a scene that runs it.
+struct ImportTiltOptions {
+  std::string input;             // FILE.tilt
+  std::string output;            // -o: the stroke file (default: the input's name with .strokes, here)
+  std::string scene;             // --scene: the scene (default: the stroke file's name with .scene)
+  Vec3 workspaceCenter{0.0, 0.5, 0.0};
+  double workspaceSize = 1.0;
+  double fit = 0.8;
+  double scale = 0.0;            // > 0: instead of fitting
+  std::string join = "touching";
+  bool noThicken = false;
+  double density = 600.0;
+  bool quiet = false;
+};
+int importTilt(const ImportTiltOptions& options);
 
 }  // namespace physketch::app

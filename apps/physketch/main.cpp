@@ -30,7 +30,8 @@ int main(int argc, char** argv) {
       "  physketch plan scenes/hello.scene                     # the passes a step runs, and why\n"
       "  physketch run scenes/play.scene --validate            # check the state after every pass\n"
       "  physketch lint scenes/hello.scene                     # check a sketch without simulating it\n"
-      "  physketch study scenes/study/drop.scene --vary substeps=1,2,4,8 --out out/study  # error vs time\n\n"
+      "  physketch study scenes/study/drop.scene --vary substeps=1,2,4,8 --out out/study  # error vs time\n"
+      "  physketch import-tilt sketch.tilt -o sketch.strokes    # an Open Brush sketch in, with sketch.scene\n\n"
       "Exit codes: 0 success, 1 bad input (the message names file:line:field), 2 runtime failure\n"
       "(e.g. the stability guard tripped: the message and report.json name the pass, particle, stroke,\n"
       "material, value, bound and the setting to change)."};
@@ -118,6 +119,38 @@ int main(int argc, char** argv) {
   auto* lintCmd = cli.add_subcommand("lint", "Parse and voxelize only: particles per stroke and material, memory estimate, warnings; exit 1 on any error");
   lintCmd->add_option("scene", lintPath, "Scene file")->required();
 
+  ImportTiltOptions tilt;
+  std::vector<double> tiltWorkspace;
+  auto* tiltCmd = cli.add_subcommand(
+      "import-tilt",
+      "Turn an Open Brush / Tilt Brush sketch (.tilt) into a stroke file and a scene that runs it.\n"
+      "Units (decimetres) and frame (left-handed) are converted, the sketch is scaled to fit the workspace\n"
+      "and set on its floor, every stroke becomes a sphere-brush stroke as wide as the brush, one rigid\n"
+      "material per colour, times kept (strokes drawn at the same time, by two hands or a mirror, are\n"
+      "played one after the other), strokes thinner than two particles thickened, and touching strokes\n"
+      "joined into one body. docs/formats.md, \"Importing Open Brush sketches\".\n\n"
+      "Example:\n"
+      "  physketch import-tilt sketch.tilt -o out/sketch.strokes   # also writes out/sketch.scene\n"
+      "  physketch run out/sketch.scene --out out/sketch");
+  tiltCmd->add_option("file", tilt.input, "The .tilt file")->required();
+  tiltCmd->add_option("-o,--output", tilt.output, "Stroke file to write (default: FILE's name with .strokes, in the current folder)");
+  tiltCmd->add_option("--scene", tilt.scene, "Scene file to write (default: the stroke file's name with .scene)");
+  tiltCmd->add_option("--join", tilt.join,
+                      "Which strokes become one body: touching (strokes whose voxels touch, any colour), material "
+                      "(touching and of one colour) or none (one body per stroke)")
+      ->capture_default_str();
+  tiltCmd->add_flag("--no-thicken", tilt.noThicken,
+                    "Keep strokes thinner than two particle spacings as drawn (they become wire-thin chains)");
+  tiltCmd->add_option("--fit", tilt.fit, "The sketch's longest side as a fraction of the workspace edge, (0, 0.98]")
+      ->capture_default_str();
+  tiltCmd->add_option("--scale", tilt.scale, "Metres per Tilt Brush metre instead of fitting (1: real size)")
+      ->check(CLI::PositiveNumber);
+  tiltCmd->add_option("--workspace", tiltWorkspace, "CX,CY,CZ,SIZE: the scene's workspace (default 0,0.5,0,1)")
+      ->delimiter(',')
+      ->expected(4);
+  tiltCmd->add_option("--density", tilt.density, "Density of every material (kg/m^3)")->capture_default_str();
+  tiltCmd->add_flag("--quiet,-q", tilt.quiet, "No summary on stdout");
+
   StudyOptions study;
   study.program = argv[0];
   auto* studyCmd = cli.add_subcommand(
@@ -154,7 +187,7 @@ int main(int argc, char** argv) {
   if (argc > 1 && argv[1][0] != '-') {
     std::string known;
     bool found = false;
-    for (const CLI::App* c : {runCmd, planCmd, lintCmd, studyCmd}) {
+    for (const CLI::App* c : {runCmd, planCmd, lintCmd, studyCmd, tiltCmd}) {
       found = found || c->check_name(argv[1]);
       known += (known.empty() ? "" : ", ") + c->get_name();
     }
@@ -178,5 +211,12 @@ int main(int argc, char** argv) {
   if (*planCmd) return printPlan(plan);
   if (*lintCmd) return lintScene(lintPath);
   if (*studyCmd) return runStudy(study);
+  if (*tiltCmd) {
+    if (tiltWorkspace.size() == 4) {
+      tilt.workspaceCenter = physketch::Vec3(tiltWorkspace[0], tiltWorkspace[1], tiltWorkspace[2]);
+      tilt.workspaceSize = tiltWorkspace[3];
+    }
+    return importTilt(tilt);
+  }
   return kExitBadInput;
 }

@@ -32,21 +32,6 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// Runs a subcommand body and maps its exceptions to the CLI's exit codes:
-// InputError -> 1 (bad input, message names file:line:field), anything else -> 2.
-template <class F>
-int withExitCodes(F&& body) {
-  try {
-    return body();
-  } catch (const InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitRuntime;
-  }
-}
-
 // Creates `sub` under DIR, removing what an earlier, longer run left there (entries named
 // frame_* with the extension `ext`, "" for folders): they would look like part of this one.
 void prepareFolder(const fs::path& folder, const std::string& ext) {

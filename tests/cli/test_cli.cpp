@@ -766,3 +766,43 @@ TEST(Cli, TheGoldenSceneMatchesItsReferenceImage) {
   EXPECT_TRUE(changed.far > 0.005 || changed.mean > 1.0) << "a blue box passed: far " << changed.far << ", mean " << changed.mean;
   fs::remove_all(dir);
 }
+
+// A real Tilt Brush sketch (tests/data/tilt/README.md) imports, lints without warnings and
+// runs; importing twice writes the same bytes; bad input is exit 1 naming the file or option
+// and writes nothing.
+TEST(Cli, ImportTiltWritesAStrokeFileAndASceneThatLintAndRun) {
+  const fs::path dir = freshDir("tilt");
+  const std::string tilt = std::string(PHYSKETCH_SOURCE_DIR) + "/tests/data/tilt/sketch1.tilt";
+  const fs::path strokes = dir / "in" / "sketch1.strokes", scene = dir / "in" / "sketch1.scene";
+  Result r = runCli("import-tilt '" + tilt + "' -o '" + strokes.string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_TRUE(fs::exists(scene));
+  EXPECT_NE(slurp(scene).find("strokes sketch1.strokes\n"), std::string::npos) << slurp(scene);
+  const std::string first = slurp(strokes);
+  r = runCli("import-tilt '" + tilt + "' -o '" + strokes.string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(slurp(strokes), first) << "the import is not deterministic";
+  const std::string lint = (dir / "lint.txt").string();
+  const int status = std::system((std::string(PHYSKETCH_CLI) + " lint '" + scene.string() + "' > '" + lint + "' 2>&1").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << slurp(lint);
+  EXPECT_NE(slurp(lint).find("0 warning(s), no errors"), std::string::npos) << slurp(lint);
+  EXPECT_NE(slurp(lint).find("3 bodies"), std::string::npos) << slurp(lint);
+  r = runCli("run '" + scene.string() + "' -q --frames 3 --out '" + (dir / "out").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "out" / "frames" / "frame_0002.png"));
+
+  const fs::path bad = dir / "bad";
+  r = runCli("import-tilt '" + (dir / "no_such.tilt").string() + "' -o '" + (bad / "x.strokes").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("no_such.tilt: cannot open the file"), std::string::npos) << r.err;
+  writeText(dir / "text.tilt", "physketch-strokes 1\n");
+  r = runCli("import-tilt '" + (dir / "text.tilt").string() + "' -o '" + (bad / "x.strokes").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("text.tilt: field 'header': not a .tilt file"), std::string::npos) << r.err;
+  r = runCli("import-tilt '" + tilt + "' --join glue -o '" + (bad / "x.strokes").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("field '--join': 'glue' is not one of touching, material, none"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(bad));
+  fs::remove_all(dir);
+}
