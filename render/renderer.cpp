@@ -363,6 +363,55 @@ void main() {
 }
 )";
 
+// Splats in the shadow pass: the same projected Gaussian, in the light's orthographic clip space
+// (pixel = (clip.xy + 1) / 2 * map size, an affine map, so its Jacobian is exact); a splat
+// occludes the light where its opacity-weighted Gaussian reaches 1/2, and writes its centre's
+// depth there.
+const char* const kSplatShadowVertexShader = R"(#version 330 core
+layout(location = 0) in vec3 aCentre;
+layout(location = 1) in vec3 aCovA;
+layout(location = 2) in vec3 aCovB;
+layout(location = 4) in float aOpacity;
+uniform mat4 uLightViewProj;
+uniform float uMapSize;                // texels
+out vec2 vOffset;
+out vec3 vConic;
+out float vOpacity;
+void main() {
+  vec4 clip = uLightViewProj * vec4(aCentre, 1.0);
+  float s = 0.5 * uMapSize;
+  mat3 T = mat3(s, 0.0, 0.0, 0.0, s, 0.0, 0.0, 0.0, 0.0) * mat3(uLightViewProj);
+  mat3 S = mat3(aCovA.x, aCovA.y, aCovA.z, aCovA.y, aCovB.x, aCovB.y, aCovA.z, aCovB.y, aCovB.z);
+  mat3 C = T * S * transpose(T);
+  float a = C[0][0] + 0.3, b = C[0][1], c = C[1][1] + 0.3;
+  float det = a * c - b * b;
+  vOffset = vec2(0.0);
+  vConic = vec3(0.0);
+  vOpacity = 0.0;
+  if (!(det > 0.0)) {
+    gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
+    return;
+  }
+  vConic = vec3(c, -b, a) / det;
+  float mid = 0.5 * (a + c);
+  float radius = ceil(3.0 * sqrt(mid + sqrt(max(0.0, mid * mid - det))));
+  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;
+  vOffset = corner * radius;
+  vOpacity = aOpacity;
+  gl_Position = clip + vec4(vOffset * 2.0 / uMapSize * clip.w, 0.0, 0.0);
+}
+)";
+const char* const kSplatShadowFragmentShader = R"(#version 330 core
+in vec2 vOffset;
+in vec3 vConic;
+in float vOpacity;
+void main() {
+  float power = -0.5 * (vConic.x * vOffset.x * vOffset.x + vConic.z * vOffset.y * vOffset.y) -
+                vConic.y * vOffset.x * vOffset.y;
+  if (vOpacity * exp(power) < 0.5) discard;
+}
+)";
+
 GLuint compileShader(GLenum type, const char* source) {
   GLuint s = glCreateShader(type);
   glShaderSource(s, 1, &source, nullptr);
@@ -550,6 +599,8 @@ struct OffscreenRenderer::Impl {
   GLint uTop = -1, uBottom = -1, uHeight = -1, uBgInvGamma = -1;
   GLuint splatProgram = 0, splatVao = 0, splatVbo = 0;
   GLint uSplatView = -1, uSplatProj = -1, uSplatViewport = -1, uSplatInvGamma = -1, uSplatLightDir = -1;
+  GLuint splatShadowProgram = 0;
+  GLint uSplatShadowLvp = -1, uSplatShadowMapSize = -1;
   static constexpr int kSplatFloats = 16;
   std::vector<Splat> splats;  // the frame's, in call order
   std::vector<GpuMesh> meshes;  // indexed by handle; freed slots stay (handles are never reused)
@@ -582,6 +633,8 @@ struct OffscreenRenderer::Impl {
   void drawBackground();
   void draw(const GpuMesh& m, const DrawCall& c, bool countSamples);
   void drawSplats();
+  // Fills the splat buffer with the frame's splats, in `order` (indices into splats).
+  void uploadSplats(const std::vector<std::uint32_t>& order);
   std::uint64_t collectMeshSamples() const;
   void destroy();
   void checkGl(const char* where) const {
@@ -739,6 +792,9 @@ void OffscreenRenderer::Impl::createProgram() {
   uSplatViewport = glGetUniformLocation(splatProgram, "uViewport");
   uSplatInvGamma = glGetUniformLocation(splatProgram, "uInvGamma");
   uSplatLightDir = glGetUniformLocation(splatProgram, "uLightDir");
+  splatShadowProgram = linkProgram(kSplatShadowVertexShader, kSplatShadowFragmentShader);
+  uSplatShadowLvp = glGetUniformLocation(splatShadowProgram, "uLightViewProj");
+  uSplatShadowMapSize = glGetUniformLocation(splatShadowProgram, "uMapSize");
   // 16 floats per splat, one instance each: centre, covariance (6), colour, opacity, normal.
   glGenVertexArrays(1, &splatVao);
   glGenBuffers(1, &splatVbo);
@@ -816,8 +872,8 @@ GpuMesh& OffscreenRenderer::Impl::liveMesh(int handle, const char* who) {
   return m;
 }
 
-// Renders the depth of every recorded mesh as the light sees it into the shadow map. Returns
-// false (nothing drawn) when shadows are off or no mesh with triangles was recorded.
+// Renders the depth of every recorded mesh and splat as the light sees it into the shadow map.
+// Returns false (nothing drawn) when shadows are off or nothing that casts was recorded.
 bool OffscreenRenderer::Impl::renderShadowMap(Eigen::Matrix4d& lightViewProj) {
   if (!looks.shadows) return false;
   Eigen::AlignedBox3d casters;
@@ -829,6 +885,11 @@ bool OffscreenRenderer::Impl::renderShadowMap(Eigen::Matrix4d& lightViewProj) {
       const Eigen::Vector3f corner = m.bounds.corner(static_cast<Eigen::AlignedBox3f::CornerType>(k));
       casters.extend((c.model * corner.homogeneous()).head<3>().cast<double>());
     }
+  }
+  for (const Splat& sp : splats) {  // the centre, grown by 3 standard deviations of the widest axis
+    const double reach = 3.0 * std::sqrt(std::max(0.0f, sp.covariance.diagonal().maxCoeff()));
+    casters.extend(sp.centre.cast<double>() - Vec3::Constant(reach));
+    casters.extend(sp.centre.cast<double>() + Vec3::Constant(reach));
   }
   if (casters.isEmpty() || !casters.min().allFinite() || !casters.max().allFinite()) return false;
   lightViewProj = lightViewProjection(casters, looks.shadowMapSize);
@@ -852,6 +913,16 @@ bool OffscreenRenderer::Impl::renderShadowMap(Eigen::Matrix4d& lightViewProj) {
     glUniformMatrix4fv(uLightMvp, 1, GL_FALSE, mvp.data());
     glBindVertexArray(m.vao);
     glDrawElements(GL_TRIANGLES, m.indexCount, GL_UNSIGNED_INT, nullptr);
+  }
+  if (!splats.empty()) {
+    std::vector<std::uint32_t> order(splats.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
+    uploadSplats(order);
+    glUseProgram(splatShadowProgram);
+    glUniformMatrix4fv(uSplatShadowLvp, 1, GL_FALSE, lvp.data());
+    glUniform1f(uSplatShadowMapSize, static_cast<float>(looks.shadowMapSize));
+    glBindVertexArray(splatVao);
+    glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, static_cast<GLsizei>(splats.size()));
   }
   glBindVertexArray(0);
   glDisable(GL_POLYGON_OFFSET_FILL);
@@ -926,6 +997,7 @@ void OffscreenRenderer::Impl::destroy() {
       glDeleteProgram(shadowProgram);
       glDeleteProgram(backgroundProgram);
       glDeleteProgram(splatProgram);
+      glDeleteProgram(splatShadowProgram);
       glDeleteBuffers(1, &splatVbo);
       glDeleteVertexArrays(1, &splatVao);
       glDeleteVertexArrays(1, &emptyVao);
@@ -1090,6 +1162,22 @@ void OffscreenRenderer::drawSplats(const std::vector<Splat>& splats) {
   r.splats.insert(r.splats.end(), splats.begin(), splats.end());
 }
 
+void OffscreenRenderer::Impl::uploadSplats(const std::vector<std::uint32_t>& order) {
+  std::vector<float> data;
+  data.reserve(kSplatFloats * order.size());
+  for (std::uint32_t k : order) {
+    const Splat& s = splats[k];
+    const Eigen::Matrix3f& c = s.covariance;
+    const float row[kSplatFloats] = {s.centre.x(), s.centre.y(), s.centre.z(), c(0, 0),    c(0, 1),    c(0, 2),
+                                     c(1, 1),      c(1, 2),      c(2, 2),      s.color[0], s.color[1], s.color[2],
+                                     s.opacity,    s.normal.x(), s.normal.y(), s.normal.z()};
+    data.insert(data.end(), row, row + kSplatFloats);
+  }
+  glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(data.size() * sizeof(float)), data.data(), GL_STREAM_DRAW);
+  glBindBuffer(GL_ARRAY_BUFFER, 0);
+}
+
 // Back to front by the depth of the centre (ties: call order), then one instanced draw with
 // blending "over" on premultiplied colour; depth tested against the meshes, not written.
 void OffscreenRenderer::Impl::drawSplats() {
@@ -1101,19 +1189,9 @@ void OffscreenRenderer::Impl::drawSplats() {
     order[i] = {t.z(), static_cast<std::uint32_t>(i)};  // more negative z: farther
   }
   std::sort(order.begin(), order.end());
-  std::vector<float> data;
-  data.reserve(kSplatFloats * n);
-  for (const auto& o : order) {
-    const Splat& s = splats[o.second];
-    const Eigen::Matrix3f& c = s.covariance;
-    const float row[kSplatFloats] = {s.centre.x(), s.centre.y(), s.centre.z(), c(0, 0),    c(0, 1),    c(0, 2),
-                                     c(1, 1),      c(1, 2),      c(2, 2),      s.color[0], s.color[1], s.color[2],
-                                     s.opacity,    s.normal.x(), s.normal.y(), s.normal.z()};
-    data.insert(data.end(), row, row + kSplatFloats);
-  }
-  glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
-  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(data.size() * sizeof(float)), data.data(), GL_STREAM_DRAW);
-  glBindBuffer(GL_ARRAY_BUFFER, 0);
+  std::vector<std::uint32_t> sorted(n);
+  for (std::size_t i = 0; i < n; ++i) sorted[i] = order[i].second;
+  uploadSplats(sorted);
   glUseProgram(splatProgram);
   glUniformMatrix4fv(uSplatView, 1, GL_FALSE, view.data());
   glUniformMatrix4fv(uSplatProj, 1, GL_FALSE, proj.data());

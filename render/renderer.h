@@ -35,8 +35,10 @@ struct Looks {
   // Samples per pixel (MSAA), resolved to one colour per pixel in endFrame. 1 turns MSAA off.
   // Must be 1 or a power of two up to the driver's GL_MAX_SAMPLES (llvmpipe: 4 and 8 work).
   int samples = 4;
-  // Shadows of the meshes (not of the ground) from the directional light, on the ground and on
-  // each other, through a shadow map of shadowMapSize^2 depth texels fitted to the meshes drawn.
+  // Shadows of the meshes and Gaussian splats (not of the ground) from the directional light, on
+  // the ground and on the meshes, through a shadow map of shadowMapSize^2 depth texels fitted to
+  // what is drawn. A splat casts where its opacity-weighted Gaussian reaches 1/2; splats are not
+  // shadowed themselves (lit by their normal only).
   bool shadows = true;
   int shadowMapSize = 1024;  // 2048 costs about 8 ms more per frame on llvmpipe (docs/benchmarks.md)
 };

@@ -97,6 +97,43 @@ TEST(Looks, FloatingBoxShadowsTheGroundWhereTheLightSays) {
   EXPECT_LE(under, 0.7 * std::min(farValue, underLit));
 }
 
+// The same with the box made of Gaussian splats (10^3 splats of sigma 0.01 m, 0.02 m apart,
+// opacity 1: each casts where its Gaussian reaches 1/2, a disc of radius 1.18 sigma, so
+// neighbours overlap and the block is opaque to the light). Same oracle and bounds as above.
+TEST(Looks, FloatingSplatBlockShadowsTheGroundWhereTheLightSays) {
+  const ShadowScene s;
+  std::vector<Splat> block;
+  for (int i = 0; i < 10; ++i)
+    for (int j = 0; j < 10; ++j)
+      for (int k = 0; k < 10; ++k) {
+        Splat sp;
+        sp.centre = Vec3f(-0.09f + 0.02f * i, 0.31f + 0.02f * j, -0.09f + 0.02f * k);
+        sp.covariance = Eigen::Matrix3f::Identity() * 1e-4f;
+        sp.color = Color{0.9f, 0.2f, 0.1f};
+        block.push_back(sp);
+      }
+  auto render = [&](bool shadows) {
+    Looks looks;
+    looks.shadows = shadows;
+    OffscreenRenderer r(200, 150, looks);
+    r.beginFrame(s.camera, Color{0.8f, 0.85f, 0.9f});
+    r.drawGround(0.0, 0.0, 0.0, 2.0, Color{0.6f, 0.6f, 0.6f});
+    r.drawSplats(block);
+    return r.endFrame();
+  };
+  const Image lit = render(false), shaded = render(true);
+  const Vec3 l = lightDirection();
+  const Vec3 shadow = s.centre - l * (s.centre.y() / l.y());
+  const Vec3 mirrored(2.0 * s.centre.x() - shadow.x(), 0.0, 2.0 * s.centre.z() - shadow.z());
+  const double under = valueAt(shaded, s.camera, shadow), underLit = valueAt(lit, s.camera, shadow);
+  std::printf("ground under the splats: %.1f with shadows, %.1f without (ratio %.2f)\n", under, underLit,
+              under / underLit);
+  EXPECT_LE(under, 0.7 * underLit);
+  EXPECT_GE(under, 0.45 * underLit);
+  EXPECT_NEAR(valueAt(shaded, s.camera, mirrored), valueAt(lit, s.camera, mirrored), 1.0);
+  EXPECT_NEAR(valueAt(shaded, s.camera, Vec3(0.7, 0.0, 0.1)), valueAt(lit, s.camera, Vec3(0.7, 0.0, 0.1)), 1.0);
+}
+
 // ---- MSAA
 
 // One flat triangle facing the camera, roughness 1 (Blinn-Phong exponent 0: the highlight is
