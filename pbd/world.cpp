@@ -1177,12 +1177,20 @@ void PbdWorld::findBodyPairs() {
   BodyPairContacts& pairs = contacts_.bodyPair;
   const double r = params_.particleRadius, margin = 2.0 * r, h = params_.dt / params_.substeps;
   const float radius = static_cast<float>(2.0 * r + margin);
-  std::vector<float> x, y, z;
-  std::vector<std::int32_t> id;
-  NeighborGrid grid;
+  // The body pairs that may touch this substep (sphere tests, cheap), then their particle
+  // pairs, each body pair on its own (in parallel, in units of 8 pairs with their own grid
+  // and scratch), concatenated in pair order: the list does not depend on the threads.
+  std::vector<std::pair<std::int32_t, std::int32_t>> candidates;
   for (std::size_t a = 0; a < members_.size(); ++a)
-    for (std::size_t b = a + 1; b < members_.size(); ++b) {
-      if (!mayTouch(a, b, h)) continue;
+    for (std::size_t b = a + 1; b < members_.size(); ++b)
+      if (mayTouch(a, b, h)) candidates.emplace_back(static_cast<std::int32_t>(a), static_cast<std::int32_t>(b));
+  std::vector<std::vector<std::int32_t>> found(candidates.size());  // per candidate: pa, pb interleaved
+  forChunks(candidates.size(), 8, [&](std::size_t lo, std::size_t hi) {
+    std::vector<float> x, y, z;
+    std::vector<std::int32_t> id;
+    NeighborGrid grid;
+    for (std::size_t c = lo; c < hi; ++c) {
+      const auto a = std::size_t(candidates[c].first), b = std::size_t(candidates[c].second);
       x.clear(), y.clear(), z.clear(), id.clear();
       std::size_t na = 0;
       for (int side = 0; side < 2; ++side) {
@@ -1201,19 +1209,28 @@ void PbdWorld::findBodyPairs() {
       }
       if (na == 0 || na == id.size()) continue;
       grid.build(x.data(), y.data(), z.data(), x.size(), radius);
-      const std::size_t first = pairs.pa.size();
+      std::vector<std::int32_t>& out = found[c];
       for (std::size_t k = 0; k < na; ++k)
         grid.forEachNeighbor(static_cast<std::int32_t>(k), radius, [&](std::int32_t j) {
           if (std::size_t(j) < na) return;  // a particle of the same body
-          pairs.pa.push_back(id[k]);
-          pairs.pb.push_back(id[std::size_t(j)]);
+          out.push_back(id[k]);
+          out.push_back(id[std::size_t(j)]);
         });
-      if (pairs.pa.size() == first) continue;
-      pairs.a.push_back(static_cast<std::int32_t>(a));
-      pairs.b.push_back(static_cast<std::int32_t>(b));
-      pairs.first.push_back(static_cast<std::int32_t>(first));
-      pairs.count.push_back(static_cast<std::int32_t>(pairs.pa.size() - first));
     }
+  });
+  for (std::size_t c = 0; c < candidates.size(); ++c) {
+    const std::vector<std::int32_t>& f = found[c];
+    if (f.empty()) continue;
+    const std::size_t first = pairs.pa.size();
+    for (std::size_t k = 0; k < f.size(); k += 2) {
+      pairs.pa.push_back(f[k]);
+      pairs.pb.push_back(f[k + 1]);
+    }
+    pairs.a.push_back(candidates[c].first);
+    pairs.b.push_back(candidates[c].second);
+    pairs.first.push_back(static_cast<std::int32_t>(first));
+    pairs.count.push_back(static_cast<std::int32_t>(pairs.pa.size() - first));
+  }
 }
 
 // Body against body (Müller et al. 2020, positional constraints between two bodies, at
