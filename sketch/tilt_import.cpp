@@ -139,10 +139,10 @@ bool parseTiltJoin(const std::string& word, TiltJoin& out) {
 
 TiltImport importTilt(const TiltSketch& sk, const TiltImportOptions& o) {
   const std::string& src = o.source;
-  if (!(o.workspaceSize > 0 && o.workspaceSize <= 1000)) throw InputError(src, 0, "workspace", "size must be in (0, 1000] m");
-  if (!(o.fit > 0 && o.fit <= 0.98)) throw InputError(src, 0, "fit", "must be in (0, 0.98]");
-  if (!(o.scale >= 0 && std::isfinite(o.scale))) throw InputError(src, 0, "scale", "must be > 0");
-  if (!(o.density > 0 && o.density <= 1e5)) throw InputError(src, 0, "density", "must be in (0, 1e5] kg/m^3");
+  if (!(o.workspaceSize > 0 && o.workspaceSize <= 1000)) throw InputError(src, 0, "--workspace", "size must be in (0, 1000] m");
+  if (!(o.fit > 0 && o.fit <= 0.98)) throw InputError(src, 0, "--fit", "must be in (0, 0.98]");
+  if (!(o.scale >= 0 && std::isfinite(o.scale))) throw InputError(src, 0, "--scale", "must be > 0");
+  if (!(o.density > 0 && o.density <= 1e5)) throw InputError(src, 0, "--density", "must be in (0, 1e5] kg/m^3");
   TiltImport r;
   r.strokesRead = static_cast<int>(sk.strokes.size());
   std::vector<int> used;
@@ -173,7 +173,7 @@ TiltImport importTilt(const TiltSketch& sk, const TiltImportOptions& o) {
   const Vec3 offset(o.workspaceCenter.x() - r.scale * mid.x(), floor + h - r.scale * lo.y(),
                     o.workspaceCenter.z() - r.scale * mid.z());
   if (r.scale * extent > o.workspaceSize - 2 * h)
-    throw InputError(src, 0, "scale", "at scale " + fmt("%.6g", r.scale) + " the sketch spans " +
+    throw InputError(src, 0, "--scale", "at scale " + fmt("%.6g", r.scale) + " the sketch spans " +
                                           fmt("%.4g", r.scale * extent) + " m, more than the " +
                                           fmt("%.4g", o.workspaceSize) + " m workspace: lower the scale, or fit it");
 

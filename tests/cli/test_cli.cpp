@@ -803,6 +803,9 @@ TEST(Cli, ImportTiltWritesAStrokeFileAndASceneThatLintAndRun) {
   r = runCli("import-tilt '" + tilt + "' --join glue -o '" + (bad / "x.strokes").string() + "'", dir);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("field '--join': 'glue' is not one of touching, material, none"), std::string::npos) << r.err;
+  r = runCli("import-tilt '" + tilt + "' --fit 0 -o '" + (bad / "x.strokes").string() + "'", dir);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("sketch1.tilt: field '--fit': must be in (0, 0.98]"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(bad));
   fs::remove_all(dir);
 }

@@ -325,7 +325,7 @@ TEST(TiltImport, AnExplicitScaleKeepsSizesOrRefusesWhatDoesNotFit) {
   EXPECT_NEAR(s.size, 0.05, 1e-6);
   o.scale = 3.0;  // 1.5 m in a 1 m workspace
   const std::string why = reason([&] { importTilt(sk, o); });
-  EXPECT_NE(why.find("field 'scale'"), std::string::npos) << why;
+  EXPECT_NE(why.find("field '--scale'"), std::string::npos) << why;
 }
 
 TEST(TiltImport, StrokesOverlappingInTimeArePlayedOneAfterTheOther) {
