@@ -29,7 +29,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"cluster_match", Cadence::kPerIteration, "soft bodies: clustered shape matching with XPBD compliance (Müller 2005, Macklin 2016)"},
     {"distance", Cadence::kPerIteration, "rope and cloth: XPBD stretch and bending, attachments to bodies, tethers"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
-    {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps"},
+    {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps; then the ground lifts out what they pressed into it"},
     {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution; soft bodies bounce at their centre of mass"},
@@ -1369,6 +1369,42 @@ void PbdWorld::bodyContact() {
       if (da) ma.c = pa.c, ma.q = pa.q;
       if (db) mb.c = pb.c, mb.q = pb.q;
     }
+  groundLastWord();
+}
+
+// The ground has the last word: body_contact, solved after rigid_contact, may press a body
+// into the ground (a box under a landing pile). One sweep lifts every body in ground contact
+// by its deepest penetration at the patch's depth-weighted centroid, as rigid_contact's normal
+// correction does (no friction: rigid_contact has applied it this substep). Independent per
+// body: parallel.
+void PbdWorld::groundLastWord() {
+  const BodyPlaneContacts& bp = contacts_.bodyPlane;
+  forEach(bp.size(), [&](std::size_t c) {
+    const auto b = std::size_t(bp.body[c]);
+    if (mode_[b] != BodyMode::kDynamic) return;
+    const Plane& plane = contacts_.planes[std::size_t(bp.plane[c])];
+    const double floorY = plane.offset + params_.particleRadius;
+    const Vec3 up = plane.normal;
+    const std::int32_t* cand = bp.candidates.data() + bp.first[c];
+    Motion& mo = motion_[b];
+    RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
+    const Mat3 R = pose.q.toRotationMatrix();
+    double wsum = 0.0, dmax = 0.0;
+    Vec3 psum = Vec3::Zero();
+    for (std::int32_t m = 0; m < bp.count[c]; ++m) {
+      const auto j = std::size_t(cand[m]);
+      const Vec3 p = R * Vec3(rx_[j], ry_[j], rz_[j]) + pose.c;
+      const double d = floorY - up.dot(p);
+      if (d <= 0.0) continue;
+      wsum += d;
+      dmax = std::max(dmax, d);
+      psum += d * p;
+    }
+    if (wsum == 0.0) return;
+    applyPointCorrection(pose, psum / wsum, up, dmax);
+    mo.c = pose.c;
+    mo.q = pose.q;
+  });
 }
 
 void PbdWorld::rigidContact() {

@@ -219,6 +219,7 @@ class PbdWorld final : public Solver {
   void predict(double h);
   void kinematicParticles(std::size_t body, const Vec3& delta);
   void findNeighbors();
+  void groundLastWord();
   void particleContact();
   void clusterMatch(double h);
   void distanceConstraints(double h);
