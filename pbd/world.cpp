@@ -1245,8 +1245,34 @@ void PbdWorld::bodyContact() {
   const double touch = 2.0 * params_.particleRadius;
   const bool bounce = work_[std::size_t(PbdPass::kRestitution)];
   pairHits_.clear();
-  for (int it = 0; it < params_.iterations; ++it)
-    for (std::size_t c = 0; c < pairs.size(); ++c) {
+  // Graph colouring: pairs of one colour share no dynamic body, so they are solved in
+  // parallel, colour after colour (Gauss-Seidel across colours, Jacobi-free within: each
+  // pair reads and writes only its own two bodies). Greedy in pair order: the colours
+  // depend on the pairs alone, never on the threads. Past 64 colours, the rest serially.
+  const std::size_t npairs = pairs.size();
+  std::vector<std::vector<std::int32_t>> colours;
+  std::vector<std::int32_t> serial;
+  {
+    std::vector<std::uint64_t> used(members_.size(), 0);
+    for (std::size_t c = 0; c < npairs; ++c) {
+      const auto a = std::size_t(pairs.a[c]), b = std::size_t(pairs.b[c]);
+      const bool da = mode_[a] == BodyMode::kDynamic, db = mode_[b] == BodyMode::kDynamic;
+      const std::uint64_t taken = (da ? used[a] : 0) | (db ? used[b] : 0);
+      if (~taken == 0) {
+        serial.push_back(static_cast<std::int32_t>(c));
+        continue;
+      }
+      int k = 0;
+      while (taken & (std::uint64_t(1) << k)) ++k;
+      if (std::size_t(k) >= colours.size()) colours.resize(std::size_t(k) + 1);
+      colours[std::size_t(k)].push_back(static_cast<std::int32_t>(c));
+      if (da) used[a] |= std::uint64_t(1) << k;
+      if (db) used[b] |= std::uint64_t(1) << k;
+    }
+  }
+  std::vector<PairHit> hits(bounce ? npairs : 0);
+  std::vector<char> hit(bounce ? npairs : 0, 0);
+  const auto solve = [&](std::size_t c, int it) {
       const auto a = std::size_t(pairs.a[c]), b = std::size_t(pairs.b[c]);
       Motion &ma = motion_[a], &mb = motion_[b];
       const bool da = mode_[a] == BodyMode::kDynamic, db = mode_[b] == BodyMode::kDynamic;
@@ -1284,7 +1310,7 @@ void PbdWorld::bodyContact() {
         nsum += d * nk;
         ssum += d * motion;
       }
-      if (wsum == 0.0 || nsum.norm() == 0.0) continue;
+      if (wsum == 0.0 || nsum.norm() == 0.0) return;
       Vec3 n = nsum.normalized();  // from b towards a
       // A flat patch (face on face) takes its normal from the plane through its pair
       // midpoints, not from the pair directions: those tilt by offset / spacing where the
@@ -1319,16 +1345,17 @@ void PbdWorld::bodyContact() {
         const double d = pairDepth(k, pi, pj, motion, nk);
         if (d > 0.0) dmax = std::max(dmax, d * nk.dot(n));
       }
-      if (dmax <= 0.0) continue;
+      if (dmax <= 0.0) return;
       const Vec3 pc = psum / wsum;
       const double wa = da ? generalizedInverseMass(pa, pc, n) : 0.0, wb = db ? generalizedInverseMass(pb, pc, n) : 0.0;
-      if (wa + wb <= 0.0) continue;
+      if (wa + wb <= 0.0) return;
       const double lambdaN = dmax / (wa + wb);
       // For restitution: the pair's contact, and its normal speed before the solve (the
       // velocities are the substep's predicted ones until update).
       if (bounce && it == 0 && restitution_[a] + restitution_[b] > 0.0) {
         const Vec3 va = ma.v + ma.w.cross(pc - ma.c), vb = mb.v + mb.w.cross(pc - mb.c);
-        pairHits_.push_back({pairs.a[c], pairs.b[c], pc, n, n.dot(va - vb)});
+        hits[c] = {pairs.a[c], pairs.b[c], pc, n, n.dot(va - vb)};
+        hit[c] = 1;
       }
       // The contact point as a point of each body, to follow it through the normal correction.
       const Vec3 localA = pa.q.conjugate() * (pc - pa.c), localB = pb.q.conjugate() * (pc - pb.c);
@@ -1368,7 +1395,13 @@ void PbdWorld::bodyContact() {
       }
       if (da) ma.c = pa.c, ma.q = pa.q;
       if (db) mb.c = pb.c, mb.q = pb.q;
-    }
+  };
+  for (int it = 0; it < params_.iterations; ++it) {
+    for (const auto& colour : colours) forEach(colour.size(), [&](std::size_t k) { solve(std::size_t(colour[k]), it); });
+    for (std::int32_t c : serial) solve(std::size_t(c), it);
+  }
+  for (std::size_t c = 0; c < hit.size(); ++c)
+    if (hit[c]) pairHits_.push_back(hits[c]);
   groundLastWord();
 }
 
