@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "core/error.h"
 #include "core/scene.h"
@@ -459,6 +460,25 @@ TEST(TiltImport, TheRealSketchImportsAndVoxelizesWithoutWarnings) {
   EXPECT_EQ(static_cast<std::int64_t>(vox.particles.size()), r.particles);
   EXPECT_EQ(static_cast<int>(vox.bodies.size()), r.bodies);
   EXPECT_TRUE(vox.warnings.empty()) << vox.warnings.front();
+}
+
+// The bundled example (scenes/tilt.scene and .strokes) is what the importer writes from the real
+// file with the default options; regenerate it with
+//   build/apps/physketch/physketch import-tilt tests/data/tilt/sketch1.tilt -o scenes/tilt.strokes
+TEST(TiltImport, TheBundledExampleIsTheImportOfTheRealFile) {
+  const TiltSketch sk = readTilt(PHYSKETCH_SOURCE_DIR "/tests/data/tilt/sketch1.tilt");
+  TiltImportOptions o;
+  o.source = "tests/data/tilt/sketch1.tilt";
+  o.strokesName = "tilt.strokes";
+  const TiltImport r = importTilt(sk, o);
+  auto slurp = [](const std::string& path) {
+    std::ifstream in(path);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  };
+  EXPECT_EQ(slurp(PHYSKETCH_SOURCE_DIR "/scenes/tilt.strokes"), r.strokes);
+  EXPECT_EQ(slurp(PHYSKETCH_SOURCE_DIR "/scenes/tilt.scene"), r.scene);
 }
 
 }  // namespace
