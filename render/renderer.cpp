@@ -297,6 +297,26 @@ void main() {
 
 // Gaussian splats (OffscreenRenderer::drawSplats): one instanced quad per splat, sized to 3
 // standard deviations of its projected Gaussian; the fragment shader evaluates the Gaussian.
+// What the splat shaders (drawn and shadow) share, pasted into their sources: the quad of a
+// projected Gaussian of 2-D covariance C (pixels^2; + 0.3 px^2 of filter), its conic (the
+// inverse covariance: xx, xy, yy) and this vertex's corner offset; false when degenerate.
+#define PHYSKETCH_SPLAT_QUAD_GLSL \
+  "bool splatQuad(mat3 C, out vec3 conic, out vec2 offset) {\n" \
+  "  float a = C[0][0] + 0.3, b = C[0][1], c = C[1][1] + 0.3;\n" \
+  "  float det = a * c - b * b;\n" \
+  "  if (!(det > 0.0)) return false;\n" \
+  "  conic = vec3(c, -b, a) / det;\n" \
+  "  float mid = 0.5 * (a + c);\n" \
+  "  float radius = ceil(3.0 * sqrt(mid + sqrt(max(0.0, mid * mid - det))));\n" \
+  "  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;\n" \
+  "  offset = corner * radius;\n" \
+  "  return true;\n" \
+  "}\n"
+// The Gaussian's exponent at a pixel offset from its centre.
+#define PHYSKETCH_SPLAT_POWER_GLSL \
+  "float splatPower(vec2 o, vec3 conic) {\n" \
+  "  return -0.5 * (conic.x * o.x * o.x + conic.z * o.y * o.y) - conic.y * o.x * o.y;\n" \
+  "}\n"
 const char* const kSplatVertexShader = R"(#version 330 core
 layout(location = 0) in vec3 aCentre;
 layout(location = 1) in vec3 aCovA;    // covariance xx, xy, xz (m^2)
@@ -312,7 +332,7 @@ out vec2 vOffset;                      // from the projected centre, pixels (y u
 out vec3 vConic;                       // the inverse of Sigma2: (xx, xy, yy)
 out vec3 vColor;
 out float vOpacity;
-void main() {
+)" PHYSKETCH_SPLAT_QUAD_GLSL R"(void main() {
   vec4 t = uView * vec4(aCentre, 1.0);
   float z = -t.z;                      // depth in front of the eye
   vOffset = vec2(0.0);
@@ -330,19 +350,10 @@ void main() {
   mat3 J = mat3(fx / z, 0.0, 0.0, 0.0, fy / z, 0.0, fx * t.x / (z * z), fy * t.y / (z * z), 0.0);
   mat3 T = J * mat3(uView);
   mat3 S = mat3(aCovA.x, aCovA.y, aCovA.z, aCovA.y, aCovB.x, aCovB.y, aCovA.z, aCovB.y, aCovB.z);
-  mat3 C = T * S * transpose(T);
-  float a = C[0][0] + 0.3, b = C[0][1], c = C[1][1] + 0.3;
-  float det = a * c - b * b;
-  if (!(det > 0.0)) {
+  if (!splatQuad(T * S * transpose(T), vConic, vOffset)) {
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
     return;
   }
-  vConic = vec3(c, -b, a) / det;
-  float mid = 0.5 * (a + c);
-  float largest = mid + sqrt(max(0.0, mid * mid - det));
-  float radius = ceil(3.0 * sqrt(largest));
-  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;
-  vOffset = corner * radius;
   vOpacity = aOpacity;
   gl_Position = clip + vec4(vOffset * 2.0 / uViewport * clip.w, 0.0, 0.0);
 }
@@ -354,10 +365,8 @@ in vec3 vColor;
 in float vOpacity;
 uniform float uInvGamma;
 out vec4 fragColor;
-void main() {
-  float power = -0.5 * (vConic.x * vOffset.x * vOffset.x + vConic.z * vOffset.y * vOffset.y) -
-                vConic.y * vOffset.x * vOffset.y;
-  float alpha = min(0.99, vOpacity * exp(power));
+)" PHYSKETCH_SPLAT_POWER_GLSL R"(void main() {
+  float alpha = min(0.99, vOpacity * exp(splatPower(vOffset, vConic)));
   if (alpha < 1.0 / 255.0) discard;
   fragColor = vec4(pow(clamp(vColor, 0.0, 1.0), vec3(uInvGamma)) * alpha, alpha);  // premultiplied
 }
@@ -377,26 +386,18 @@ uniform float uMapSize;                // texels
 out vec2 vOffset;
 out vec3 vConic;
 out float vOpacity;
-void main() {
+)" PHYSKETCH_SPLAT_QUAD_GLSL R"(void main() {
   vec4 clip = uLightViewProj * vec4(aCentre, 1.0);
   float s = 0.5 * uMapSize;
   mat3 T = mat3(s, 0.0, 0.0, 0.0, s, 0.0, 0.0, 0.0, 0.0) * mat3(uLightViewProj);
   mat3 S = mat3(aCovA.x, aCovA.y, aCovA.z, aCovA.y, aCovB.x, aCovB.y, aCovA.z, aCovB.y, aCovB.z);
-  mat3 C = T * S * transpose(T);
-  float a = C[0][0] + 0.3, b = C[0][1], c = C[1][1] + 0.3;
-  float det = a * c - b * b;
   vOffset = vec2(0.0);
   vConic = vec3(0.0);
   vOpacity = 0.0;
-  if (!(det > 0.0)) {
+  if (!splatQuad(T * S * transpose(T), vConic, vOffset)) {
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
     return;
   }
-  vConic = vec3(c, -b, a) / det;
-  float mid = 0.5 * (a + c);
-  float radius = ceil(3.0 * sqrt(mid + sqrt(max(0.0, mid * mid - det))));
-  vec2 corner = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1)) * 2.0 - 1.0;
-  vOffset = corner * radius;
   vOpacity = aOpacity;
   gl_Position = clip + vec4(vOffset * 2.0 / uMapSize * clip.w, 0.0, 0.0);
 }
@@ -405,10 +406,8 @@ const char* const kSplatShadowFragmentShader = R"(#version 330 core
 in vec2 vOffset;
 in vec3 vConic;
 in float vOpacity;
-void main() {
-  float power = -0.5 * (vConic.x * vOffset.x * vOffset.x + vConic.z * vOffset.y * vOffset.y) -
-                vConic.y * vOffset.x * vOffset.y;
-  if (vOpacity * exp(power) < 0.5) discard;
+)" PHYSKETCH_SPLAT_POWER_GLSL R"(void main() {
+  if (vOpacity * exp(splatPower(vOffset, vConic)) < 0.5) discard;
 }
 )";
 

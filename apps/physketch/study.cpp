@@ -724,7 +724,7 @@ Trajectory calibrationRun(const std::string& scenePath, const Setting& setting, 
 }
 
 int runStudy(const StudyOptions& opt) {
-  try {
+  return withExitCodes([&] {
     if (!opt.collect.empty()) return collect(opt);
     if (opt.scene.empty()) throw InputError("study", 0, "scene", "missing SCENE (or --collect DIR)");
     const int threads = opt.threads > 0 ? opt.threads : defaultThreads(opt.jobs);
@@ -769,13 +769,7 @@ int runStudy(const StudyOptions& opt) {
       std::cerr << "physketch study: " << parts.size() << " settings -> " << (fs::path(opt.outDir) / "study.csv").string()
                 << ", study.md, study.png\n";
     return kExitOk;
-  } catch (const InputError& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return kExitRuntime;
-  }
+  });
 }
 
 std::string sceneDigest(const SceneDesc& scene) {
