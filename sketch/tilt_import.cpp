@@ -263,11 +263,17 @@ TiltImport importTilt(const TiltSketch& sk, const TiltImportOptions& o) {
           }
     }
   }
+  // A body per component that holds particles (a stroke whose voxels were all taken makes none).
   std::vector<int> members(out.size(), 0);
-  for (std::size_t k = 0; k < out.size(); ++k) ++members[static_cast<std::size_t>(uf.find(static_cast<int>(k)))];
+  std::vector<char> holds(out.size(), 0);
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    const auto root = static_cast<std::size_t>(uf.find(static_cast<int>(k)));
+    ++members[root];
+    if (vox.operations[k].remaining > 0) holds[root] = 1;
+  }
   for (std::size_t k = 0; k < out.size(); ++k) {
     const int root = uf.find(static_cast<int>(k));
-    if (root == static_cast<int>(k)) ++r.bodies;
+    if (root == static_cast<int>(k) && holds[k]) ++r.bodies;
     if (members[static_cast<std::size_t>(root)] > 1) out[k].body = "part_" + std::to_string(out[static_cast<std::size_t>(root)].source + 1);
   }
   r.strokes = strokesText(out, colours, r, o);

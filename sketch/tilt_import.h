@@ -58,7 +58,7 @@ struct TiltImport {
   int thickened = 0;     // strokes widened to two particle spacings
   int delayed = 0;       // strokes moved later so that times never go back
   int pointsNudged = 0;  // points whose time did not increase
-  int bodies = 0;        // bodies in the sketch after joining
+  int bodies = 0;        // bodies in the sketch after joining (those that hold particles)
   int materials = 0;
   std::int64_t particles = 0;
 };

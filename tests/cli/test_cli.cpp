@@ -792,6 +792,36 @@ TEST(Cli, ImportTiltWritesAStrokeFileAndASceneThatLintAndRun) {
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(dir / "out" / "frames" / "frame_0002.png"));
 
+  // A real 471-stroke artwork (tests/data/tilt/README.md): as drawn, hundreds of wire-thin
+  // bodies; with the defaults (touching strokes joined, thin ones thickened) a handful, that
+  // lint and run.
+  auto bodiesOf = [&](const fs::path& sceneFile) {
+    const std::string out = (dir / "lint_bt.txt").string();
+    const int st = std::system((std::string(PHYSKETCH_CLI) + " lint '" + sceneFile.string() + "' > '" + out + "' 2>&1").c_str());
+    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << slurp(out);
+    const std::string text = slurp(out);
+    const std::size_t at = text.find(" bodies, play");
+    if (at == std::string::npos) return -1;
+    const std::size_t from = text.rfind(' ', at - 1) + 1;
+    return std::stoi(text.substr(from, at - from));
+  };
+  const std::string bird = std::string(PHYSKETCH_SOURCE_DIR) + "/tests/data/tilt/Blue_Tit.tilt";
+  r = runCli("import-tilt '" + bird + "' -q -o '" + (dir / "bt" / "bird.strokes").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const int joined = bodiesOf(dir / "bt" / "bird.scene");
+  r = runCli("import-tilt '" + bird + "' -q --join none --no-thicken -o '" + (dir / "bt" / "apart.strokes").string() + "'",
+             dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const int apart = bodiesOf(dir / "bt" / "apart.scene");
+  std::printf("Blue_Tit.tilt: %d bodies as drawn, %d imported with the defaults\n", apart, joined);
+  EXPECT_GT(apart, 400);
+  EXPECT_GE(joined, 1);
+  EXPECT_LE(joined, 10);
+  r = runCli("run '" + (dir / "bt" / "bird.scene").string() + "' -q --frames 3 --out '" + (dir / "bt" / "out").string() + "'",
+             dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "bt" / "out" / "frames" / "frame_0002.png"));
+
   const fs::path bad = dir / "bad";
   r = runCli("import-tilt '" + (dir / "no_such.tilt").string() + "' -o '" + (bad / "x.strokes").string() + "'", dir);
   EXPECT_EQ(r.code, 1);

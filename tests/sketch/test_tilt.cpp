@@ -499,6 +499,15 @@ TEST(TiltImport, TheRealSketchImportsAndVoxelizesWithoutWarnings) {
   EXPECT_EQ(static_cast<std::int64_t>(vox.particles.size()), r.particles);
   EXPECT_EQ(static_cast<int>(vox.bodies.size()), r.bodies);
   EXPECT_TRUE(vox.warnings.empty()) << vox.warnings.front();
+  // The 471-stroke artwork: four strokes lie inside others and make no particle; the count of
+  // bodies the importer reports is still the sketch's.
+  const TiltSketch bird = readTilt(PHYSKETCH_SOURCE_DIR "/tests/data/tilt/Blue_Tit.tilt");
+  ASSERT_EQ(bird.strokes.size(), 471u);
+  const TiltImport rb = importTilt(bird, {});
+  const Sketch vb = voxelize(parsed(rb), GridMapping(scene.workspaceCenter, scene.workspaceSize),
+                             parseScene(rb.scene, "b.scene").materials);
+  EXPECT_EQ(static_cast<int>(vb.bodies.size()), rb.bodies);
+  EXPECT_EQ(rb.thickened, 471);
 }
 
 // The bundled example (scenes/tilt.scene and .strokes) is what the importer writes from the real
