@@ -402,7 +402,8 @@ TEST(TiltImport, ThinStrokesAreThickenedToTwoParticleSpacings) {
   {
     const TiltImport r = importTilt(sk, {});
     EXPECT_EQ(r.thickened, 1);
-    const auto& thin = parsed(r).operations[1].stroke;
+    const StrokeFile written = parsed(r);
+    const auto& thin = written.operations[1].stroke;
     for (const Sample& s : thin.samples) EXPECT_GE(thin.size * s.pressure, 2.0 * h) << s.line;
     // The lint warning it is meant to silence (features thinner than two spacings) stays away.
     SceneDesc scene = parseScene(r.scene, "s.scene");
@@ -413,7 +414,8 @@ TEST(TiltImport, ThinStrokesAreThickenedToTwoParticleSpacings) {
   o.thicken = false;
   const TiltImport r = importTilt(sk, o);
   EXPECT_EQ(r.thickened, 0);
-  const auto& thin = parsed(r).operations[1].stroke;
+  const StrokeFile written = parsed(r);
+  const auto& thin = written.operations[1].stroke;
   EXPECT_NEAR(thin.size, r.scale * 0.001, 1e-6);
   EXPECT_LT(thin.size, 2.0 * h);
 }
