@@ -1238,8 +1238,9 @@ void PbdWorld::findBodyPairs() {
 // than one spacing) form a patch; one correction of the patch's deepest overlap along its
 // depth-weighted normal at its depth-weighted centre, split between the two bodies by
 // their generalized inverse masses (a fixed or carried body has none), then Coulomb
-// friction on impulses with the mean of the two bodies' coefficients. Pairs are swept in
-// order, serially (Gauss-Seidel), so the result does not depend on threads.
+// friction on impulses with the mean of the two bodies' coefficients. Pairs are swept colour
+// by colour (Gauss-Seidel; a colour's pairs share no dynamic body and run in parallel), so
+// the result does not depend on threads.
 void PbdWorld::bodyContact() {
   const BodyPairContacts& pairs = contacts_.bodyPair;
   const double touch = 2.0 * params_.particleRadius;
