@@ -632,8 +632,10 @@ struct OffscreenRenderer::Impl {
   void drawBackground();
   void draw(const GpuMesh& m, const DrawCall& c, bool countSamples);
   void drawSplats();
-  // Fills the splat buffer with the frame's splats, in `order` (indices into splats).
-  void uploadSplats(const std::vector<std::uint32_t>& order);
+  // Fills the splat buffer with the frame's splats, back to front (the order drawSplats blends
+  // them in; the shadow pass draws the same buffer), once per frame.
+  void uploadSplats();
+  bool splatsUploaded = false;
   std::uint64_t collectMeshSamples() const;
   void destroy();
   void checkGl(const char* where) const {
@@ -914,9 +916,7 @@ bool OffscreenRenderer::Impl::renderShadowMap(Eigen::Matrix4d& lightViewProj) {
     glDrawElements(GL_TRIANGLES, m.indexCount, GL_UNSIGNED_INT, nullptr);
   }
   if (!splats.empty()) {
-    std::vector<std::uint32_t> order(splats.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<std::uint32_t>(i);
-    uploadSplats(order);
+    uploadSplats();
     glUseProgram(splatShadowProgram);
     glUniformMatrix4fv(uSplatShadowLvp, 1, GL_FALSE, lvp.data());
     glUniform1f(uSplatShadowMapSize, static_cast<float>(looks.shadowMapSize));
@@ -1108,6 +1108,7 @@ void OffscreenRenderer::beginFrame(const Camera& camera, const Background& backg
   r.background = background;
   r.calls.clear();
   r.splats.clear();
+  r.splatsUploaded = false;
   r.queriesUsed = 0;
   r.inFrame = true;
 }
@@ -1161,11 +1162,20 @@ void OffscreenRenderer::drawSplats(const std::vector<Splat>& splats) {
   r.splats.insert(r.splats.end(), splats.begin(), splats.end());
 }
 
-void OffscreenRenderer::Impl::uploadSplats(const std::vector<std::uint32_t>& order) {
+// Back to front by the depth of the centre (ties: call order).
+void OffscreenRenderer::Impl::uploadSplats() {
+  if (splatsUploaded) return;
+  const std::size_t n = splats.size();
+  std::vector<std::pair<float, std::uint32_t>> order(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector4f t = view * splats[i].centre.homogeneous();
+    order[i] = {t.z(), static_cast<std::uint32_t>(i)};  // more negative z: farther
+  }
+  std::sort(order.begin(), order.end());
   std::vector<float> data;
-  data.reserve(kSplatFloats * order.size());
-  for (std::uint32_t k : order) {
-    const Splat& s = splats[k];
+  data.reserve(kSplatFloats * n);
+  for (const auto& o : order) {
+    const Splat& s = splats[o.second];
     const Eigen::Matrix3f& c = s.covariance;
     const float row[kSplatFloats] = {s.centre.x(), s.centre.y(), s.centre.z(), c(0, 0),    c(0, 1),    c(0, 2),
                                      c(1, 1),      c(1, 2),      c(2, 2),      s.color[0], s.color[1], s.color[2],
@@ -1175,22 +1185,15 @@ void OffscreenRenderer::Impl::uploadSplats(const std::vector<std::uint32_t>& ord
   glBindBuffer(GL_ARRAY_BUFFER, splatVbo);
   glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(data.size() * sizeof(float)), data.data(), GL_STREAM_DRAW);
   glBindBuffer(GL_ARRAY_BUFFER, 0);
+  splatsUploaded = true;
 }
 
-// Back to front by the depth of the centre (ties: call order), then one instanced draw with
-// blending "over" on premultiplied colour; depth tested against the meshes, not written.
+// The uploaded splats (uploadSplats), in one instanced draw with blending "over" on
+// premultiplied colour; depth tested against the meshes, not written.
 void OffscreenRenderer::Impl::drawSplats() {
   if (splats.empty()) return;
   const std::size_t n = splats.size();
-  std::vector<std::pair<float, std::uint32_t>> order(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector4f t = view * splats[i].centre.homogeneous();
-    order[i] = {t.z(), static_cast<std::uint32_t>(i)};  // more negative z: farther
-  }
-  std::sort(order.begin(), order.end());
-  std::vector<std::uint32_t> sorted(n);
-  for (std::size_t i = 0; i < n; ++i) sorted[i] = order[i].second;
-  uploadSplats(sorted);
+  uploadSplats();
   glUseProgram(splatProgram);
   glUniformMatrix4fv(uSplatView, 1, GL_FALSE, view.data());
   glUniformMatrix4fv(uSplatProj, 1, GL_FALSE, proj.data());
@@ -1208,6 +1211,7 @@ void OffscreenRenderer::Impl::drawSplats() {
   glDisable(GL_BLEND);
   glDepthMask(GL_TRUE);
   splats.clear();
+  splatsUploaded = false;
   checkGl("drawSplats");
 }
 
