@@ -5,6 +5,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "core/parallel.h"
 #include "mpm/world.h"
@@ -24,6 +28,40 @@ inline void bsplineWeights(float f, float w[3]) {
   w[1] = 0.75f - (f - 1.0f) * (f - 1.0f);
   w[2] = 0.5f * (f - 0.5f) * (f - 0.5f);
 }
+
+// Four floats added and multiplied lane by lane: one grid node's record (mass, then three
+// momentum or velocity components) as one SSE register. Each lane is the same IEEE operation
+// as the scalar code it replaces, in the same order, so results are bit-identical to it and
+// the scalar fallback (no SSE2) gives the same bits too.
+struct F4 {
+#if defined(__SSE2__)
+  __m128 v;
+  static F4 set(float a, float b, float c, float d) { return {_mm_setr_ps(a, b, c, d)}; }
+  static F4 splat(float s) { return {_mm_set1_ps(s)}; }
+  static F4 load(const void* p) { return {_mm_loadu_ps(static_cast<const float*>(p))}; }
+  void store(void* p) const { _mm_storeu_ps(static_cast<float*>(p), v); }
+  friend F4 operator+(F4 a, F4 b) { return {_mm_add_ps(a.v, b.v)}; }
+  friend F4 operator*(F4 a, F4 b) { return {_mm_mul_ps(a.v, b.v)}; }
+  float lane(int k) const {
+    alignas(16) float t[4];
+    _mm_store_ps(t, v);
+    return t[k];
+  }
+#else
+  float v[4];
+  static F4 set(float a, float b, float c, float d) { return {{a, b, c, d}}; }
+  static F4 splat(float s) { return {{s, s, s, s}}; }
+  static F4 load(const void* p) {
+    F4 r;
+    std::memcpy(r.v, p, sizeof r.v);
+    return r;
+  }
+  void store(void* p) const { std::memcpy(p, v, sizeof v); }
+  friend F4 operator+(F4 a, F4 b) { return {{a.v[0] + b.v[0], a.v[1] + b.v[1], a.v[2] + b.v[2], a.v[3] + b.v[3]}}; }
+  friend F4 operator*(F4 a, F4 b) { return {{a.v[0] * b.v[0], a.v[1] * b.v[1], a.v[2] * b.v[2], a.v[3] * b.v[3]}}; }
+  float lane(int k) const { return v[k]; }
+#endif
+};
 
 // Coulomb's law for a contact whose normal speed vn < 0 was removed: the factor on the
 // tangential velocity of length t >= 0. It stops when t <= mus |vn| (static), else loses

@@ -44,7 +44,8 @@ void MpmWorld::sortByBlock() {
     if (blockKey_[i] >= 0) ++blockStart_[std::size_t(blockKey_[i]) + 1];
   for (std::size_t b = 0; b < blocks; ++b) blockStart_[b + 1] += blockStart_[b];
   order_.resize(std::size_t(blockStart_[blocks]));
-  std::vector<std::int32_t> fill(blockStart_.begin(), blockStart_.end() - 1);
+  std::vector<std::int32_t>& fill = blockFill_;
+  fill.assign(blockStart_.begin(), blockStart_.end() - 1);
   for (std::size_t i = 0; i < n; ++i)
     if (blockKey_[i] >= 0) order_[std::size_t(fill[std::size_t(blockKey_[i])]++)] = static_cast<std::int32_t>(i);
   for (auto& c : colourBlocks_) c.clear();
@@ -116,24 +117,27 @@ void MpmWorld::p2g(float h) {
     const MatModel& mat = models_[std::size_t(parts_.material[i])];
     const float ms = mp * mat.mus, mk = mp * mat.muk;
     const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
-    const float mv[3] = {mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]};
+    // Node (a, b, c) receives wt * (mp, mp v + A d) with d = ((a, b, c) - f) dx: per axis the
+    // column of A times that axis's offset, as 4 lanes (mass lane 0), summed in the order
+    // ((mp v + A_0 d_a) + A_1 d_b) + A_2 d_c.
+    F4 X[3], Y[3], Z[3];
+    for (int k = 0; k < 3; ++k) {
+      const float da = (float(k) - st.f[0]) * dx, db = (float(k) - st.f[1]) * dx, dc = (float(k) - st.f[2]) * dx;
+      X[k] = F4::set(0.0f, A(0, 0) * da, A(1, 0) * da, A(2, 0) * da);
+      Y[k] = F4::set(0.0f, A(0, 1) * db, A(1, 1) * db, A(2, 1) * db);
+      Z[k] = F4::set(0.0f, A(0, 2) * dc, A(1, 2) * dc, A(2, 2) * dc);
+    }
+    const F4 M = F4::set(mp, mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]);
     for (int a = 0; a < 3; ++a) {
-      const float dxa = (float(a) - st.f[0]) * dx;
+      const F4 Ma = M + X[a];
       for (int b = 0; b < 3; ++b) {
-        const float dyb = (float(b) - st.f[1]) * dx;
         const float wab = st.w[0][a] * st.w[1][b];
-        // The affine momentum at the row's first node, then per node one step of A's z column.
-        const float r0 = mv[0] + A(0, 0) * dxa + A(0, 1) * dyb, r1 = mv[1] + A(1, 0) * dxa + A(1, 1) * dyb,
-                    r2 = mv[2] + A(2, 0) * dxa + A(2, 1) * dyb;
+        const F4 r = Ma + Y[b];
         for (int c = 0; c < 3; ++c) {
-          const float dzc = (float(c) - st.f[2]) * dx;
           const float wt = wab * st.w[2][c];
           const std::size_t node = st.node(a, b, c);
           Node& g = grid_[node];
-          g.m += wt * mp;
-          g.x += wt * (r0 + A(0, 2) * dzc);
-          g.y += wt * (r1 + A(1, 2) * dzc);
-          g.z += wt * (r2 + A(2, 2) * dzc);
+          (F4::load(&g) + F4::splat(wt) * (r + Z[c])).store(&g);
           if (mixed) {
             gfs_[node] += wt * ms;
             gfk_[node] += wt * mk;
@@ -247,27 +251,30 @@ void MpmWorld::g2p(float h) {
     for (std::size_t o = lo; o < hi; ++o) {
       const auto i = std::size_t(order_[o]);
       const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
-      float v[3] = {0, 0, 0};
-      float Bm[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};  // sum of w v d^T (row r, column axis)
+      // Per node u = wt * v_node (lane 0 carries the node's mass along, unused), summed into
+      // v and into B's three columns u d_axis.
+      F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
       for (int a = 0; a < 3; ++a) {
-        const float d0 = (float(a) - st.f[0]) * dx;
+        const F4 d0 = F4::splat((float(a) - st.f[0]) * dx);
         for (int b = 0; b < 3; ++b) {
-          const float d1 = (float(b) - st.f[1]) * dx;
+          const F4 d1 = F4::splat((float(b) - st.f[1]) * dx);
           const float wab = st.w[0][a] * st.w[1][b];
           for (int c = 0; c < 3; ++c) {
-            const float d2 = (float(c) - st.f[2]) * dx;
-            const float wt = wab * st.w[2][c];
-            const std::size_t node = st.node(a, b, c);
-            const Node& g = grid_[node];
-            const float u[3] = {wt * g.x, wt * g.y, wt * g.z};
-            for (int r = 0; r < 3; ++r) {
-              v[r] += u[r];
-              Bm[r][0] += u[r] * d0;
-              Bm[r][1] += u[r] * d1;
-              Bm[r][2] += u[r] * d2;
-            }
+            const F4 d2 = F4::splat((float(c) - st.f[2]) * dx);
+            const F4 u = F4::splat(wab * st.w[2][c]) * F4::load(&grid_[st.node(a, b, c)]);
+            v4 = v4 + u;
+            B0 = B0 + u * d0;
+            B1 = B1 + u * d1;
+            B2 = B2 + u * d2;
           }
         }
+      }
+      const float v[3] = {v4.lane(1), v4.lane(2), v4.lane(3)};
+      float Bm[3][3];  // sum of w v d^T (row r, column axis)
+      for (int r = 0; r < 3; ++r) {
+        Bm[r][0] = B0.lane(r + 1);
+        Bm[r][1] = B1.lane(r + 1);
+        Bm[r][2] = B2.lane(r + 1);
       }
       Eigen::Matrix3f B;
       B << Bm[0][0], Bm[0][1], Bm[0][2], Bm[1][0], Bm[1][1], Bm[1][2], Bm[2][0], Bm[2][1], Bm[2][2];

@@ -1,7 +1,6 @@
 #include "mpm/world.h"
 
 #include <algorithm>
-#include <optional>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -705,13 +704,6 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
 
 // --- the step and its guard ----------------------------------------------------------
 
-struct MpmWorld::Saved {
-  std::vector<float> x, y, z, vx, vy, vz, plastic;
-  std::vector<Eigen::Matrix3f> C, F;
-  std::int64_t atEdge = 0;
-  EdgeHit firstEdge;
-};
-
 GuardRecord MpmWorld::check(MpmPass pass) const {
   GuardRecord r = checkParticles(parts_, params_.maxSpeed);
   if (r.tripped()) return r;
@@ -811,13 +803,16 @@ bool MpmWorld::step() {
     energy_.arm(energySums(parts_, params_.gravity), params_.gravity, params_.spacing);
   // The start of the step: to replay it with a check after every pass (naming the pass that
   // produced a bad value), and under policy warn to complete a step the guard stopped midway.
-  std::optional<Saved> start;
-  if (!validate_ || guardLog_.policy == GuardPolicy::kWarn)
-    start = Saved{parts_.x, parts_.y, parts_.z, parts_.vx, parts_.vy, parts_.vz, plastic_, C_, F_, atEdge_, firstEdge_};
+  Saved& start = start_;
+  if (!validate_ || guardLog_.policy == GuardPolicy::kWarn) {
+    start.x = parts_.x, start.y = parts_.y, start.z = parts_.z;
+    start.vx = parts_.vx, start.vy = parts_.vy, start.vz = parts_.vz;
+    start.plastic = plastic_, start.C = C_, start.F = F_, start.atEdge = atEdge_, start.firstEdge = firstEdge_;
+  }
   const auto restoreStart = [&] {
-    parts_.x = start->x, parts_.y = start->y, parts_.z = start->z;
-    parts_.vx = start->vx, parts_.vy = start->vy, parts_.vz = start->vz;
-    plastic_ = start->plastic, C_ = start->C, F_ = start->F, atEdge_ = start->atEdge, firstEdge_ = start->firstEdge;
+    parts_.x = start.x, parts_.y = start.y, parts_.z = start.z;
+    parts_.vx = start.vx, parts_.vy = start.vy, parts_.vz = start.vz;
+    plastic_ = start.plastic, C_ = start.C, F_ = start.F, atEdge_ = start.atEdge, firstEdge_ = start.firstEdge;
   };
   const bool checks = work_[std::size_t(MpmPass::kGuard)];
   const auto endChecks = [&] {

@@ -279,6 +279,10 @@ class PbdWorld final : public Solver {
     std::vector<std::int32_t> candidates;
   };
   std::vector<GroundCache> groundCache_;
+  // The state at the start of the current step, for the guard's replay (step()).
+  std::vector<Motion> startMotion_;
+  std::vector<GroundCache> startCache_;
+  std::vector<float> startLoose_;
   // --- particle-level kinds -------------------------------------------------
   std::vector<MaterialKind> kind_;  // per body: what it runs as (solverModel(kind, pbd).runsAs)
   std::vector<float> strandRadius_;  // per body: a rope's or cloth's radius from the brush (m), else 0
