@@ -165,6 +165,7 @@ MaterialKind PbdWorld::kindOf(std::int16_t material) const {
 // Appends one slot to every per-body array; mass properties are filled by refreshMassProperties.
 std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Motion& motion, const Vec3& restCentre,
                                    BodyMode mode, MaterialKind kind) {
+  ++bodyEdits_;
   members_.push_back(std::move(members));
   kind_.push_back(kind);
   strandRadius_.push_back(0.0f);
@@ -228,6 +229,7 @@ void PbdWorld::bodyPairFriction(std::size_t a, std::size_t b, double& mus, doubl
 
 // Mass, inertia, friction and reach of a body from its members' rest offsets.
 void PbdWorld::refreshMassProperties(std::size_t b) {
+  ++bodyEdits_;  // members or rest offsets changed: body-pair lists are made afresh
   const auto& mem = members_[b];
   double m = 0.0, mus = 0.0, muk = 0.0, e = 0.0, reach = 0.0;
   Eigen::AlignedBox3d box;
@@ -347,6 +349,7 @@ void PbdWorld::setKinematicTarget(int body, const Vec3& centre) {
 
 // Moves a body's rest frame to its members' centre of mass, keeping every particle where it is.
 void PbdWorld::recentre(std::size_t b) {
+  ++bodyEdits_;
   double m = 0.0;
   Vec3 cr = Vec3::Zero();
   for (std::int32_t i : members_[b]) {
@@ -403,6 +406,7 @@ void PbdWorld::labelDesignPieces(std::size_t b) {
 
 std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids) {
   std::vector<int> changed;
+  ++bodyEdits_;
   energy_.reset();
   for (std::int32_t i : ids) {
     if (i < 0 || static_cast<std::size_t>(i) >= parts_.size() || !alive(i)) continue;
@@ -1171,13 +1175,19 @@ bool PbdWorld::bodiesMayTouch() const {
 }
 
 // For every pair of bodies that may touch: the particle pairs (one of each body) closer
-// than one spacing plus a margin, found with a NeighborGrid over the particles of each
-// body that lie within the other's reach. Pairs are in a fixed order (body pair, then
-// a's particle, then b's by rank): the same for any thread count.
+// than one spacing plus a margin. Each body pair keeps a list made with a NeighborGrid over
+// the particles of each body within the other's reach, at the radius plus a skin of one
+// spacing (PairCache); while the two bodies have moved less than the skin since, every pair
+// now within the radius is on that list, and the substep only filters it (a pile at rest
+// makes its lists once, not every substep). Pairs are in a fixed order (body pair, then
+// (a's particle, b's particle) ascending) made from the positions now, whatever list they
+// come from: the same for any thread count, and for a replayed step.
 void PbdWorld::findBodyPairs() {
   BodyPairContacts& pairs = contacts_.bodyPair;
   const double r = params_.particleRadius, margin = 2.0 * r, h = params_.dt / params_.substeps;
-  const float radius = static_cast<float>(2.0 * r + margin);
+  const double skin = 2.0 * r;
+  const float radius = static_cast<float>(2.0 * r + margin), r2 = radius * radius;
+  const float cacheRadius = static_cast<float>(2.0 * r + margin + skin);
   // The body pairs that may touch this substep (sphere tests, cheap), then their particle
   // pairs, each body pair on its own (in parallel, in units of 8 pairs with their own grid
   // and scratch), concatenated in pair order: the list does not depend on the threads.
@@ -1185,40 +1195,89 @@ void PbdWorld::findBodyPairs() {
   for (std::size_t a = 0; a < members_.size(); ++a)
     for (std::size_t b = a + 1; b < members_.size(); ++b)
       if (mayTouch(a, b, h)) candidates.emplace_back(static_cast<std::int32_t>(a), static_cast<std::int32_t>(b));
+  ++usedClock_;
+  std::vector<PairCache*> cache(candidates.size());
+  for (std::size_t c = 0; c < candidates.size(); ++c) {
+    PairCache& e = pairCache_[std::uint64_t(candidates[c].first) << 32 | std::uint64_t(candidates[c].second)];
+    e.used = usedClock_;
+    cache[c] = &e;
+  }
+  // How far any particle of body k can have moved since a list made at pose (c, q).
+  const auto moved = [&](std::size_t k, const Vec3& c, const Quat& q) {
+    const Motion& m = motion_[k];
+    return (m.c - c).norm() + 2.0 * std::acos(std::min(1.0, std::abs(m.q.dot(q)))) * reach_[k];
+  };
   std::vector<std::vector<std::int32_t>> found(candidates.size());  // per candidate: pa, pb interleaved
   forChunks(candidates.size(), 8, [&](std::size_t lo, std::size_t hi) {
     std::vector<float> x, y, z;
     std::vector<std::int32_t> id;
+    std::vector<std::uint64_t> sorted;
     NeighborGrid grid;
     for (std::size_t c = lo; c < hi; ++c) {
       const auto a = std::size_t(candidates[c].first), b = std::size_t(candidates[c].second);
-      x.clear(), y.clear(), z.clear(), id.clear();
-      std::size_t na = 0;
-      for (int side = 0; side < 2; ++side) {
-        const std::size_t self = side ? b : a, other = side ? a : b;
-        const Motion& m = motion_[self];
-        const Mat3 R = m.q.toRotationMatrix();
-        const double within = reach_[other] + margin;
-        for (std::int32_t i : members_[self]) {
-          const auto k = std::size_t(i);
-          const Vec3 p = R * Vec3(rx_[k], ry_[k], rz_[k]) + m.c;
-          if ((p - motion_[other].c).norm() > within) continue;
-          x.push_back(float(p.x())), y.push_back(float(p.y())), z.push_back(float(p.z()));
-          id.push_back(i);
+      PairCache& e = *cache[c];
+      if (!e.valid || e.edits != bodyEdits_ || moved(a, e.ca, e.qa) + moved(b, e.cb, e.qb) >= skin) {
+        x.clear(), y.clear(), z.clear(), id.clear();
+        std::size_t na = 0;
+        for (int side = 0; side < 2; ++side) {
+          const std::size_t self = side ? b : a, other = side ? a : b;
+          const Motion& m = motion_[self];
+          const Mat3 R = m.q.toRotationMatrix();
+          // A particle of this body within the radius of one of the other's now is within
+          // reach + 3 r of its centre now, so within reach + 5 r when the list is made.
+          const double within = reach_[other] + margin + 2.0 * skin;
+          for (std::int32_t i : members_[self]) {
+            const auto k = std::size_t(i);
+            const Vec3 p = R * Vec3(rx_[k], ry_[k], rz_[k]) + m.c;
+            if ((p - motion_[other].c).norm() > within) continue;
+            x.push_back(float(p.x())), y.push_back(float(p.y())), z.push_back(float(p.z()));
+            id.push_back(i);
+          }
+          if (side == 0) na = id.size();
         }
-        if (side == 0) na = id.size();
+        sorted.clear();
+        if (na > 0 && na < id.size()) {
+          grid.build(x.data(), y.data(), z.data(), x.size(), cacheRadius);
+          for (std::size_t k = 0; k < na; ++k)
+            grid.forEachNeighbor(static_cast<std::int32_t>(k), cacheRadius, [&](std::int32_t j) {
+              if (std::size_t(j) < na) return;  // a particle of the same body
+              sorted.push_back(std::uint64_t(std::uint32_t(id[k])) << 32 | std::uint32_t(id[std::size_t(j)]));
+            });
+        }
+        std::sort(sorted.begin(), sorted.end());
+        e.pairs.clear();
+        for (std::uint64_t key : sorted) {
+          e.pairs.push_back(static_cast<std::int32_t>(key >> 32));
+          e.pairs.push_back(static_cast<std::int32_t>(key & 0xffffffffu));
+        }
+        e.ca = motion_[a].c, e.qa = motion_[a].q, e.cb = motion_[b].c, e.qb = motion_[b].q;
+        e.edits = bodyEdits_;
+        e.valid = true;
       }
-      if (na == 0 || na == id.size()) continue;
-      grid.build(x.data(), y.data(), z.data(), x.size(), radius);
+      // The listed pairs within the radius now, tested in b's rest frame: a's particle taken
+      // there by the relative pose (float), against b's rest offset. The same test whichever
+      // list the pair comes from.
+      if (e.pairs.empty()) continue;
+      const Motion &ma = motion_[a], &mb = motion_[b];
+      const Mat3 RbT = mb.q.toRotationMatrix().transpose();
+      const Eigen::Matrix3f Rab = (RbT * ma.q.toRotationMatrix()).cast<float>();
+      const Eigen::Vector3f t = (RbT * (ma.c - mb.c)).cast<float>();
       std::vector<std::int32_t>& out = found[c];
-      for (std::size_t k = 0; k < na; ++k)
-        grid.forEachNeighbor(static_cast<std::int32_t>(k), radius, [&](std::int32_t j) {
-          if (std::size_t(j) < na) return;  // a particle of the same body
-          out.push_back(id[k]);
-          out.push_back(id[std::size_t(j)]);
-        });
+      for (std::size_t k = 0; k < e.pairs.size(); k += 2) {
+        const auto i = std::size_t(e.pairs[k]), j = std::size_t(e.pairs[k + 1]);
+        const float xi = rx_[i], yi = ry_[i], zi = rz_[i];
+        const float dx = ((Rab(0, 0) * xi + Rab(0, 1) * yi) + Rab(0, 2) * zi + t.x()) - rx_[j];
+        const float dy = ((Rab(1, 0) * xi + Rab(1, 1) * yi) + Rab(1, 2) * zi + t.y()) - ry_[j];
+        const float dz = ((Rab(2, 0) * xi + Rab(2, 1) * yi) + Rab(2, 2) * zi + t.z()) - rz_[j];
+        if ((dx * dx + dy * dy) + dz * dz > r2) continue;
+        out.push_back(e.pairs[k]);
+        out.push_back(e.pairs[k + 1]);
+      }
     }
   });
+  // Lists no candidate asked for this substep go (a pair that parts and meets again starts afresh).
+  for (auto it = pairCache_.begin(); it != pairCache_.end();)
+    it = it->second.used == usedClock_ ? std::next(it) : pairCache_.erase(it);
   for (std::size_t c = 0; c < candidates.size(); ++c) {
     const std::vector<std::int32_t>& f = found[c];
     if (f.empty()) continue;

@@ -46,6 +46,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "core/material.h"
@@ -202,6 +203,21 @@ class PbdWorld final : public Solver {
   void findContacts();
   void rigidContact();
   void findBodyPairs();
+  // Per body pair that may touch: the particle pairs within the pair radius plus kPairSkin of
+  // each other when the list was made, and the two bodies' poses then. A later substep
+  // reuses the list while the two bodies together have moved less than the skin since (no
+  // pair now within the radius can be missing from it) and filters it by the radius.
+  struct PairCache {
+    Vec3 ca = Vec3::Zero(), cb = Vec3::Zero();
+    Quat qa = Quat::Identity(), qb = Quat::Identity();
+    std::uint64_t edits = 0;    // bodyEdits_ when made
+    std::int64_t used = -1;     // the substep (usedClock_) that last asked for it
+    bool valid = false;
+    std::vector<std::int32_t> pairs;  // pa, pb interleaved, sorted by (pa, pb)
+  };
+  std::unordered_map<std::uint64_t, PairCache> pairCache_;
+  std::int64_t usedClock_ = 0;
+  std::uint64_t bodyEdits_ = 0;  // bumped whenever a body's members or rest offsets change
   void bodyContact();
   void update(double h);
   void restitution(double h);
