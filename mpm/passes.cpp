@@ -128,17 +128,22 @@ void MpmWorld::p2g(float h) {
       Z[k] = F4::set(0.0f, A(0, 2) * dc, A(1, 2) * dc, A(2, 2) * dc);
     }
     const F4 M = F4::set(mp, mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]);
+    // Locals, not captures or members: an SSE store may alias anything reached through a
+    // pointer, so the grid's base and the flags would be reloaded after every node's store.
+    Node* const grid = grid_.data();
+    const bool mix = mixed;
     for (int a = 0; a < 3; ++a) {
       const F4 Ma = M + X[a];
       for (int b = 0; b < 3; ++b) {
         const float wab = st.w[0][a] * st.w[1][b];
         const F4 r = Ma + Y[b];
+        const std::size_t row = st.ix[a] + st.iy[b];
         for (int c = 0; c < 3; ++c) {
           const float wt = wab * st.w[2][c];
-          const std::size_t node = st.node(a, b, c);
-          Node& g = grid_[node];
-          (F4::load(&g) + F4::splat(wt) * (r + Z[c])).store(&g);
-          if (mixed) {
+          const std::size_t node = row + st.iz[c];
+          Node* const g = grid + node;
+          (F4::load(g) + F4::splat(wt) * (r + Z[c])).store(g);
+          if (mix) {
             gfs_[node] += wt * ms;
             gfk_[node] += wt * mk;
           }

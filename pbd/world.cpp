@@ -1293,6 +1293,12 @@ void PbdWorld::findBodyPairs() {
   }
 }
 
+const BodyPairContacts& PbdWorld::bodyPairsNow() {
+  contacts_.bodyPair.clear();
+  findBodyPairs();
+  return contacts_.bodyPair;
+}
+
 // Body against body (Müller et al. 2020, positional constraints between two bodies, at
 // body level as for the ground): per pair and sweep, the touching particle pairs (closer
 // than one spacing) form a patch; one correction of the patch's deepest overlap along its

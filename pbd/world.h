@@ -142,6 +142,10 @@ class PbdWorld final : public Solver {
   // The fluids' density error rho/rho0 - 1 at the end of the last substep's iterations
   // (fluidCount 0 when the scene has no moving fluid).
   DensityError fluidDensityError() const;
+  // The particle pairs of the body pairs that may touch, at the poses now: what find_contacts
+  // hands body_contact (for tests and tools; it refreshes the kept lists, which never changes
+  // what a later step does).
+  const BodyPairContacts& bodyPairsNow();
   // Total mass (kg) and rest-frame inertia tensor (kg m^2) of a body.
   double bodyMass(int body) const;
   Mat3 bodyInertiaRest(int body) const;
