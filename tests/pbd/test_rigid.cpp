@@ -811,7 +811,7 @@ TEST(RigidBody, AStackOfSixAlignedBoxesStands) {
   // to show. Friction applied at a face patch's centroid turned each tilt correction into a
   // rocking that grew from round-off (x13 every 4 frames) until a stack of 3 fell after 2 s.
   // (Offset stacks still fall, issue 8: a box set 2 spacings off-centre on a dynamic box on the
-  // ground slides off at ~2.6 cm/s, then tips; on a fixed box it stands. The ground turns the
+  // ground slides off at 1.5-2.7 cm/s, then tips; on a fixed box it stands. The ground turns the
   // lower box back after the load turned it, without the box on top.)
   ParticleArrays p;
   std::vector<BodyRange> bodies;
