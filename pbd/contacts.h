@@ -31,10 +31,11 @@ struct BodyPlaneContacts {
   std::vector<std::uint8_t> touched;
   std::vector<Vec3> point;
   std::vector<double> approachSpeed;  // n . v of the contact point before the solve (m/s, < 0 approaching)
+  std::vector<double> normalImpulse;  // rigid_contact's normal corrections this substep, summed (kg m)
   std::size_t size() const { return body.size(); }
   void clear() {
     body.clear(), plane.clear(), first.clear(), count.clear(), candidates.clear();
-    touched.clear(), point.clear(), approachSpeed.clear();
+    touched.clear(), point.clear(), approachSpeed.clear(), normalImpulse.clear();
   }
 };
 

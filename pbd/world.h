@@ -198,6 +198,9 @@ class PbdWorld final : public Solver {
     double approach = 0.0;  // n . (v_a - v_b) at the point before the solve (m/s, < 0 approaching)
   };
   std::vector<PairHit> pairHits_;
+  // Scratch of shockPropagation, kept for its capacity.
+  std::vector<int> shockLevel_;
+  std::vector<std::int32_t> shockQueue_, shockFirst_, shockNext_, shockOrder_;
   void bodyRestitution(double slow);
   bool energyClosed() const;
   EnergySums energyNow() const;
@@ -240,6 +243,8 @@ class PbdWorld final : public Solver {
   void kinematicParticles(std::size_t body, const Vec3& delta);
   void findNeighbors();
   void groundLastWord();
+  template <typename Solve>
+  void shockPropagation(const std::vector<char>& touching, Solve&& solve);
   void particleContact();
   void clusterMatch(double h);
   void distanceConstraints(double h);
