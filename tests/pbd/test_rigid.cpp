@@ -422,7 +422,10 @@ void addTurnedCube(ParticleArrays& p, std::vector<BodyRange>& bodies, const Vec3
 // step 12 at the default 4 substeps, 5.5 mm deep against its 5 mm bound). The ground has the
 // last word now: no particle is ever more than 0.1 r below its resting height r (one substep
 // of gravity is g h^2 = 0.017 r here, a contact sweep's leftover far less), and the pile comes
-// to rest (largest particle speed under 0.3 m/s after 2 s, where the pile lands at about 2 m/s).
+// to rest: from 5 to 6 s no particle moves faster than 0.1 m/s in any step (it lands at about
+// 2 m/s; a box that rocks or slides shows 0.1-0.6 m/s). Measured: 0.020 m/s. Before shock
+// propagation's flat-patch friction (body_contact) the pile never settled: 0.39 m/s in that
+// second, and between 0.02 and 0.9 m/s sampled every 10 steps from 2 to 6 s.
 TEST(RigidBody, APileLandingOnItsBottomLayerDoesNotPressItIntoTheGround) {
   ParticleArrays p;
   std::vector<BodyRange> bodies;
@@ -438,17 +441,17 @@ TEST(RigidBody, APileLandingOnItsBottomLayerDoesNotPressItIntoTheGround) {
       }
   }
   PbdWorld w(p, bodies, rigidMaterial(), params(4, 4));
-  double lowest = 1e9;
-  for (int s = 0; s < 120; ++s) {
+  double lowest = 1e9, fastest = 0.0;
+  for (int s = 0; s < 360; ++s) {
     ASSERT_TRUE(w.step()) << w.guard().message();
-    for (float y : w.particles().y) lowest = std::min(lowest, double(y));
+    const ParticleArrays& q = w.particles();
+    for (float y : q.y) lowest = std::min(lowest, double(y));
+    if (s >= 300)
+      for (std::size_t i = 0; i < q.size(); ++i) fastest = std::max(fastest, Vec3(q.vx[i], q.vy[i], q.vz[i]).norm());
   }
   EXPECT_GE(lowest, 0.9 * kRadius);
-  double fastest = 0.0;
-  const ParticleArrays& q = w.particles();
-  for (std::size_t i = 0; i < q.size(); ++i) fastest = std::max(fastest, Vec3(q.vx[i], q.vy[i], q.vz[i]).norm());
-  EXPECT_LT(fastest, 0.3);
-  std::printf("lowest particle %.5f m (r = %.4f), largest speed after 2 s %.3f m/s\n", lowest, kRadius, fastest);
+  EXPECT_LT(fastest, 0.1);
+  std::printf("lowest particle %.5f m (r = %.4f), largest speed from 5 to 6 s %.3f m/s\n", lowest, kRadius, fastest);
 }
 
 // find_contacts keeps each body pair's particle pairs across substeps (within the radius plus
@@ -841,9 +844,9 @@ TEST(RigidBody, OffsetStacksStand) {
   // on a rigid floor with mu 0.6 stay put; the bounds (2 mm sideways, 0.01 rad of tilt over
   // 5 s after 0.5 s to settle) are those of the aligned stack above. Before shock
   // propagation and the ground's second friction, every one of them fell (two boxes: the top
-  // slid off at 1.5-2.7 cm/s, then tipped). Measured since: the first four move under
-  // 0.15 mm in 5 s. Not yet: four boxes stepping the same way (+1, +2, +1 or +1, +1, +1) still
-  // creep, the upper three together over the bottom box, at 0.4 mm/s (2.2 mm in 5 s).
+  // slid off at 1.5-2.7 cm/s, then tipped). Measured since: none moves more than 0.15 mm in
+  // 5 s. Not yet: four boxes stepping the same way (+1, +1, +1 or +1, +2, +1) still creep and
+  // tilt, the upper boxes over the lower ones: 4.3 and 4.8 mm in 5 s.
   struct Case {
     std::vector<int> shift;
     int substeps;
