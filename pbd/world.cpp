@@ -30,7 +30,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"cluster_match", Cadence::kPerIteration, "soft bodies: clustered shape matching with XPBD compliance (Müller 2005, Macklin 2016)"},
     {"distance", Cadence::kPerIteration, "rope and cloth: XPBD stretch and bending, attachments to bodies, tethers"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
-    {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps; then the ground lifts out what they pressed into it"},
+    {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps; then the ground lifts out what they pressed into it; then shock propagation, from the ground up"},
     {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution; soft bodies bounce at their centre of mass"},
@@ -1453,11 +1453,6 @@ void PbdWorld::bodyContact() {
       const Vec3 localA = pa.q.conjugate() * (pc - pa.c), localB = pb.q.conjugate() * (pc - pb.c);
       if (da) applyPointCorrection(pa, pc, n, lambdaN * wa);
       if (db) applyPointCorrection(pb, pc, -n, lambdaN * wb);
-      // The normal correction turns the bodies about their centres, which slides the contact
-      // point of one over the other (by the turn times the centre's height above the patch);
-      // friction must undo that slide too, as rigid_contact does against the ground. Left
-      // out, a stack's tilt corrections became sideways slips that fed a growing
-      // tilt-and-slide mode, and a 10-box stack fell after 2 s from round-off.
       // The shock-propagation sweep, on a flat patch: friction holds the upper body's centre
       // where the frozen lower body carried it over the substep (its motion seen in the lower
       // body's frame, less the part along n), a shift of the centre alone. Measured at the patch
@@ -1487,6 +1482,11 @@ void PbdWorld::bodyContact() {
         if (db) mb.c = pb.c, mb.q = pb.q;
         return;
       }
+      // The normal correction turns the bodies about their centres, which slides the contact
+      // point of one over the other (by the turn times the centre's height above the patch);
+      // friction must undo that slide too, as rigid_contact does against the ground. Left
+      // out, a stack's tilt corrections became sideways slips that fed a growing
+      // tilt-and-slide mode, and a 10-box stack fell after 2 s from round-off.
       const Vec3 slipA = (pa.q * localA + pa.c) - pc, slipB = (pb.q * localB + pb.c) - pc;
       Vec3 slide = ssum / wsum + (slipA - slipB);
       slide -= n.dot(slide) * n;
@@ -1612,9 +1612,10 @@ void PbdWorld::shockPropagation(const std::vector<char>& touching, Solve&& solve
     if (touching[c] && upper(c) > 0) order[std::size_t(start[std::size_t(upper(c))]++)] = static_cast<std::int32_t>(c);
   // Each pair is solved `iterations` times in a row (its normal and friction corrections
   // settle together; one solve let a zigzag stack of four fall). Serially: solving a level's
-  // pairs in parallel colours (measured: bench_pile 1.3x faster than this) changed the order
-  // enough that the landing pile of APileLandingOnItsBottomLayerDoesNotPressItIntoTheGround
-  // was still at 0.62 m/s after 2 s; pair order gave 0.1 m/s.
+  // pairs in parallel colours (tried before the flat-patch friction: bench_pile 1.3x faster)
+  // changed the order enough to change the landing pile of
+  // APileLandingOnItsBottomLayerDoesNotPressItIntoTheGround (0.62 m/s after 2 s; pair order
+  // 0.1 m/s, in a pile that then still twitched).
   for (std::int32_t c : order) {
     const int la = level[std::size_t(pairs.a[std::size_t(c)])], lb = level[std::size_t(pairs.b[std::size_t(c)])];
     for (int it = 0; it < params_.iterations; ++it) solve(std::size_t(c), la < lb, lb < la);
