@@ -4,7 +4,8 @@
 NAME.expect, one `key = value` a line (# starts a comment):
   breaks    = what breaks a naive solver in this scene (for docs/stability.md)
   outcome   = pass | stopped
-  metric    = min_C B | max_C B | end_C B (C = x, y, z) | max_drift B | max_ydrift | max_speed   (outcome pass)
+  metric    = min_C B | max_C B | end_C B (C = x, y, z) | max_drift B | max_ydrift | max_sidedrift
+              | max_speed   (outcome pass)
   threshold = > X | < X                                                   (outcome pass)
   guard     = KIND [PASS]   the guard's kind (nan, explosion, ...) and optionally its pass (outcome stopped)
   ci_frames = N             at most N frames when the runner is given --frames (ctest), for scenes
@@ -14,6 +15,8 @@ Metrics come from the run's report.json: poses[frame].bodies[body] = [x, y, z, q
   end_C B      centre coordinate C of body B at the last frame (m)
   max_drift B  largest distance of body B's centre from its frame-0 position (m)
   max_ydrift   largest |y - y0| of any body's centre (m)
+  max_sidedrift largest distance in x-z of any body's centre from its frame-0 position (m): a stack that
+               settles straight down through the gaps it was drawn with does not count, one that creeps does
   max_speed    largest frame-to-frame centre speed of any body (m/s)
 A scene whose run crashes, hangs past --timeout, or whose declaration is missing or invalid fails.
 Exit status: 0 when every scene holds its declaration, 1 otherwise.
@@ -27,7 +30,7 @@ import sys
 import tempfile
 
 METRICS = {f"{m}_{c}": True for m in ("min", "max", "end") for c in "xyz"}
-METRICS.update(max_drift=True, max_ydrift=False, max_speed=False)
+METRICS.update(max_drift=True, max_ydrift=False, max_sidedrift=False, max_speed=False)
 KEYS = {"breaks", "outcome", "metric", "threshold", "guard", "ci_frames"}
 
 
@@ -70,7 +73,7 @@ def read_expect(path):
         words, n = d["metric"][0].split(), d["metric"][1]
         if not words or words[0] not in METRICS or len(words) != (2 if METRICS[words[0]] else 1):
             raise DeclError(f"{path}:{n}: field 'metric': '{d['metric'][0]}' is not one of min_C B, max_C B, "
-                            "end_C B (C = x, y, z), max_drift B, max_ydrift, max_speed")
+                            "end_C B (C = x, y, z), max_drift B, max_ydrift, max_sidedrift, max_speed")
         body = None
         if METRICS[words[0]]:
             if not words[1].isdigit():
@@ -121,6 +124,9 @@ def measure(e, rep, fps):
         return max(math.dist(f[b][:3], poses[0][b][:3]) for f in poses)
     if m == "max_ydrift":
         return max(abs(f[i][1] - poses[0][i][1]) for f in poses for i in range(len(f)) if i < len(poses[0]))
+    if m == "max_sidedrift":
+        return max(math.hypot(f[i][0] - poses[0][i][0], f[i][2] - poses[0][i][2])
+                   for f in poses for i in range(len(f)) if i < len(poses[0]))
     if m == "max_speed":
         best = 0.0
         for a, c in zip(poses, poses[1:]):
