@@ -33,7 +33,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps; then the ground lifts out what they pressed into it; then shock propagation, from the ground up"},
     {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
-    {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; ground restitution; soft bodies bounce at their centre of mass"},
+    {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; restitution off the ground, bodies and colliders; soft bodies bounce at their centre of mass"},
     {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), when set"},
     {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched the ground or each other leave at e times their approach speed (Müller 2020 Eq. 34; a pair: the mean of their e)"},
@@ -152,6 +152,7 @@ void PbdWorld::ensureParticleLevel() {
   invMassP_.assign(n, 0.0f);
   pinned_.assign(n, 0);
   groundApproach_.assign(n, 0.0f);
+  bounceNoted_.assign(n, 0);
   particleLevel_ = true;
 }
 
@@ -295,6 +296,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
       invMassP_.push_back(0.0f);
       pinned_.push_back(0);
       groundApproach_.push_back(0.0f);
+      bounceNoted_.push_back(0);
     }
     ids.push_back(id);
   }
@@ -761,7 +763,8 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
       return b;
     }
     case PbdPass::kColliderContact: return surface(contacts_.particleMesh);
-    case PbdPass::kParticleUpdate: return heldBytes(groundApproach_) + heldBytes(softBounce_);
+    case PbdPass::kParticleUpdate:
+      return heldBytes(groundApproach_, bounceNoted_) + heldBytes(softBounce_) + heldBytes(particleBounces_);
     case PbdPass::kWriteParticles: return heldBytes(rx_, ry_, rz_);
     default: return 0;
   }

@@ -378,6 +378,25 @@ class PbdWorld final : public Solver {
     int softCount = 0;
   };
   std::vector<SoftBounce> softBounce_;
+  // Particle by particle (rope, cloth, fluid and soft bodies that do not bounce as a whole): the
+  // first contact of this substep with a rigid body or a collider whose restitution e (the
+  // pair's mean with a body, the particle's own against a collider) is > 0, with the normal
+  // (from the surface to the particle) and the normal approach speed before the solve (< 0).
+  // particle_update lets the particle leave at e times it, as it does at the ground. Recorded
+  // in the serial contact sweeps (a fixed order); bounceNoted_ marks the particles recorded.
+  struct ParticleBounce {
+    std::int32_t particle = 0;
+    std::int32_t body = -1;   // the rigid body touched, or -1: a collider
+    std::int32_t other = 0;   // the body's particle at the contact, or the collider's index
+    Vec3 normal = Vec3::Zero();
+    Vec3 point = Vec3::Zero();  // a collider's contact point (m)
+    double approach = 0.0;      // m/s, < 0
+    double e = 0.0;
+  };
+  std::vector<ParticleBounce> particleBounces_;
+  std::vector<std::uint8_t> bounceNoted_;
+  void noteParticleBounce(const ParticleBounce& b);
+  void particleRestitution(double h);
   bool dynamicSoft(std::size_t b) const { return kind_[b] == MaterialKind::kSoft && mode_[b] == BodyMode::kDynamic; }
   bool bouncySoft(std::size_t b) const { return dynamicSoft(b) && restitution_[b] > 0.0; }
   Vec3 centreVelocity(std::size_t b) const;

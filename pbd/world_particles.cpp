@@ -475,6 +475,7 @@ void PbdWorld::predict(double h) {
     for (std::size_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(loose_[k]);
       groundApproach_[i] = 0.0f;
+      bounceNoted_[i] = 0;
       if (invMassP_[i] > 0.0f) {
         parts_.vx[i] += gx, parts_.vy[i] += gy, parts_.vz[i] += gz;
         px_[i] = predicted(parts_.x[i], hf, parts_.vx[i]);
@@ -485,6 +486,7 @@ void PbdWorld::predict(double h) {
       }
     }
   });
+  particleBounces_.clear();
   distances_.resetMultipliers();
   std::fill(clusters_.lambda.begin(), clusters_.lambda.end(), 0.0f);
   bool bouncy = false;
@@ -771,6 +773,12 @@ void PbdWorld::particleContact() {
         note(bj, bi, -n);
       }
     }
+    if (rigidJ && !bounceNoted_[i]) {
+      const double e = 0.5 * (materials_[std::size_t(parts_.material[i])].restitution + restitution_[bj]);
+      const Vec3 vs = mj->v + mj->w.cross(pj - mj->c);
+      noteParticleBounce({std::int32_t(i), std::int32_t(bj), std::int32_t(j), n, pj,
+                          (at(parts_.vx, parts_.vy, parts_.vz, i) - vs).dot(n), e});
+    }
     Vec3 newI = pi + (wi * lambda) * n;
     Vec3 newJ = pj - (wj * lambda) * n;
     // Friction: relative tangential displacement over the substep.
@@ -983,7 +991,56 @@ void PbdWorld::particleUpdate(double h) {
       }
     }
   });
+  particleRestitution(h);
   softBodyRestitution(h);
+}
+
+// A contact worth a bounce (e > 0, the particle approaching, not part of a soft body that
+// bounces as a whole: softBodyRestitution) is kept, once per particle and substep.
+void PbdWorld::noteParticleBounce(const ParticleBounce& b) {
+  const auto i = std::size_t(b.particle);
+  bounceNoted_[i] = 1;
+  if (!(b.e > 0.0) || !(b.approach < 0.0) || invMassP_[i] == 0.0f || pinned_[i]) return;
+  if (!softBounce_.empty() && bouncySoft(std::size_t(parts_.group(i)))) return;
+  particleBounces_.push_back(b);
+}
+
+// Restitution particle by particle (Müller et al. 2020 §3.6, Eq. 34, as at the ground): a
+// particle that hit a body or a collider faster than 2 |g| h leaves it at e times its approach
+// speed along the contact normal, relative to the surface's velocity now. A dynamic body takes
+// the opposite impulse at the contact point through its generalized inverse mass (momentum is
+// kept); fixed and carried bodies and colliders do not move. Serial, in the order recorded.
+void PbdWorld::particleRestitution(double h) {
+  const double slow = 2.0 * params_.gravity.norm() * h;
+  for (const ParticleBounce& b : particleBounces_) {
+    if (b.approach >= -slow) continue;
+    const auto i = std::size_t(b.particle);
+    Vec3 vs, point = b.point;
+    Motion* mo = nullptr;
+    if (b.body >= 0) {
+      mo = &motion_[std::size_t(b.body)];
+      point = rigidPoint(std::size_t(b.other));
+      vs = mo->v + mo->w.cross(point - mo->c);
+    } else {
+      vs = colliders_->surfaceVelocity(std::size_t(b.other), point);
+    }
+    const Vec3 v = at(parts_.vx, parts_.vy, parts_.vz, i);
+    const double dv = -b.e * b.approach - (v - vs).dot(b.normal);
+    if (dv <= 0.0) continue;
+    const double wi = invMassP_[i];
+    double share = dv;  // the particle's velocity change
+    if (mo && mode_[std::size_t(b.body)] == BodyMode::kDynamic) {
+      const auto r = std::size_t(b.body);
+      const RigidPose pose{mo->c, mo->q, invMass_[r], invInertiaRest_[r]};
+      const double impulse = dv / (wi + generalizedInverseMass(pose, point, b.normal));
+      const Mat3 R = mo->q.toRotationMatrix();
+      mo->v -= (impulse * invMass_[r]) * b.normal;
+      mo->w -= R * invInertiaRest_[r] * R.transpose() * (point - mo->c).cross(impulse * b.normal);
+      share = impulse * wi;
+    }
+    const Vec3 out = v + share * b.normal;
+    parts_.vx[i] = float(out.x()), parts_.vy[i] = float(out.y()), parts_.vz[i] = float(out.z());
+  }
 }
 
 // Plastic creep (Müller et al. 2005 §4.4, in the rest offsets of each cluster): where the
@@ -1228,6 +1285,11 @@ void PbdWorld::looseColliderContact() {
         sb.eSum += restitution_[bi];
         ++sb.count;
       }
+    }
+    if (!bounceNoted_[i]) {
+      const Vec3 vs = colliders_->surfaceVelocity(std::size_t(c.collider), c.point);
+      noteParticleBounce({std::int32_t(i), -1, c.collider, c.normal, c.point,
+                          (at(parts_.vx, parts_.vy, parts_.vz, i) - vs).dot(c.normal), m.restitution});
     }
     Vec3 rel = (p - at(parts_.x, parts_.y, parts_.z, i)) - colliders_->surfaceVelocity(std::size_t(c.collider), c.point) * h;
     rel -= rel.dot(c.normal) * c.normal;
