@@ -379,15 +379,16 @@ class PbdWorld final : public Solver {
   };
   std::vector<SoftBounce> softBounce_;
   // Particle by particle (rope, cloth, fluid and soft bodies that do not bounce as a whole): the
-  // first contact of this substep with a rigid body or a collider whose restitution e (the
-  // pair's mean with a body, the particle's own against a collider) is > 0, with the normal
-  // (from the surface to the particle) and the normal approach speed before the solve (< 0).
+  // first contact of this substep with a rigid body, a collider or a particle of another such
+  // body whose restitution e (the pair's mean with a body or particle, the particle's own
+  // against a collider) is > 0, with the normal (from the surface to the particle) and the
+  // normal approach speed before the solve (< 0).
   // particle_update lets the particle leave at e times it, as it does at the ground. Recorded
   // in the serial contact sweeps (a fixed order); bounceNoted_ marks the particles recorded.
   struct ParticleBounce {
     std::int32_t particle = 0;
-    std::int32_t body = -1;   // the rigid body touched, or -1: a collider
-    std::int32_t other = 0;   // the body's particle at the contact, or the collider's index
+    std::int32_t body = -1;   // the rigid body touched, -1: a collider, -2: another such particle
+    std::int32_t other = 0;   // the body's particle at the contact, the collider's index, or the particle
     Vec3 normal = Vec3::Zero();
     Vec3 point = Vec3::Zero();  // a collider's contact point (m)
     double approach = 0.0;      // m/s, < 0

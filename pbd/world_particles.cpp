@@ -773,6 +773,12 @@ void PbdWorld::particleContact() {
         note(bj, bi, -n);
       }
     }
+    if (!rigidJ && !bounceNoted_[i] && !bounceNoted_[j]) {
+      const double e = 0.5 * (materials_[std::size_t(parts_.material[i])].restitution +
+                              materials_[std::size_t(parts_.material[j])].restitution);
+      const Vec3 vj = at(parts_.vx, parts_.vy, parts_.vz, j);
+      noteParticleBounce({std::int32_t(i), -2, std::int32_t(j), n, pj, (at(parts_.vx, parts_.vy, parts_.vz, i) - vj).dot(n), e});
+    }
     if (rigidJ && !bounceNoted_[i]) {
       const double e = 0.5 * (materials_[std::size_t(parts_.material[i])].restitution + restitution_[bj]);
       const Vec3 vs = mj->v + mj->w.cross(pj - mj->c);
@@ -1000,8 +1006,10 @@ void PbdWorld::particleUpdate(double h) {
 void PbdWorld::noteParticleBounce(const ParticleBounce& b) {
   const auto i = std::size_t(b.particle);
   bounceNoted_[i] = 1;
+  if (b.body == -2) bounceNoted_[std::size_t(b.other)] = 1;
   if (!(b.e > 0.0) || !(b.approach < 0.0) || invMassP_[i] == 0.0f || pinned_[i]) return;
-  if (!softBounce_.empty() && bouncySoft(std::size_t(parts_.group(i)))) return;
+  const auto bouncesAsABody = [&](std::size_t k) { return !softBounce_.empty() && bouncySoft(std::size_t(parts_.group(k))); };
+  if (bouncesAsABody(i) || (b.body == -2 && bouncesAsABody(std::size_t(b.other)))) return;
   particleBounces_.push_back(b);
 }
 
@@ -1017,6 +1025,17 @@ void PbdWorld::particleRestitution(double h) {
     const auto i = std::size_t(b.particle);
     Vec3 vs, point = b.point;
     Motion* mo = nullptr;
+    if (b.body == -2) {  // two particles: the pair's impulse through both inverse masses
+      const auto j = std::size_t(b.other);
+      const Vec3 vi = at(parts_.vx, parts_.vy, parts_.vz, i), vj = at(parts_.vx, parts_.vy, parts_.vz, j);
+      const double wi = invMassP_[i], wj = pinned_[j] ? 0.0 : double(invMassP_[j]);
+      const double dv = -b.e * b.approach - (vi - vj).dot(b.normal);
+      if (dv <= 0.0) continue;
+      const double impulse = dv / (wi + wj);
+      put(parts_.vx, parts_.vy, parts_.vz, i, vi + (impulse * wi) * b.normal);
+      put(parts_.vx, parts_.vy, parts_.vz, j, vj - (impulse * wj) * b.normal);
+      continue;
+    }
     if (b.body >= 0) {
       mo = &motion_[std::size_t(b.body)];
       point = rigidPoint(std::size_t(b.other));
