@@ -378,6 +378,13 @@ class PbdWorld final : public Solver {
     int softCount = 0;
   };
   std::vector<SoftBounce> softBounce_;
+  // A contact takes part in a soft body's bounce only while the particle approaches the surface
+  // faster than 2 |g| h (relative velocity before the solve, normal towards the particle): a
+  // ball sliding on the ground into a wall bounces off the wall alone, the ground it rests on
+  // neither tilting the bounce nor making it a contact with "a dynamic body and something else".
+  bool approaching(const Vec3& relativeVelocity, const Vec3& normal) const {
+    return relativeVelocity.dot(normal) < -2.0 * params_.gravity.norm() * params_.dt / params_.substeps;
+  }
   // Particle by particle (rope, cloth, fluid and soft bodies that do not bounce as a whole): the
   // first contact of this substep with a rigid body, a collider or a particle of another such
   // body whose restitution e (the pair's mean with a body or particle, the particle's own

@@ -512,14 +512,14 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
   return m > 0.0 ? Vec3(mv / m) : Vec3::Zero();
 }
 
-// Soft bodies' restitution (SoftBounce above): a body that touched something this substep
-// while its centre approached it faster than 2 g h (a resting body does not bounce) leaves at
-// e times that approach speed along the mean contact normal, relative to the surface: every
-// particle gets the same velocity change, so the body's shape is untouched. e: the pair's mean
-// with a body, the body's own against the ground and colliders (which have none). A dynamic
-// rigid body or another soft body shares the bounce when it is all the body touched (one
-// partner, nothing else), taking the opposite impulse (momentum is kept); a body that touched a
-// dynamic partner and something else stays inelastic. Serial over bodies: deterministic.
+// Soft bodies' restitution (SoftBounce above): a body that hit something this substep (its
+// contacts that approached faster than 2 g h; what it rests or slides on does not count) leaves
+// at e times its centre's approach speed along the mean normal of those contacts, relative to
+// the surface: every particle gets the same velocity change, so the body's shape is untouched.
+// e: the pair's mean with a body, the body's own against the ground and colliders (which have
+// none). A dynamic rigid body or another soft body shares the bounce when it is all the body hit
+// (one partner, nothing else), taking the opposite impulse (momentum is kept); a body that hit a
+// dynamic partner and something else at once stays inelastic. Serial over bodies: deterministic.
 void PbdWorld::softBodyRestitution(double h) {
   if (softBounce_.empty()) return;
   const double slow = 2.0 * params_.gravity.norm() * h;
@@ -540,7 +540,7 @@ void PbdWorld::softBodyRestitution(double h) {
     if (!bouncySoft(b)) continue;
     SoftBounce& sb = softBounce_[b];
     for (std::int32_t i : members_[b]) {
-      if (groundApproach_[std::size_t(i)] == 0.0f) continue;
+      if (!(groundApproach_[std::size_t(i)] < -slow)) continue;  // not touching, or resting on it
       sb.nSum += Vec3::UnitY();
       sb.eSum += restitution_[b];
       ++sb.count;
@@ -744,7 +744,8 @@ void PbdWorld::particleContact() {
     const double lambda = pen / (wi + wj);
     if (!softBounce_.empty() && rigidJ && (mode_[bj] == BodyMode::kFixed || mode_[bj] == BodyMode::kDynamic)) {
       const auto bi = std::size_t(parts_.group(i));
-      if (bouncySoft(bi)) {
+      const Vec3 vs = mj->v + mj->w.cross(pj - mj->c);
+      if (bouncySoft(bi) && approaching(at(parts_.vx, parts_.vy, parts_.vz, i) - vs, n)) {
         SoftBounce& sb = softBounce_[bi];
         sb.nSum += n;
         sb.eSum += 0.5 * (restitution_[bi] + restitution_[bj]);
@@ -753,13 +754,14 @@ void PbdWorld::particleContact() {
           sb.partner = sb.partner == -1 || sb.partner == std::int32_t(bj) ? std::int32_t(bj) : -2;
           ++sb.partnerCount;
           sb.partnerPoints += pj;
-          sb.partnerVBefore += mj->v + mj->w.cross(pj - mj->c);
+          sb.partnerVBefore += vs;
         }
       }
     }
     if (!softBounce_.empty() && !rigidJ) {
       const auto bi = std::size_t(parts_.group(i));
-      if (bi != bj && dynamicSoft(bi) && dynamicSoft(bj) && restitution_[bi] + restitution_[bj] > 0.0) {
+      if (bi != bj && dynamicSoft(bi) && dynamicSoft(bj) && restitution_[bi] + restitution_[bj] > 0.0 &&
+          approaching(at(parts_.vx, parts_.vy, parts_.vz, i) - at(parts_.vx, parts_.vy, parts_.vz, j), n)) {
         const double e = 0.5 * (restitution_[bi] + restitution_[bj]);
         const auto note = [&](std::size_t self, std::size_t other, const Vec3& normal) {
           SoftBounce& sb = softBounce_[self];
@@ -1297,7 +1299,9 @@ void PbdWorld::looseColliderContact() {
     const auto& fr = colliders_->collider(std::size_t(c.collider)).friction;
     if (!softBounce_.empty()) {
       const auto bi = std::size_t(parts_.group(i));
-      if (bouncySoft(bi)) {
+      if (bouncySoft(bi) &&
+          approaching(at(parts_.vx, parts_.vy, parts_.vz, i) - colliders_->surfaceVelocity(std::size_t(c.collider), c.point),
+                      c.normal)) {
         SoftBounce& sb = softBounce_[bi];
         sb.nSum += c.normal;
         sb.vSurface += colliders_->surfaceVelocity(std::size_t(c.collider), c.point);
