@@ -27,7 +27,8 @@
 // apart at their interface):
 //     C_i = sum_j nu_j W(p_i - p_j, h) - 1          (j includes i; poly6 W)
 // and a solid particle in range contributes its boundary volume nu_b = s / sum_k W_bk over
-// its solid neighbours k (Akinci et al. 2012, Eq. 4; s = FluidParams::solidScale). The
+// its solid neighbours k and the walls' ghost samples (Akinci et al. 2012, Eq. 4; s =
+// FluidParams::solidScale). The
 // constraint is unilateral (only C_i > 0 is corrected: free surfaces are not pulled in).
 // With inverse masses w the Jacobi step is (Macklin et al. 2014 §7.1)
 //     lambda_i = -C_i / (w_i |sum_j nu_j gradW_ij|^2 + sum_j w_j nu_j^2 |gradW_ij|^2 + eps_i)
@@ -120,6 +121,9 @@ class FluidSolver {
   // By id (arrays of count()): the last dp, the lambdas, the current positions.
   void corrections(float* dx, float* dy, float* dz) const;
   void lambdas(float* lambda) const;
+  // The volumes the density sums use (m^3): a fluid particle's rest volume, a solid's boundary
+  // volume (computeSolidVolumes).
+  void volumes(float* nu) const;
   void positions(float* x, float* y, float* z) const;
   // Replaces the positions (by id) of every particle, e.g. after the caller moved solids.
   void setPositions(const float* x, const float* y, const float* z);
