@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <string>
 
 #include <tbb/global_control.h>
@@ -50,13 +51,14 @@ BodyRange addChain(ParticleArrays& p, const Vec3& start, const Vec3& dir, int n,
   return b;
 }
 
-// A rows x cols lattice, rows going down (-y) from `topLeft`, cols along +x.
-BodyRange addSheet(ParticleArrays& p, const Vec3& topLeft, int rows, int cols, std::int16_t material) {
+// A rows x cols lattice, rows going down (-y) from `topLeft` (or along `rowDir`), cols along +x.
+BodyRange addSheet(ParticleArrays& p, const Vec3& topLeft, int rows, int cols, std::int16_t material,
+                   const Vec3& rowDir = Vec3(0, -1, 0)) {
   BodyRange b;
   b.first = static_cast<std::int32_t>(p.size());
   for (int r = 0; r < rows; ++r)
     for (int c = 0; c < cols; ++c) {
-      const Vec3 x = topLeft + kSpacing * Vec3(c, -r, 0);
+      const Vec3 x = topLeft + kSpacing * (Vec3(c, 0, 0) + r * rowDir);
       p.push(float(x.x()), float(x.y()), float(x.z()), 2, material);
     }
   b.count = rows * cols;
@@ -312,6 +314,52 @@ TEST(Soft, CubeOnTheGroundKeepsItsShapeAndSoftOneSags) {
 }
 
 
+// The drop scenes of the bounce tests: body 0 (material `falling`, made by `add` with its lowest
+// particle centre 0.2 m above its landing height `floor`) over the ground, a fixed rigid slab
+// 21 x 4 x 21 (material e = slabE) or a static mesh floor at 0.2 m. Returns the top of its first
+// bounce above where it touched (firstBounceApex; -1 if it did not bounce).
+enum class Under { kGround, kSlab, kMesh };
+double dropApex(const Material& falling, Under under, double slabE,
+                const std::function<BodyRange(ParticleArrays&, double floor)>& add) {
+  ParticleArrays p;
+  std::vector<Material> mats = {falling, makeKind("slab", MaterialKind::kRigid)};
+  mats[1].restitution = slabE;
+  const double floor = under == Under::kSlab ? 0.1 + 3 * kSpacing + kRadius : under == Under::kMesh ? 0.2 : 0.0;
+  std::vector<BodyRange> bodies{add(p, floor)};
+  if (under == Under::kSlab) {
+    bodies.push_back(addBox(p, Vec3(0.4, 0.1, 0.4), 21, 4, 21, 1, 1));
+    bodies[1].init.fixed = true;
+  }
+  PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
+  if (under == Under::kMesh) {
+    TriangleSoup s;
+    s.vertices = {Vec3(0.2, 0.2, 0.2), Vec3(0.8, 0.2, 0.2), Vec3(0.8, 0.2, 0.8), Vec3(0.2, 0.2, 0.8)};
+    s.triangles = {{0, 2, 1}, {0, 3, 2}};
+    MeshCollider c;
+    c.name = "floor";
+    w.setColliders(ColliderSet({c}, {s}));
+  }
+  return firstBounceApex(w, 0, w.pose(0).centre.y() - 0.2, /*rising=*/0.05);
+}
+
+// The bounce tests' check (body 0 of e = 0.8 dropped h0 = 0.2 m, see dropApex): it rises to
+// e^2 h0 off the ground, a slab of e = 0.8 (the pair's mean 0.8) and the mesh floor (its own
+// e), and to 0.4^2 h0 off a slab of e = 0 (mean 0.4). Tolerance 3 % of h0 (the approach is read
+// before a substep's solve; the slab's lattice is bumpy).
+void expectBouncesToESquared(const char* what, const Material& falling,
+                             const std::function<BodyRange(ParticleArrays&, double floor)>& add) {
+  const auto apex = [&](Under under, double slabE) { return dropApex(falling, under, slabE, add); };
+  const double ground = apex(Under::kGround, 0.0), slab = apex(Under::kSlab, 0.8), mesh = apex(Under::kMesh, 0.0),
+               dull = apex(Under::kSlab, 0.0);
+  std::printf("%s e 0.8 from 0.2 m: apex %.4f (ground), %.4f (slab e 0.8), %.4f (mesh floor), %.4f (slab e 0; "
+              "closed forms 0.128 and 0.032)\n",
+              what, ground, slab, mesh, dull);
+  EXPECT_NEAR(ground, 0.64 * 0.2, 0.03 * 0.2) << what;
+  EXPECT_NEAR(slab, 0.64 * 0.2, 0.03 * 0.2) << what;
+  EXPECT_NEAR(mesh, 0.64 * 0.2, 0.03 * 0.2) << what;
+  EXPECT_NEAR(dull, 0.16 * 0.2, 0.03 * 0.2) << what;
+}
+
 // Restitution of soft bodies (issue 8: "a ball bounces", every kind). A stiff soft ball
 // (E = 5e5 Pa) of e = 0.8 dropped h0 = 0.2 m rises to e^2 h0 (closed form, as a rigid ball):
 // off the ground, off a fixed rigid slab of e = 0.8 (the pair's e is the mean, 0.8), off a
@@ -321,38 +369,12 @@ TEST(Soft, CubeOnTheGroundKeepsItsShapeAndSoftOneSags) {
 // restitution at the body the ball did not bounce at all (contact stops the touching layer,
 // shape matching averages it away): measured no apex on the ground, 0.012 m on the slab.
 TEST(Soft, ASoftBallBouncesOffTheGroundABodyAndAMeshFloor) {
-  enum Under { kGround, kSlab, kMesh };
-  const auto apex = [](Under under, double slabE) {
-    ParticleArrays p;
-    std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("slab", MaterialKind::kRigid)};
-    mats[0].elastic.youngs = 5e5;
-    mats[0].restitution = 0.8;
-    mats[1].restitution = slabE;
-    const double floor = under == kSlab ? 0.1 + 3 * kSpacing + kRadius : under == kMesh ? 0.2 : 0.0;
-    std::vector<BodyRange> bodies{addBall(p, Vec3(0.5, floor + 0.2 + 6 * kSpacing + kRadius, 0.5), 6, 0, 0)};
-    if (under == kSlab) {
-      bodies.push_back(addBox(p, Vec3(0.4, 0.1, 0.4), 21, 4, 21, 1, 1));
-      bodies[1].init.fixed = true;
-    }
-    PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
-    if (under == kMesh) {
-      TriangleSoup s;
-      s.vertices = {Vec3(0.2, 0.2, 0.2), Vec3(0.8, 0.2, 0.2), Vec3(0.8, 0.2, 0.8), Vec3(0.2, 0.2, 0.8)};
-      s.triangles = {{0, 2, 1}, {0, 3, 2}};
-      MeshCollider c;
-      c.name = "floor";
-      w.setColliders(ColliderSet({c}, {s}));
-    }
-    return firstBounceApex(w, 0, w.pose(0).centre.y() - 0.2, /*rising=*/0.05);
-  };
-  const double ground = apex(kGround, 0.0), slab = apex(kSlab, 0.8), mesh = apex(kMesh, 0.0), dull = apex(kSlab, 0.0);
-  std::printf("soft ball e 0.8 from 0.2 m: apex %.4f (ground), %.4f (slab e 0.8), %.4f (mesh floor), %.4f (slab e 0; "
-              "closed forms 0.128 and 0.032)\n",
-              ground, slab, mesh, dull);
-  EXPECT_NEAR(ground, 0.64 * 0.2, 0.03 * 0.2);
-  EXPECT_NEAR(slab, 0.64 * 0.2, 0.03 * 0.2);
-  EXPECT_NEAR(mesh, 0.64 * 0.2, 0.03 * 0.2);
-  EXPECT_NEAR(dull, 0.16 * 0.2, 0.03 * 0.2);
+  Material jelly = makeKind("jelly", MaterialKind::kSoft);
+  jelly.elastic.youngs = 5e5;
+  jelly.restitution = 0.8;
+  expectBouncesToESquared("soft ball", jelly, [](ParticleArrays& p, double floor) {
+    return addBall(p, Vec3(0.5, floor + 0.2 + 6 * kSpacing + kRadius, 0.5), 6, 0, 0);
+  });
 }
 
 // Against a dynamic rigid body the pair shares the bounce (zero gravity, head-on): a stiff soft
@@ -403,21 +425,9 @@ TEST(Soft, TwoSoftBallsSeparateAtETimesTheirApproachSpeed) {
   EXPECT_LT((momentum(w) - m0).norm(), 2e-3 * scale);
 }
 
-// A flat rows x cols cloth lattice in the x-z plane at height y, its corner at `corner`.
+// A flat cloth in the x-z plane, rows along +z from `corner`.
 BodyRange addFlatSheet(ParticleArrays& p, const Vec3& corner, int rows, int cols, std::int16_t material) {
-  BodyRange b;
-  b.first = static_cast<std::int32_t>(p.size());
-  for (int r = 0; r < rows; ++r)
-    for (int c = 0; c < cols; ++c) {
-      const Vec3 x = corner + kSpacing * Vec3(c, 0, r);
-      p.push(float(x.x()), float(x.y()), float(x.z()), 2, material);
-    }
-  b.count = rows * cols;
-  b.rows = rows;
-  b.cols = cols;
-  b.stroke = 2;
-  b.layout = BodyLayout::kLattice;
-  return b;
+  return addSheet(p, corner, rows, cols, material, Vec3(0, 0, 1));
 }
 
 // Restitution particle by particle (issue 8: every kind bounces, against everything): a flat
@@ -428,38 +438,12 @@ BodyRange addFlatSheet(ParticleArrays& p, const Vec3& corner, int rows, int cols
 // soft ball's (the approach is read before a substep's solve). Before this, the cloth bounced
 // only off the ground: on the slab and the mesh it stopped dead (no apex).
 TEST(Cloth, AFallingClothBouncesOffTheGroundABodyAndAMeshFloor) {
-  enum Under { kGround, kSlab, kMesh };
-  const auto apex = [](Under under, double slabE) {
-    ParticleArrays p;
-    std::vector<Material> mats = {makeKind("cloth", MaterialKind::kCloth), makeKind("slab", MaterialKind::kRigid)};
-    mats[0].restitution = 0.8;
-    mats[0].staticFriction = mats[0].dynamicFriction = 0.0;
-    mats[1].restitution = slabE;
-    const double floor = under == kSlab ? 0.1 + 3 * kSpacing + kRadius : under == kMesh ? 0.2 : 0.0;
-    std::vector<BodyRange> bodies{addFlatSheet(p, Vec3(0.42, floor + 0.2 + kRadius, 0.42), 12, 12, 0)};
-    if (under == kSlab) {
-      bodies.push_back(addBox(p, Vec3(0.4, 0.1, 0.4), 21, 4, 21, 1, 1));
-      bodies[1].init.fixed = true;
-    }
-    PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
-    if (under == kMesh) {
-      TriangleSoup s;
-      s.vertices = {Vec3(0.2, 0.2, 0.2), Vec3(0.8, 0.2, 0.2), Vec3(0.8, 0.2, 0.8), Vec3(0.2, 0.2, 0.8)};
-      s.triangles = {{0, 2, 1}, {0, 3, 2}};
-      MeshCollider c;
-      c.name = "floor";
-      w.setColliders(ColliderSet({c}, {s}));
-    }
-    return firstBounceApex(w, 0, w.pose(0).centre.y() - 0.2, /*rising=*/0.05);
-  };
-  const double ground = apex(kGround, 0.0), slab = apex(kSlab, 0.8), mesh = apex(kMesh, 0.0), dull = apex(kSlab, 0.0);
-  std::printf("cloth e 0.8 from 0.2 m: apex %.4f (ground), %.4f (slab e 0.8), %.4f (mesh floor), %.4f (slab e 0; "
-              "closed forms 0.128 and 0.032)\n",
-              ground, slab, mesh, dull);
-  EXPECT_NEAR(ground, 0.64 * 0.2, 0.03 * 0.2);
-  EXPECT_NEAR(slab, 0.64 * 0.2, 0.03 * 0.2);
-  EXPECT_NEAR(mesh, 0.64 * 0.2, 0.03 * 0.2);
-  EXPECT_NEAR(dull, 0.16 * 0.2, 0.03 * 0.2);
+  Material cloth = makeKind("cloth", MaterialKind::kCloth);
+  cloth.restitution = 0.8;
+  cloth.staticFriction = cloth.dynamicFriction = 0.0;
+  expectBouncesToESquared("cloth", cloth, [](ParticleArrays& p, double floor) {
+    return addFlatSheet(p, Vec3(0.42, floor + 0.2 + kRadius, 0.42), 12, 12, 0);
+  });
 }
 
 // Against a dynamic body (zero gravity): a flat cloth of e = 0.8 moving at 1 m/s hits the face
