@@ -402,6 +402,7 @@ class PbdWorld final : public Solver {
     double e = 0.0;
   };
   std::vector<ParticleBounce> particleBounces_;
+  std::vector<double> bounceImpulse_;  // particleRestitution's accumulated impulse per record
   std::vector<std::uint8_t> bounceNoted_;
   void noteParticleBounce(const ParticleBounce& b);
   void particleRestitution(double h);
