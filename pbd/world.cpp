@@ -1626,6 +1626,27 @@ void PbdWorld::shockPropagation(const std::vector<char>& touching, Solve&& solve
   }
 }
 
+namespace {
+
+// Friction of a body's ground patch (rigid_contact, and the ground's last word in
+// body_contact): the tangential slide of the contact point over the substep — the patch
+// particles' mean motion `meanSlip` plus what the normal correction's turn moved the point
+// (`local`, fixed in the body, was at `pc`) — is undone by the distance `limit(len, wt)` returns
+// (len the slide, wt the generalized inverse mass along it; 0: none).
+template <class Limit>
+void slidePatch(RigidPose& pose, const Vec3& pc, const Vec3& local, const Vec3& meanSlip, const Vec3& up, Limit&& limit) {
+  const Vec3 pcAfter = pose.q.toRotationMatrix() * local + pose.c;
+  Vec3 slide = meanSlip + (pcAfter - pc);
+  slide -= up.dot(slide) * up;  // tangential part
+  const double len = slide.norm();
+  if (!(len > 0.0)) return;
+  const Vec3 t = -slide / len;
+  const double distance = limit(len, generalizedInverseMass(pose, pcAfter, t));
+  if (distance > 0.0) applyPointCorrection(pose, pcAfter, t, distance);
+}
+
+}  // namespace
+
 // The ground has the last word: body_contact, solved after rigid_contact, may press a body
 // into the ground (a box under a landing pile). One sweep lifts every body in ground contact
 // by its deepest penetration at the patch's depth-weighted centroid, as rigid_contact's normal
@@ -1665,15 +1686,8 @@ void PbdWorld::groundLastWord() {
     // pose every substep, and a stack walked across the floor at 6 mm/s. Bounded by the
     // substep's whole normal impulse at the ground (rigid_contact's and this lift's); past it,
     // the body slides and rigid_contact's kinetic friction has acted.
-    const Vec3 pcAfter = pose.q.toRotationMatrix() * local + pose.c;
-    Vec3 slide = ssum / wsum + (pcAfter - pc);
-    slide -= up.dot(slide) * up;
-    const double len = slide.norm();
-    if (len > 0.0) {
-      const Vec3 t = -slide / len;
-      const double wt = generalizedInverseMass(pose, pcAfter, t);
-      if (len / wt <= staticFriction_[b] * (bp.normalImpulse[c] + lambdaN)) applyPointCorrection(pose, pcAfter, t, len);
-    }
+    const double bound = staticFriction_[b] * (bp.normalImpulse[c] + lambdaN);
+    slidePatch(pose, pc, local, ssum / wsum, up, [&](double len, double wt) { return len / wt <= bound ? len : 0.0; });
     mo.c = pose.c;
     mo.q = pose.q;
   });
@@ -1727,19 +1741,14 @@ void PbdWorld::rigidContact() {
       const Vec3 local = R.transpose() * (pc - pose.c);  // the contact point, fixed in the body
       const double lambdaN = applyPointCorrection(pose, pc, up, depth);
       bp.normalImpulse[c] += lambdaN;
-      // The normal correction rotates the body, which moves the contact point sideways too.
-      const Vec3 pcAfter = pose.q.toRotationMatrix() * local + pose.c;
       // Coulomb friction at position level (Müller 2020 §3.5), on impulses: undo the
       // tangential motion of the contact over this substep fully when that takes an
       // impulse within mu_s lambda_n (static), else apply mu_k lambda_n against it.
-      Vec3 slide = ssum / wsum + (pcAfter - pc);
-      slide -= up.dot(slide) * up;  // tangential part
-      const double len = slide.norm();
-      if (len > 0.0 && lambdaN > 0.0) {
-        const Vec3 t = -slide / len;
-        const double wt = generalizedInverseMass(pose, pcAfter, t);
-        const double lambdaT = coulomb(len / wt, lambdaN, mus, muk);
-        if (lambdaT > 0.0) applyPointCorrection(pose, pcAfter, t, lambdaT * wt);
+      if (lambdaN > 0.0) {
+        slidePatch(pose, pc, local, ssum / wsum, up, [&](double len, double wt) {
+          const double lambdaT = coulomb(len / wt, lambdaN, mus, muk);
+          return lambdaT > 0.0 ? lambdaT * wt : 0.0;
+        });
       }
     }
     mo.c = pose.c;

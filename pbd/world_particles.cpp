@@ -742,10 +742,15 @@ void PbdWorld::particleContact() {
                              : double(invMassP_[j]);
     if (wi + wj <= 0.0) continue;
     const double lambda = pen / (wi + wj);
+    // For the bounces: the other side's velocity at the contact and i's relative to it, before
+    // the solve (evaluated only where a bounce is recorded).
+    const auto otherVelocity = [&]() -> Vec3 {
+      return rigidJ ? Vec3(mj->v + mj->w.cross(pj - mj->c)) : at(parts_.vx, parts_.vy, parts_.vz, j);
+    };
+    const auto relativeVelocity = [&]() -> Vec3 { return at(parts_.vx, parts_.vy, parts_.vz, i) - otherVelocity(); };
     if (!softBounce_.empty() && rigidJ && (mode_[bj] == BodyMode::kFixed || mode_[bj] == BodyMode::kDynamic)) {
       const auto bi = std::size_t(parts_.group(i));
-      const Vec3 vs = mj->v + mj->w.cross(pj - mj->c);
-      if (bouncySoft(bi) && approaching(at(parts_.vx, parts_.vy, parts_.vz, i) - vs, n)) {
+      if (bouncySoft(bi) && approaching(relativeVelocity(), n)) {
         SoftBounce& sb = softBounce_[bi];
         sb.nSum += n;
         sb.eSum += 0.5 * (restitution_[bi] + restitution_[bj]);
@@ -754,14 +759,14 @@ void PbdWorld::particleContact() {
           sb.partner = sb.partner == -1 || sb.partner == std::int32_t(bj) ? std::int32_t(bj) : -2;
           ++sb.partnerCount;
           sb.partnerPoints += pj;
-          sb.partnerVBefore += vs;
+          sb.partnerVBefore += otherVelocity();
         }
       }
     }
     if (!softBounce_.empty() && !rigidJ) {
       const auto bi = std::size_t(parts_.group(i));
       if (bi != bj && dynamicSoft(bi) && dynamicSoft(bj) && restitution_[bi] + restitution_[bj] > 0.0 &&
-          approaching(at(parts_.vx, parts_.vy, parts_.vz, i) - at(parts_.vx, parts_.vy, parts_.vz, j), n)) {
+          approaching(relativeVelocity(), n)) {
         const double e = 0.5 * (restitution_[bi] + restitution_[bj]);
         const auto note = [&](std::size_t self, std::size_t other, const Vec3& normal) {
           SoftBounce& sb = softBounce_[self];
@@ -775,17 +780,11 @@ void PbdWorld::particleContact() {
         note(bj, bi, -n);
       }
     }
-    if (!rigidJ && !bounceNoted_[i] && !bounceNoted_[j]) {
-      const double e = 0.5 * (materials_[std::size_t(parts_.material[i])].restitution +
-                              materials_[std::size_t(parts_.material[j])].restitution);
-      const Vec3 vj = at(parts_.vx, parts_.vy, parts_.vz, j);
-      noteParticleBounce({std::int32_t(i), -2, std::int32_t(j), n, pj, (at(parts_.vx, parts_.vy, parts_.vz, i) - vj).dot(n), e});
-    }
-    if (rigidJ && !bounceNoted_[i]) {
-      const double e = 0.5 * (materials_[std::size_t(parts_.material[i])].restitution + restitution_[bj]);
-      const Vec3 vs = mj->v + mj->w.cross(pj - mj->c);
-      noteParticleBounce({std::int32_t(i), std::int32_t(bj), std::int32_t(j), n, pj,
-                          (at(parts_.vx, parts_.vy, parts_.vz, i) - vs).dot(n), e});
+    if (!bounceNoted_[i] && (rigidJ || !bounceNoted_[j])) {  // a body (its mean e) or another particle
+      const double ej = rigidJ ? restitution_[bj] : materials_[std::size_t(parts_.material[j])].restitution;
+      const double e = 0.5 * (materials_[std::size_t(parts_.material[i])].restitution + ej);
+      noteParticleBounce({std::int32_t(i), rigidJ ? std::int32_t(bj) : -2, std::int32_t(j), n, pj,
+                          relativeVelocity().dot(n), e});
     }
     Vec3 newI = pi + (wi * lambda) * n;
     Vec3 newJ = pj - (wj * lambda) * n;
