@@ -7,7 +7,7 @@
 
 namespace physketch::pbd::detail {
 
-// ---- shared per-particle finish ----------------------------------------------------
+// ---- per-particle finish (the scalar reference; the AVX2 finish repeats it lane-wise) ---
 
 WallTerm wallTerm(const PairArgs& a, const float* p) {
   WallTerm t;
@@ -146,7 +146,7 @@ void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
 
 namespace {
 
-// Shared per-particle finishes of the velocity passes (both kernels call them).
+// Per-particle finishes of the scalar velocity passes (the AVX2 ones repeat them lane-wise).
 void finishSmoothing(const VelocityArgs& a, std::size_t i, const float sum[3], const float w[3]) {
   if (i >= a.n) return;
   float* vi = a.vrec + i * kRecord;
@@ -270,86 +270,147 @@ PHYSKETCH_AVX2 Consts8 consts8(const PairArgs& a) {
   return {_mm256_set1_ps(a.h), _mm256_set1_ps(a.h2), _mm256_set1_ps(kMinDistance)};
 }
 
-// Lanes within h of a wall (bit l set): those take the scalar finish, which adds the walls.
-PHYSKETCH_AVX2 int nearWall8(const PairArgs& a, const __m256 ri[8]) {
-  const __m256 h = _mm256_set1_ps(a.h);
-  __m256 m = _mm256_setzero_ps();
-  for (int k = 0; k < 3; ++k) {
-    m = _mm256_or_ps(m, _mm256_cmp_ps(_mm256_sub_ps(ri[k], _mm256_set1_ps(a.wallPlaneLo[k])), h, _CMP_LT_OQ));
-    m = _mm256_or_ps(m, _mm256_cmp_ps(_mm256_sub_ps(_mm256_set1_ps(a.wallPlaneHi[k]), ri[k]), h, _CMP_LT_OQ));
-  }
-  return _mm256_movemask_ps(m);
+// wallTerm for 8 lanes, operation for operation: a lane further than h from a plane adds
+// +0 (c + 0 = c and g + 0 = g: neither sum is ever -0), so every lane gets the scalar bits.
+struct Wall8 {
+  __m256 c, g[3];
+};
+PHYSKETCH_AVX2 Wall8 wallTerm8(const PairArgs& a, const __m256 ri[8]) {
+  const __m256 zero = _mm256_setzero_ps(), h = _mm256_set1_ps(a.h), invStep = _mm256_set1_ps(a.wallInvStep);
+  const __m256 sign = _mm256_set1_ps(-0.0f);
+  const __m256i last = _mm256_set1_epi32(a.wallSamples - 2), first = _mm256_setzero_si256(), one = _mm256_set1_epi32(1);
+  Wall8 t{zero, {zero, zero, zero}};
+  for (int k = 0; k < 3; ++k)
+    for (int side = 0; side < 2; ++side) {
+      const __m256 y = side ? _mm256_sub_ps(_mm256_set1_ps(a.wallPlaneHi[k]), ri[k])
+                            : _mm256_sub_ps(ri[k], _mm256_set1_ps(a.wallPlaneLo[k]));
+      const __m256 in = _mm256_cmp_ps(y, h, _CMP_LT_OQ);
+      if (_mm256_testz_ps(in, in)) continue;
+      const __m256 u = _mm256_mul_ps(_mm256_max_ps(zero, y), invStep);  // std::max(y, 0): y on ties
+      // Lanes out of range index sample 0 (their u may not fit an int); the gathers skip them.
+      const __m256i s = _mm256_max_epi32(first, _mm256_min_epi32(_mm256_cvttps_epi32(_mm256_and_ps(in, u)), last));
+      const __m256 f = _mm256_sub_ps(u, _mm256_cvtepi32_ps(s));
+      const __m256i s1 = _mm256_add_epi32(s, one);
+      const __m256 b0 = _mm256_mask_i32gather_ps(zero, a.wallB, s, in, 4);
+      const __m256 b1 = _mm256_mask_i32gather_ps(zero, a.wallB, s1, in, 4);
+      const __m256 d0 = _mm256_mask_i32gather_ps(zero, a.wallDB, s, in, 4);
+      const __m256 d1 = _mm256_mask_i32gather_ps(zero, a.wallDB, s1, in, 4);
+      t.c = _mm256_add_ps(t.c, _mm256_and_ps(in, _mm256_add_ps(b0, _mm256_mul_ps(f, _mm256_sub_ps(b1, b0)))));
+      __m256 db = _mm256_add_ps(d0, _mm256_mul_ps(f, _mm256_sub_ps(d1, d0)));
+      if (side) db = _mm256_xor_ps(db, sign);
+      t.g[k] = _mm256_add_ps(t.g[k], _mm256_and_ps(in, db));
+    }
+  return t;
 }
 
-// finishLambda for the 8 lanes of block b away from the walls, operation for operation
-// (a wall term of +0 adds nothing: x + 0 = x, 0 - y = -y), so the bits are the same.
+// finishLambda for the 8 lanes of block b, operation for operation, so the bits are the
+// scalar finish's (its wall term is wallTerm8's).
 PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256 ri[8], __m256 rho, __m256 gx,
                                   __m256 gy, __m256 gz, __m256 den) {
   const __m256 zero = _mm256_setzero_ps(), cs = _mm256_set1_ps(a.cs);
+  const Wall8 wall = wallTerm8(a, ri);
   const __m256 c = _mm256_sub_ps(
-      _mm256_mul_ps(_mm256_set1_ps(a.cp), _mm256_add_ps(rho, _mm256_mul_ps(ri[kNu], _mm256_set1_ps(a.h6)))),
+      _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(a.cp), _mm256_add_ps(rho, _mm256_mul_ps(ri[kNu], _mm256_set1_ps(a.h6)))),
+                    wall.c),
       _mm256_set1_ps(1.0f));
-  const __m256 x = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gx));
-  const __m256 y = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gy));
-  const __m256 z = _mm256_sub_ps(zero, _mm256_mul_ps(cs, gz));
+  const __m256 x = _mm256_sub_ps(wall.g[0], _mm256_mul_ps(cs, gx));
+  const __m256 y = _mm256_sub_ps(wall.g[1], _mm256_mul_ps(cs, gy));
+  const __m256 z = _mm256_sub_ps(wall.g[2], _mm256_mul_ps(cs, gz));
   const __m256 grad2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z));
   const __m256 denom = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ri[kW], grad2), _mm256_mul_ps(_mm256_mul_ps(cs, cs), den)),
                                      _mm256_mul_ps(_mm256_set1_ps(a.epsK), ri[kW]));
-  const __m256 on = _mm256_and_ps(_mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ), _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
-  const __m256 lambda = _mm256_and_ps(on, _mm256_div_ps(_mm256_sub_ps(zero, c), denom));
+  const __m256 fluidLane = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+  const __m256 on = _mm256_and_ps(fluidLane, _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
+  const __m256 lambda = _mm256_and_ps(on, _mm256_div_ps(_mm256_xor_ps(c, _mm256_set1_ps(-0.0f)), denom));
   alignas(32) float l8[8], c8[8];
   _mm256_store_ps(l8, lambda);
-  // max(C, 0) of the fluid lanes (the near-wall lanes' scalar finish below rewrites theirs).
-  const __m256 fluidLane = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
-  _mm256_store_ps(c8, _mm256_and_ps(fluidLane, _mm256_max_ps(c, zero)));
-  const int near = nearWall8(a, ri);
-  if (near) {  // the scalar finish needs every accumulator of those lanes
-    alignas(32) float s[5][8];
-    _mm256_store_ps(s[0], rho), _mm256_store_ps(s[1], gx), _mm256_store_ps(s[2], gy);
-    _mm256_store_ps(s[3], gz), _mm256_store_ps(s[4], den);
-    for (int l = 0; l < 8; ++l)
-      if (near >> l & 1) finishLambda(a, b * kLanes + std::size_t(l), {s[0][l], s[1][l], s[2][l], s[3][l], s[4][l]});
-  }
+  // max(C, 0) of the fluid lanes, as std::max(c, 0.0f): c itself on a tie.
+  _mm256_store_ps(c8, _mm256_and_ps(fluidLane, _mm256_max_ps(zero, c)));
   for (int l = 0; l < 8; ++l) {
     const std::size_t i = b * kLanes + std::size_t(l);
-    if (!(near >> l & 1) && i < a.n) {
-      a.rec[i * kRecord + kLambda] = l8[l];
-      if (a.comp) a.comp[i] = c8[l];
-    }
+    if (i >= a.n) break;
+    a.rec[i * kRecord + kLambda] = l8[l];
+    if (a.comp) a.comp[i] = c8[l];
   }
 }
 
-// finishCorrection for the lanes away from the walls, the same way (the clamp to the box
-// still applies; max_ps(lo, p) and min_ps(hi, p) return p on ties, as std::max(p, lo) and
-// std::min(p, hi) do, so even signed zeros agree).
+// finishCorrection for the 8 lanes of block b, the same way (max_ps(lo, p) and min_ps(hi, p)
+// return p on ties, as std::max(p, lo) and std::min(p, hi) do, so even signed zeros agree).
 PHYSKETCH_AVX2 void finishCorrection8(const PairArgs& a, std::size_t b, const __m256 ri[8], __m256 ax, __m256 ay,
                                       __m256 az) {
   const __m256 zero = _mm256_setzero_ps();
   const __m256 s = _mm256_mul_ps(_mm256_sub_ps(zero, _mm256_set1_ps(a.cs)), ri[kW]);
   const __m256 fluid = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+  // The walls' share of lambda_i's correction, on fluid lanes with lambda != 0 only.
+  const __m256 walled = _mm256_and_ps(fluid, _mm256_cmp_ps(ri[kLambda], zero, _CMP_NEQ_UQ));
+  const bool anyWall = !_mm256_testz_ps(walled, walled);
+  Wall8 wall{};
+  if (anyWall) wall = wallTerm8(a, ri);
+  const __m256 wl = _mm256_mul_ps(ri[kW], ri[kLambda]);
   const __m256 acc[3] = {ax, ay, az};
   __m256 d[3];
   for (int k = 0; k < 3; ++k) {
-    const __m256 v = _mm256_mul_ps(s, acc[k]);
+    __m256 v = _mm256_mul_ps(s, acc[k]);
+    if (anyWall) v = _mm256_blendv_ps(v, _mm256_add_ps(v, _mm256_mul_ps(wl, wall.g[k])), walled);
     const __m256 p = _mm256_add_ps(ri[k], v);
     const __m256 c = _mm256_sub_ps(
         _mm256_min_ps(_mm256_set1_ps(a.wallHi[k]), _mm256_max_ps(_mm256_set1_ps(a.wallLo[k]), p)), ri[k]);
     d[k] = _mm256_blendv_ps(v, c, fluid);
   }
-  const int near = nearWall8(a, ri);
+  const std::size_t i0 = b * kLanes;  // dx_ .. dz_ are padded to whole blocks
+  _mm256_storeu_ps(a.dx + i0, d[0]), _mm256_storeu_ps(a.dy + i0, d[1]), _mm256_storeu_ps(a.dz + i0, d[2]);
+}
+
+// Lanes of block b that hold a fluid particle (i < n, nu > 0): the ones the velocity passes
+// write, as a store mask.
+PHYSKETCH_AVX2 __m256 liveLanes(std::size_t n, std::size_t b, __m256 nu) {
+  const __m256i lane = _mm256_add_epi32(_mm256_set1_epi32(std::int32_t(b * kLanes)), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  const __m256 inRange = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(std::int32_t(n)), lane));
+  return _mm256_and_ps(inRange, _mm256_cmp_ps(nu, _mm256_setzero_ps(), _CMP_GT_OQ));
+}
+
+// finishSmoothing for the 8 lanes of block b, operation for operation.
+PHYSKETCH_AVX2 void finishSmoothing8(const VelocityArgs& a, std::size_t b, const __m256 vi[8], const __m256 sum[3],
+                                     const __m256 w[3]) {
+  const __m256 live = liveLanes(a.n, b, vi[kNu]);
+  const int mask = _mm256_movemask_ps(live);
+  if (!mask) return;
+  const __m256i store = _mm256_castps_si256(live);
   const std::size_t i0 = b * kLanes;
-  if (!near) {  // dx_ .. dz_ are padded to whole blocks
-    _mm256_storeu_ps(a.dx + i0, d[0]), _mm256_storeu_ps(a.dy + i0, d[1]), _mm256_storeu_ps(a.dz + i0, d[2]);
-    return;
-  }
-  alignas(32) float v[3][8], acc8[3][8];
-  for (int k = 0; k < 3; ++k) _mm256_store_ps(v[k], d[k]), _mm256_store_ps(acc8[k], acc[k]);
-  for (int l = 0; l < 8; ++l) {
-    const std::size_t i = i0 + std::size_t(l);
-    if (i >= a.n) continue;
-    if (near >> l & 1) finishCorrection(a, i, {acc8[0][l], acc8[1][l], acc8[2][l]});
-    else a.dx[i] = v[0][l], a.dy[i] = v[1][l], a.dz[i] = v[2][l];
-  }
+  const __m256 xsph = _mm256_set1_ps(a.xsph);
+  for (int k = 0; k < 3; ++k)
+    _mm256_maskstore_ps(a.out[k] + i0, store, _mm256_add_ps(vi[kVX + k], _mm256_mul_ps(xsph, sum[k])));
+  if (!a.omega[0]) return;
+  const __m256 ncs = _mm256_set1_ps(-a.cs);
+  const __m256 o[3] = {_mm256_mul_ps(ncs, w[0]), _mm256_mul_ps(ncs, w[1]), _mm256_mul_ps(ncs, w[2])};
+  for (int k = 0; k < 3; ++k) _mm256_maskstore_ps(a.omega[k] + i0, store, o[k]);
+  alignas(32) float norm[8];
+  _mm256_store_ps(norm, _mm256_sqrt_ps(_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(o[0], o[0]), _mm256_mul_ps(o[1], o[1])),
+                                                     _mm256_mul_ps(o[2], o[2]))));
+  for (int l = 0; l < 8; ++l)
+    if (mask >> l & 1) a.vrec[(i0 + std::size_t(l)) * kRecord + kOmegaNorm] = norm[l];
+}
+
+// finishConfinement for the 8 lanes of block b, operation for operation.
+PHYSKETCH_AVX2 void finishConfinement8(const VelocityArgs& a, std::size_t b, const __m256 vi[8], const __m256 acc[3]) {
+  const __m256 live = liveLanes(a.n, b, vi[kNu]);
+  if (_mm256_testz_ps(live, live)) return;
+  const __m256 ncs = _mm256_set1_ps(-a.cs);
+  const __m256 eta[3] = {_mm256_mul_ps(ncs, acc[0]), _mm256_mul_ps(ncs, acc[1]), _mm256_mul_ps(ncs, acc[2])};
+  const __m256 len = _mm256_sqrt_ps(
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(eta[0], eta[0]), _mm256_mul_ps(eta[1], eta[1])), _mm256_mul_ps(eta[2], eta[2])));
+  const __m256 ok = _mm256_and_ps(live, _mm256_cmp_ps(len, _mm256_set1_ps(1e-12f), _CMP_GT_OQ));
+  if (_mm256_testz_ps(ok, ok)) return;
+  const std::size_t i0 = b * kLanes;
+  const __m256 nn[3] = {_mm256_div_ps(eta[0], len), _mm256_div_ps(eta[1], len), _mm256_div_ps(eta[2], len)};
+  const __m256 w[3] = {_mm256_loadu_ps(a.omega[0] + i0), _mm256_loadu_ps(a.omega[1] + i0), _mm256_loadu_ps(a.omega[2] + i0)};
+  const __m256 step = _mm256_set1_ps(a.vortStep);
+  const __m256 cross[3] = {_mm256_sub_ps(_mm256_mul_ps(nn[1], w[2]), _mm256_mul_ps(nn[2], w[1])),
+                           _mm256_sub_ps(_mm256_mul_ps(nn[2], w[0]), _mm256_mul_ps(nn[0], w[2])),
+                           _mm256_sub_ps(_mm256_mul_ps(nn[0], w[1]), _mm256_mul_ps(nn[1], w[0]))};
+  const __m256i store = _mm256_castps_si256(ok);
+  for (int k = 0; k < 3; ++k)
+    _mm256_maskstore_ps(a.out[k] + i0, store, _mm256_add_ps(_mm256_loadu_ps(a.out[k] + i0), _mm256_mul_ps(step, cross[k])));
 }
 
 }  // namespace
@@ -431,13 +492,8 @@ __attribute__((target("avx2"))) void smoothingBlocksAvx2(const VelocityArgs& a, 
       w1 = _mm256_add_ps(w1, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(uz, p.dx), _mm256_mul_ps(ux, p.dz))));
       w2 = _mm256_add_ps(w2, _mm256_mul_ps(gn, _mm256_sub_ps(_mm256_mul_ps(ux, p.dy), _mm256_mul_ps(uy, p.dx))));
     }
-    alignas(32) float s[6][8];
-    _mm256_store_ps(s[0], s0), _mm256_store_ps(s[1], s1), _mm256_store_ps(s[2], s2);
-    _mm256_store_ps(s[3], w0), _mm256_store_ps(s[4], w1), _mm256_store_ps(s[5], w2);
-    for (int l = 0; l < 8; ++l) {
-      const float sum[3] = {s[0][l], s[1][l], s[2][l]}, w[3] = {s[3][l], s[4][l], s[5][l]};
-      finishSmoothing(a, b * kLanes + std::size_t(l), sum, w);
-    }
+    const __m256 sum[3] = {s0, s1, s2}, w[3] = {w0, w1, w2};
+    finishSmoothing8(a, b, vi, sum, w);
   }
 }
 
@@ -459,12 +515,8 @@ __attribute__((target("avx2"))) void confinementBlocksAvx2(const VelocityArgs& a
       e1 = _mm256_add_ps(e1, _mm256_mul_ps(e, p.dy));
       e2 = _mm256_add_ps(e2, _mm256_mul_ps(e, p.dz));
     }
-    alignas(32) float s[3][8];
-    _mm256_store_ps(s[0], e0), _mm256_store_ps(s[1], e1), _mm256_store_ps(s[2], e2);
-    for (int l = 0; l < 8; ++l) {
-      const float acc[3] = {s[0][l], s[1][l], s[2][l]};
-      finishConfinement(a, b * kLanes + std::size_t(l), acc);
-    }
+    const __m256 acc[3] = {e0, e1, e2};
+    finishConfinement8(a, b, vi, acc);
   }
 }
 

@@ -1,7 +1,8 @@
 // The per-pair loops of the PBF density iteration (pbd/fluid.h), internal to pbd/.
 // Each kernel runs blocks [b0, b1) of 8 consecutive ranks against their blocked lists and
-// writes only those ranks. The scalar and AVX2 forms do the same IEEE operations per pair
-// in the same order, and share the per-particle finishing code, so they give equal bits.
+// writes only those ranks. The scalar and AVX2 forms do the same IEEE operations in the
+// same order, per pair and in the per-particle finish (the AVX2 finish repeats the scalar
+// one lane-wise, walls included), so they give equal bits.
 #pragma once
 
 #include <cstddef>
@@ -87,8 +88,8 @@ struct WallTerm {
 };
 WallTerm wallTerm(const PairArgs& a, const float* p);
 
-// Shared per-particle finish: lambda from the sums (Macklin & Müller 2013 Eq. 11, multi-fluid
-// form of pbd/fluid.h), and dp with the walls.
+// The scalar kernels' per-particle finish: lambda from the sums (Macklin & Müller 2013
+// Eq. 11, multi-fluid form of pbd/fluid.h), and dp with the walls.
 void finishLambda(const PairArgs& a, std::size_t rank, const LambdaAcc& acc);
 void finishCorrection(const PairArgs& a, std::size_t rank, const CorrectionAcc& acc);
 
