@@ -28,6 +28,18 @@ WallTerm wallTerm(const PairArgs& a, const float* p) {
   return t;
 }
 
+namespace {
+
+// Accumulators of one lane, finished per particle.
+struct LambdaAcc {
+  float rho, gx, gy, gz, den;
+};
+struct CorrectionAcc {
+  float x, y, z;
+};
+
+// The scalar kernels' per-particle finish: lambda from the sums (Macklin & Müller 2013
+// Eq. 11, multi-fluid form of pbd/fluid.h), and dp with the walls.
 void finishLambda(const PairArgs& a, std::size_t i, const LambdaAcc& acc) {
   if (i >= a.n) return;
   float* ri = a.rec + i * kRecord;
@@ -67,6 +79,8 @@ void finishCorrection(const PairArgs& a, std::size_t i, const CorrectionAcc& acc
     }
   a.dx[i] = d[0], a.dy[i] = d[1], a.dz[i] = d[2];
 }
+
+}  // namespace
 
 // ---- scalar kernels: the reference -------------------------------------------------
 

@@ -46,14 +46,6 @@ struct PairArgs {
   float wallInvStep = 0;
 };
 
-// Accumulators of one lane, finished per particle by the shared scalar code.
-struct LambdaAcc {
-  float rho, gx, gy, gz, den;
-};
-struct CorrectionAcc {
-  float x, y, z;
-};
-
 // The velocity passes (Alg. 1 line 22) over the same blocked lists, on records of their own:
 //   x, y, z (m), nu (m^3; 0 for solids: they take no part), vx, vy, vz (m/s), |omega| (1/s)
 enum VelocityField { kVX = 4, kVY, kVZ, kOmegaNorm };
@@ -87,10 +79,5 @@ struct WallTerm {
   float c = 0, g[3] = {0, 0, 0};
 };
 WallTerm wallTerm(const PairArgs& a, const float* p);
-
-// The scalar kernels' per-particle finish: lambda from the sums (Macklin & Müller 2013
-// Eq. 11, multi-fluid form of pbd/fluid.h), and dp with the walls.
-void finishLambda(const PairArgs& a, std::size_t rank, const LambdaAcc& acc);
-void finishCorrection(const PairArgs& a, std::size_t rank, const CorrectionAcc& acc);
 
 }  // namespace physketch::pbd::detail
