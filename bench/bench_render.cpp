@@ -3,7 +3,7 @@
 // PNG), and the fluid surface of an 80,000-particle pool (anisotropic kernels against cells).
 // Prints CSV rows `bench,case,particles,threads,metric,value,unit`; medians of repeated frames.
 //
-//   bench_render [--threads N] [--repeats R] [--smooth S] [--samples MSAA] [--no-shadows]
+//   bench_render [--threads N] [--repeats R] [--smooth S] [--samples MSAA] [--no-shadows] [--gl-device cpu|gpu]
 // (defaults: what `physketch run` draws, with 2 smoothing iterations)
 #include <algorithm>
 #include <cmath>
@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -20,6 +21,7 @@
 #include <tbb/parallel_for.h>
 
 #include "bench/bench_common.h"
+#include "core/error.h"
 #include "core/profile.h"
 #include "core/scene.h"
 #include "render/fluid_surface.h"
@@ -92,14 +94,17 @@ int main(int argc, char** argv) {
   int repeats = 7;
   int smooth = 2;
   render::Looks looks;
+  render::GlDevice device = render::GlDevice::Cpu;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--repeats") && i + 1 < argc) repeats = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--smooth") && i + 1 < argc) smooth = std::max(0, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--samples") && i + 1 < argc) looks.samples = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--no-shadows")) looks.shadows = false;
+    else if (!std::strcmp(argv[i], "--gl-device") && i + 1 < argc && (!std::strcmp(argv[i + 1], "cpu") || !std::strcmp(argv[i + 1], "gpu")))
+      device = render::parseGlDevice(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: bench_render [--threads N] [--repeats R] [--smooth S] [--samples MSAA] [--no-shadows]\n");
+      std::fprintf(stderr, "usage: bench_render [--threads N] [--repeats R] [--smooth S] [--samples MSAA] [--no-shadows] [--gl-device cpu|gpu]\n");
       return 1;
     }
   }
@@ -111,7 +116,15 @@ int main(int argc, char** argv) {
   Camera camera;
   camera.eye = Vec3(1.2, 0.9, 1.5);
   camera.target = Vec3(0.0, 0.1, 0.0);
-  render::OffscreenRenderer renderer(1280, 720, looks);
+  std::unique_ptr<render::OffscreenRenderer> made;
+  try {
+    made = std::make_unique<render::OffscreenRenderer>(1280, 720, looks, device);
+  } catch (const RuntimeError& e) {
+    std::fprintf(stderr, "bench_render: %s\n", e.what());
+    return 1;
+  }
+  render::OffscreenRenderer& renderer = *made;
+  std::fprintf(stderr, "bench_render: drawing with %s\n", renderer.deviceDescription().c_str());
   std::vector<int> handles;
   for (std::size_t b = 0; b < centres.size(); ++b) handles.push_back(renderer.uploadMesh(render::TriangleMesh{}));
   const auto png = std::filesystem::temp_directory_path() / "physketch_bench_render.png";

@@ -123,66 +123,73 @@ std::string describeHardwareDevice(EGLDeviceEXT device, PFNEGLQUERYDEVICESTRINGE
   return "hardware";
 }
 
-// Order of preference (documented at OffscreenRenderer in renderer.h):
-//  1. an EGL device advertising EGL_MESA_device_software (llvmpipe). On a machine with a GPU the
-//     surfaceless platform may pick the GPU, whose rasteriser gives different pixels; the
-//     software device keeps images identical on every machine with the same Mesa.
+// Tries the displays in displayOrder's order (documented at OffscreenRenderer in renderer.h).
+// Why this order for GlDevice::Cpu:
+//  1. the software device first: on a machine with a GPU the surfaceless platform may pick the
+//     GPU, whose rasteriser gives different pixels; the software device keeps images identical
+//     on every machine with the same Mesa.
 //  2. Mesa's surfaceless platform: Mesa loads the hardware driver of a DRM render node when one
 //     exists and has a Mesa driver, else llvmpipe (on the project's machines: llvmpipe, no
 //     render node).
 //  3. any other EGL device, in enumeration order: a GPU (e.g. NVIDIA's EGL via libglvnd).
 // Plain eglGetDisplay(EGL_DEFAULT_DISPLAY) is not tried: without a display server it fails
 // unless EGL_PLATFORM=surfaceless is set in the environment.
-AcquiredDisplay acquireDisplay() {
+AcquiredDisplay acquireDisplay(GlDevice wanted) {
   std::string log;
   const char* clientExt = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
   auto getPlatformDisplay =
       reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
   if (!getPlatformDisplay || !hasExtension(clientExt, "EGL_EXT_platform_base")) {
     throw RuntimeError("EGL: eglGetPlatformDisplayEXT is unavailable (client extensions: " +
-                       std::string(clientExt ? clientExt : "none") + "); install Mesa's libegl-mesa0");
+                       std::string(clientExt ? clientExt : "none") +
+                       "); install Mesa's libegl-mesa0, or a GPU's EGL driver for --gl-device gpu");
   }
 
-  std::vector<EGLDeviceEXT> software, others;
-  std::vector<EGLint> softwareIndex, othersIndex;  // position in EGL's device list, for the description
+  std::vector<EGLDeviceEXT> devices;
+  std::vector<bool> isSoftware;
   auto queryDevices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
   auto queryDeviceString =
       reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
   if (queryDevices && queryDeviceString && hasExtension(clientExt, "EGL_EXT_platform_device")) {
-    EGLDeviceEXT devices[16];
+    EGLDeviceEXT listed[16];
     EGLint count = 0;
-    if (queryDevices(16, devices, &count)) {
+    if (queryDevices(16, listed, &count)) {
       for (EGLint i = 0; i < count; ++i) {
-        const char* ext = queryDeviceString(devices[i], EGL_EXTENSIONS);
-        const bool isSoftware = hasExtension(ext, "EGL_MESA_device_software");
-        (isSoftware ? software : others).push_back(devices[i]);
-        (isSoftware ? softwareIndex : othersIndex).push_back(i);
+        devices.push_back(listed[i]);
+        isSoftware.push_back(hasExtension(queryDeviceString(listed[i], EGL_EXTENSIONS), "EGL_MESA_device_software"));
+        log += "; EGL device " + std::to_string(i) + (isSoftware.back() ? ": software" : ": hardware");
       }
+      if (count == 0) log += "; EGL lists no devices";
     } else {
       log += "; eglQueryDevicesEXT failed (" + hex(eglGetError()) + ")";
     }
   } else {
     log += "; no EGL device enumeration";
   }
+  const bool hasSurfaceless = hasExtension(clientExt, "EGL_MESA_platform_surfaceless");
 
-  for (std::size_t i = 0; i < software.size(); ++i) {
-    const std::string label = "EGL device " + std::to_string(softwareIndex[i]);
-    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, software[i], nullptr), label, log);
-    if (d != EGL_NO_DISPLAY) return {d, label + " (EGL_MESA_device_software)"};
+  for (const DisplayCandidate& c : displayOrder(isSoftware, hasSurfaceless, wanted)) {
+    if (c.kind == DisplayCandidate::Kind::Surfaceless) {
+      const std::string label = "EGL Mesa surfaceless platform";
+      EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr),
+                                   label, log);
+      if (d != EGL_NO_DISPLAY) return {d, label + " (no software device found; Mesa chose the driver)"};
+      continue;
+    }
+    const EGLDeviceEXT device = devices[static_cast<std::size_t>(c.deviceIndex)];
+    const std::string label = "EGL device " + std::to_string(c.deviceIndex);
+    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, device, nullptr), label, log);
+    if (d != EGL_NO_DISPLAY) {
+      return {d, label + (isSoftware[static_cast<std::size_t>(c.deviceIndex)]
+                              ? std::string(" (EGL_MESA_device_software)")
+                              : " (" + describeHardwareDevice(device, queryDeviceString) + ")")};
+    }
   }
-  if (hasExtension(clientExt, "EGL_MESA_platform_surfaceless")) {
-    const std::string label = "EGL Mesa surfaceless platform";
-    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr),
-                                 label, log);
-    if (d != EGL_NO_DISPLAY) return {d, label + " (no software device found; Mesa chose the driver)"};
-  } else {
-    log += "; no EGL_MESA_platform_surfaceless";
+  if (wanted == GlDevice::Gpu) {
+    throw RuntimeError("EGL: no hardware (GPU) EGL device could be used, and --gl-device gpu asks for one "
+                       "(without it, the default 'cpu' draws with Mesa's llvmpipe)" + log);
   }
-  for (std::size_t i = 0; i < others.size(); ++i) {
-    const std::string label = "EGL device " + std::to_string(othersIndex[i]);
-    EGLDisplay d = tryInitialize(getPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, others[i], nullptr), label, log);
-    if (d != EGL_NO_DISPLAY) return {d, label + " (" + describeHardwareDevice(others[i], queryDeviceString) + ")"};
-  }
+  if (!hasSurfaceless) log += "; no EGL_MESA_platform_surfaceless";
   throw RuntimeError("EGL: no usable display" + log);
 }
 
@@ -540,6 +547,30 @@ std::vector<float> interleave(const TriangleMesh& mesh) {
 
 }  // namespace
 
+GlDevice parseGlDevice(const std::string& name) {
+  if (name == "cpu") return GlDevice::Cpu;
+  if (name == "gpu") return GlDevice::Gpu;
+  throw RuntimeError("GL device '" + name + "': expected cpu or gpu");
+}
+
+const char* glDeviceName(GlDevice device) { return device == GlDevice::Gpu ? "gpu" : "cpu"; }
+
+std::vector<DisplayCandidate> displayOrder(const std::vector<bool>& deviceIsSoftware, bool hasSurfaceless,
+                                           GlDevice device) {
+  std::vector<DisplayCandidate> order;
+  const int n = static_cast<int>(deviceIsSoftware.size());
+  if (device == GlDevice::Cpu) {
+    for (int i = 0; i < n; ++i) {
+      if (deviceIsSoftware[static_cast<std::size_t>(i)]) order.push_back({DisplayCandidate::Kind::Device, i});
+    }
+    if (hasSurfaceless) order.push_back({DisplayCandidate::Kind::Surfaceless, -1});
+  }
+  for (int i = 0; i < n; ++i) {
+    if (!deviceIsSoftware[static_cast<std::size_t>(i)]) order.push_back({DisplayCandidate::Kind::Device, i});
+  }
+  return order;
+}
+
 Mat4f viewMatrix(const Camera& camera) { return viewMatrixD(camera).cast<float>(); }
 
 Mat4f projectionMatrix(const Camera& camera, double aspect, double zNear, double zFar) {
@@ -622,7 +653,9 @@ struct OffscreenRenderer::Impl {
   Background background;
   std::vector<DrawCall> calls;
 
-  Impl(int w, int h, const Looks& l) : width(w), height(h), looks(l) {}
+  GlDevice device = GlDevice::Cpu;  // which display to ask for (createContext)
+
+  Impl(int w, int h, const Looks& l, GlDevice d) : width(w), height(h), looks(l), device(d) {}
   ~Impl() { destroy(); }
 
   void createContext();
@@ -651,7 +684,7 @@ struct OffscreenRenderer::Impl {
 };
 
 void OffscreenRenderer::Impl::createContext() {
-  AcquiredDisplay acquired = acquireDisplay();
+  AcquiredDisplay acquired = acquireDisplay(device);
   display = acquired.display;
   description = std::move(acquired.description);
   if (!eglBindAPI(EGL_OPENGL_API)) throw RuntimeError("EGL: desktop OpenGL API unavailable (" + hex(eglGetError()) + ")");
@@ -1021,13 +1054,13 @@ void OffscreenRenderer::Impl::destroy() {
   display = EGL_NO_DISPLAY;  // never terminated: see "EGL display lifetime" above
 }
 
-OffscreenRenderer::OffscreenRenderer(int width, int height, const Looks& looks) {
+OffscreenRenderer::OffscreenRenderer(int width, int height, const Looks& looks, GlDevice device) {
   if (width <= 0 || height <= 0) {
     throw RuntimeError("renderer: image size " + std::to_string(width) + "x" + std::to_string(height) +
                        " must be positive");
   }
   // Built step by step inside impl_, so a throw part-way frees what was already created.
-  impl_ = std::make_unique<Impl>(width, height, looks);
+  impl_ = std::make_unique<Impl>(width, height, looks, device);
   impl_->createContext();
   impl_->createFramebuffer();
   impl_->createShadowMap();

@@ -135,8 +135,39 @@ struct Splat {
   Vec3f normal = Vec3f::Zero();
 };
 
+// Which EGL display a renderer asks for (`physketch run --gl-device`, bench_render --gl-device).
+enum class GlDevice {
+  // The default: Mesa's software rasteriser (llvmpipe, on the CPU) first, so images are
+  // bit-identical wherever the Mesa version is the same; where Mesa offers none, whatever EGL
+  // has (the order at OffscreenRenderer).
+  Cpu,
+  // A hardware EGL device only (e.g. NVIDIA's EGL through libglvnd, or a Mesa GPU driver's DRM
+  // device), in the order EGL lists them; the renderer throws RuntimeError when none
+  // initialises, naming what EGL offered. Its images differ from llvmpipe's in rasterisation
+  // and rounding (measured on an NVIDIA H200: docs/benchmarks.md, "Drawing on a GPU").
+  Gpu,
+};
+// "cpu" / "gpu" <-> GlDevice; parseGlDevice throws RuntimeError naming a value it does not know.
+GlDevice parseGlDevice(const std::string& name);
+const char* glDeviceName(GlDevice device);
+
+// One display a renderer tries: an EGL device (its position in eglQueryDevicesEXT's list) or
+// Mesa's surfaceless platform.
+struct DisplayCandidate {
+  enum class Kind { Device, Surfaceless };
+  Kind kind = Kind::Device;
+  int deviceIndex = -1;  // Kind::Device only
+  bool operator==(const DisplayCandidate& o) const { return kind == o.kind && deviceIndex == o.deviceIndex; }
+};
+// The order in which a renderer tries displays, from what EGL lists: deviceIsSoftware[i] is
+// whether device i advertises EGL_MESA_device_software; hasSurfaceless whether the client
+// offers EGL_MESA_platform_surfaceless. The rules are at OffscreenRenderer.
+std::vector<DisplayCandidate> displayOrder(const std::vector<bool>& deviceIsSoftware, bool hasSurfaceless,
+                                           GlDevice device);
+
 // One EGL context per renderer, rendering into its own framebuffer. The EGL display is the
-// first of these that initialises (deviceDescription() says which one was taken):
+// first of these that initialises (deviceDescription() says which one was taken). With
+// GlDevice::Cpu (the default):
 //  1. an EGL device whose extensions contain EGL_MESA_device_software: Mesa's llvmpipe, a CPU
 //     rasteriser. Preferred so images are bit-identical wherever the Mesa version is the
 //     same; on the project's machines this is the one used.
@@ -144,13 +175,15 @@ struct Splat {
 //     a DRM render node with a Mesa driver exists, else llvmpipe.
 //  3. any other EGL device, in the order EGL lists them: a hardware GPU (e.g. NVIDIA's EGL
 //     through libglvnd). Its images may differ from llvmpipe's (rasterisation and rounding).
+// With GlDevice::Gpu: only 3 (the surfaceless platform is not tried: it may fall back to
+// llvmpipe without saying so).
 // Several renderers may exist at once and one after another; each makes its context current
 // on every call. Use a renderer from one thread at a time.
 class OffscreenRenderer {
  public:
   // Creates the EGL display/context and the framebuffers. Throws RuntimeError with the EGL/GL
   // error, or for a sample count or shadow map size the driver does not offer.
-  explicit OffscreenRenderer(int width, int height, const Looks& looks = Looks{});
+  explicit OffscreenRenderer(int width, int height, const Looks& looks = Looks{}, GlDevice device = GlDevice::Cpu);
   ~OffscreenRenderer();
   OffscreenRenderer(const OffscreenRenderer&) = delete;
   OffscreenRenderer& operator=(const OffscreenRenderer&) = delete;

@@ -51,6 +51,7 @@ struct RunOptions {
   std::string guard = "stop";    // --guard: stop at the first trip, or warn and go on (recoverable kinds)
   double budgetMs = 0.0;         // --budget: solver ms per frame to fit (0: the scene's settings)
   std::string budgetFrom;        // --from-study DIR: choose from a study's rows instead of calibrating
+  std::string glDevice = "cpu";  // --gl-device: cpu (llvmpipe first) or gpu (a hardware EGL device only)
 };
 
 int runScene(const RunOptions& options);

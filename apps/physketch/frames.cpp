@@ -90,7 +90,7 @@ std::vector<render::ExportMaterial> exportMaterials(const SceneDesc& scene) {
 
 FrameWriter::FrameWriter(const SceneDesc& scene, const sketch::GridMapping& mapping, const FrameOptions& options)
     : scene_(scene), mapping_(mapping), options_(options) {
-  if (options.draw) renderer_ = std::make_unique<render::OffscreenRenderer>(scene.width, scene.height);
+  if (options.draw) renderer_ = std::make_unique<render::OffscreenRenderer>(scene.width, scene.height, render::Looks{}, options.glDevice);
   passMesh_ = profile_.add("mesh");
   passDraw_ = profile_.add("draw");
   // Splats for every material (--look splats) or for those whose look is splats.

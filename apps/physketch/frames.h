@@ -36,6 +36,7 @@ struct FrameOptions {
   // with a grid (mpm). Off: from the particles' cells (meshParticles).
   bool solidGrid = false;
   int splatDetail = 1;  // --splat-detail: appearance particles per particle along each axis (particleSplats)
+  render::GlDevice glDevice = render::GlDevice::Cpu;  // --gl-device: which EGL display draws
 };
 
 // Half the mass a node of `spacing` holds inside material of the particles' rest density

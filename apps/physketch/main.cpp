@@ -91,6 +91,12 @@ int main(int argc, char** argv) {
                      "as VR-Doh decouples them); costs N^3 the drawing")
       ->capture_default_str()
       ->check(CLI::Range(1, 4));
+  runCmd->add_option("--gl-device", run.glDevice,
+                     "Which EGL display draws the frames: 'cpu' (Mesa's llvmpipe first: the same pixels on every machine "
+                     "with the same Mesa; else whatever EGL offers) or 'gpu' (a hardware EGL device only, e.g. NVIDIA's "
+                     "through libglvnd; an error when there is none). report.json: frames.device says which one drew")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"cpu", "gpu"}));
   runCmd->add_option("--guard", run.guard,
                      "When the stability guard trips: 'stop' the run (exit 2, report.json: guard), or 'warn': log the "
                      "event and go on where the state can go on (a particle too fast or too deep, fluid compression, "

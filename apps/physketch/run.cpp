@@ -78,6 +78,7 @@ FrameOptions surfaceOptions(const RunOptions& opt) {
   fo.solidGrid = opt.solidSurface == "grid";
   fo.splats = opt.look == "splats";
   fo.splatDetail = opt.splatDetail;
+  fo.glDevice = render::parseGlDevice(opt.glDevice);
   return fo;
 }
 
@@ -506,7 +507,8 @@ int runScene(const RunOptions& opt) {
                      {"triangles", frameWriter ? frameWriter->trianglesLastFrame() : 0},
                      {"triangles_meshed", frameWriter ? frameWriter->trianglesMeshed() : 0},
                      {"folder", sc.writeFrames ? (out / "frames").string() : ""},
-                     {"device", frameWriter ? frameWriter->device() : ""}};
+                     {"device", frameWriter ? frameWriter->device() : ""},
+                     {"gl_device", opt.glDevice}};
     if (opt.smooth > 0) {
       rep["frames"]["smoothing"] = volumeChangeJson(frameWriter ? frameWriter->smoothing() : VolumeChangeStats{});
       rep["frames"]["smoothing"]["iterations"] = opt.smooth;

@@ -199,6 +199,33 @@ TEST(Cli, BrokenSceneExitsOneWithFileLineFieldAndWritesNothing) {
   fs::remove_all(dir);
 }
 
+// --gl-device gpu on a machine without a GPU (the project's): exit 2 with EGL's answer and no
+// output folder; where a GPU drew, report.json says it was a hardware device, asked for as gpu.
+TEST(Cli, GlDeviceGpuDrawsOnAGpuOrFailsBeforeWritingAnything) {
+  const fs::path dir = freshDir("gl_device");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/hello.scene";
+  const fs::path out = dir / "out";
+  const Result r = runCli("run '" + scene + "' -q --frames 2 --gl-device gpu --out '" + out.string() + "'", dir);
+  if (r.code == 0) {
+    const nlohmann::json rep = readJson(out / "report.json");
+    EXPECT_EQ(rep["frames"]["gl_device"], "gpu");
+    const std::string device = rep["frames"]["device"];
+    EXPECT_NE(device.find("(hardware"), std::string::npos) << device;
+    EXPECT_EQ(device.find("llvmpipe"), std::string::npos) << device;
+  } else {
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("--gl-device gpu"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+  }
+  // An unknown device is a usage error that names the option.
+  fs::remove_all(out);
+  const Result bad = runCli("run '" + scene + "' -q --gl-device vulkan --out '" + out.string() + "'", dir);
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.err.find("--gl-device"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(out));
+  fs::remove_all(dir);
+}
+
 TEST(Cli, LintListsOperationsAndWarnsWithoutWritingAnything) {
   const fs::path dir = freshDir("lint");
   const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/play.scene";

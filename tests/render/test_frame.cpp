@@ -280,5 +280,49 @@ TEST(Renderer, DeviceDescriptionNamesTheEglDisplayAndTheGlRenderer) {
   EXPECT_EQ(second.deviceDescription(), d);  // the same display every time
 }
 
+// The documented order (renderer.h, OffscreenRenderer), written out by hand for a machine with
+// a software device, a GPU, another software device and a second GPU: cpu tries the software
+// devices in EGL's order, then the surfaceless platform, then the GPUs; gpu tries the GPUs only.
+TEST(Renderer, DisplayOrderFollowsTheDocumentedPreference) {
+  using K = DisplayCandidate::Kind;
+  const std::vector<bool> soft{true, false, true, false};
+  const std::vector<DisplayCandidate> cpu{{K::Device, 0}, {K::Device, 2}, {K::Surfaceless, -1}, {K::Device, 1}, {K::Device, 3}};
+  EXPECT_EQ(displayOrder(soft, true, GlDevice::Cpu), cpu);
+  const std::vector<DisplayCandidate> cpuNoSurfaceless{{K::Device, 0}, {K::Device, 2}, {K::Device, 1}, {K::Device, 3}};
+  EXPECT_EQ(displayOrder(soft, false, GlDevice::Cpu), cpuNoSurfaceless);
+  const std::vector<DisplayCandidate> gpu{{K::Device, 1}, {K::Device, 3}};
+  EXPECT_EQ(displayOrder(soft, true, GlDevice::Gpu), gpu);
+  // No devices listed (no enumeration): cpu still has the surfaceless platform; gpu has nothing.
+  EXPECT_EQ(displayOrder({}, true, GlDevice::Cpu), (std::vector<DisplayCandidate>{{K::Surfaceless, -1}}));
+  EXPECT_TRUE(displayOrder({}, true, GlDevice::Gpu).empty());
+  EXPECT_TRUE(displayOrder({true}, true, GlDevice::Gpu).empty());
+}
+
+TEST(Renderer, GlDeviceNamesRoundTripAndUnknownOnesAreRejected) {
+  EXPECT_EQ(parseGlDevice("cpu"), GlDevice::Cpu);
+  EXPECT_EQ(parseGlDevice("gpu"), GlDevice::Gpu);
+  EXPECT_STREQ(glDeviceName(GlDevice::Cpu), "cpu");
+  EXPECT_STREQ(glDeviceName(GlDevice::Gpu), "gpu");
+  EXPECT_THROW(parseGlDevice("GPU0"), RuntimeError);
+  EXPECT_THROW(parseGlDevice(""), RuntimeError);
+}
+
+// --gl-device gpu takes a hardware EGL device or fails naming what EGL offered; it never draws
+// with llvmpipe. On the project's machines (no GPU) it throws; on a machine with a GPU the
+// renderer describes a hardware device.
+TEST(Renderer, AskingForAGpuNeverFallsBackToSoftware) {
+  try {
+    OffscreenRenderer r(8, 8, Looks{}, GlDevice::Gpu);
+    const std::string d = r.deviceDescription();
+    EXPECT_EQ(d.find("EGL_MESA_device_software"), std::string::npos) << d;
+    EXPECT_EQ(d.find("llvmpipe"), std::string::npos) << d;
+    EXPECT_NE(d.find("(hardware"), std::string::npos) << d;
+  } catch (const RuntimeError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("--gl-device gpu"), std::string::npos) << what;
+    EXPECT_NE(what.find("no hardware (GPU) EGL device"), std::string::npos) << what;
+  }
+}
+
 }  // namespace
 }  // namespace physketch::render
