@@ -483,8 +483,16 @@ BodyPose PbdWorld::pose(int body) const {
 
 // --- the step -------------------------------------------------------------------
 
+bool PbdWorld::anyBouncyRigid() const {
+  for (std::size_t b = 0; b < mode_.size(); ++b) {
+    if (isRigid(b) && mode_[b] != BodyMode::kEmpty && restitution_[b] > 0.0) return true;
+  }
+  return false;
+}
+
 PbdWorld::Census PbdWorld::census() const {
   Census c;
+  const bool bouncy = anyBouncyRigid();
   for (std::size_t b = 0; b < mode_.size(); ++b) {
     const BodyMode m = mode_[b];
     if (m == BodyMode::kEmpty) continue;
@@ -497,7 +505,7 @@ PbdWorld::Census PbdWorld::census() const {
     };
     if (isRigid(b)) {
       count(c.rigidDynamic, c.rigidBodies, dyn);
-      count(c.bouncy, c.bouncyBodies, dyn && restitution_[b] > 0.0);
+      count(c.bouncy, c.bouncyBodies, dyn && bouncy);
     } else {
       count(c.looseDynamic, c.looseBodies, dyn);
       count(c.soft, c.softBodies, dyn && kind_[b] == MaterialKind::kSoft);
@@ -632,8 +640,8 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
       return on ? n(c.plastic, "soft clusters with plastic_creep > 0") : "no soft material has plastic_creep > 0";
     case PbdPass::kWriteParticles: return on ? "bodies move" : "no body moves";
     case PbdPass::kRestitution:
-      return on ? n(c.bouncy, "dynamic rigid bodies with restitution > 0")
-                : "no dynamic rigid body's material has restitution > 0";
+      return on ? n(c.bouncy, "dynamic rigid bodies that can bounce (restitution > 0, theirs or another rigid body's)")
+                : "no rigid body's material has restitution > 0 (or no rigid body moves)";
     case PbdPass::kGuard: return on ? "checks every step" : "no particles";
     case PbdPass::kCount: break;
   }
@@ -642,6 +650,7 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
 
 std::string PbdWorld::touches(PbdPass pass) const {
   long particles = 0, bodies = 0;
+  const bool bouncy = pass == PbdPass::kRestitution && anyBouncyRigid();
   for (std::size_t b = 0; b < mode_.size(); ++b) {
     const BodyMode m = mode_[b];
     const bool rigid = isRigid(b), dyn = m == BodyMode::kDynamic;
@@ -651,7 +660,7 @@ std::string PbdWorld::touches(PbdPass pass) const {
       case PbdPass::kFindContacts:
       case PbdPass::kRigidContact: counts = rigid && dyn; break;
       case PbdPass::kBodyContact: counts = rigid && m != BodyMode::kEmpty; break;
-      case PbdPass::kRestitution: counts = rigid && dyn && restitution_[b] > 0.0; break;
+      case PbdPass::kRestitution: counts = rigid && dyn && bouncy; break;
       case PbdPass::kKinematic: counts = m == BodyMode::kKinematic; break;
       case PbdPass::kUpdate: counts = rigid && (dyn || m == BodyMode::kKinematic); break;
       case PbdPass::kPredict:

@@ -167,7 +167,7 @@ class PbdWorld final : public Solver {
     long bodies = 0;        // not emptied
     long rigidDynamic = 0, looseDynamic = 0, kinematic = 0, kinematicLoose = 0;
     long soft = 0, strands = 0, fluid = 0;  // dynamic particle-level bodies by kind
-    long bouncy = 0;        // dynamic rigid bodies with restitution > 0
+    long bouncy = 0;        // dynamic rigid bodies that may bounce (anyBouncyRigid)
     long plastic = 0;       // clusters of dynamic soft bodies with plastic_creep > 0
     bool distances = false; // a distance constraint, attachment or tether with a dynamic end
     // The bodies behind the counts, for reasons that name their strokes and materials.
@@ -232,6 +232,10 @@ class PbdWorld final : public Solver {
 
   // Particle-level kinds (pbd/world_particles.cpp).
   bool isRigid(std::size_t body) const { return kind_[body] == MaterialKind::kRigid; }
+  // Whether any rigid body (fixed, carried or dynamic) has restitution > 0. A rigid pair bounces
+  // at the mean of its two restitutions, so then every dynamic rigid body may bounce (the
+  // restitution pass): one of e = 0 off a body of e > 0, and one of e > 0 off anything.
+  bool anyBouncyRigid() const;
   void setupParticleBody(std::size_t body, const BodyRange& range);
   void buildClusters(std::size_t body);
   void buildStrand(std::size_t body, const BodyRange& range);
@@ -407,7 +411,12 @@ class PbdWorld final : public Solver {
   void noteParticleBounce(const ParticleBounce& b);
   void particleRestitution(double h);
   bool dynamicSoft(std::size_t b) const { return kind_[b] == MaterialKind::kSoft && mode_[b] == BodyMode::kDynamic; }
-  bool bouncySoft(std::size_t b) const { return dynamicSoft(b) && restitution_[b] > 0.0; }
+  // A dynamic soft body bounces as a whole (softBodyRestitution) when its material has e > 0 or
+  // anything it can hit does: a pair bounces at the mean of its two restitutions, so a soft body
+  // of e = 0 leaves a slab of e = 0.8 at 0.4. anyBouncy_: some body's restitution is > 0 (set by
+  // predict, every substep).
+  bool bouncySoft(std::size_t b) const { return dynamicSoft(b) && (restitution_[b] > 0.0 || anyBouncy_); }
+  bool anyBouncy_ = false;
   Vec3 centreVelocity(std::size_t b) const;
   void softBodyRestitution(double h);
   bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level

@@ -489,6 +489,10 @@ void PbdWorld::predict(double h) {
   particleBounces_.clear();
   distances_.resetMultipliers();
   std::fill(clusters_.lambda.begin(), clusters_.lambda.end(), 0.0f);
+  anyBouncy_ = false;
+  for (std::size_t b = 0; b < mode_.size() && !anyBouncy_; ++b) {
+    anyBouncy_ = mode_[b] != BodyMode::kEmpty && restitution_[b] > 0.0;
+  }
   bool bouncy = false;
   for (std::size_t b = 0; b < members_.size() && !bouncy; ++b) bouncy = bouncySoft(b);
   if (!bouncy) {
@@ -1003,14 +1007,16 @@ void PbdWorld::particleUpdate(double h) {
 }
 
 // A contact worth a bounce (e > 0, the particle approaching, not part of a soft body that
-// bounces as a whole: softBodyRestitution) is kept, once per particle and substep.
+// bounces as a whole: softBodyRestitution) is kept, once per particle and substep: the particle
+// (and a particle on the other side) is marked only when its bounce is kept, so a contact not
+// worth one (a neighbour it rests against or slides along) does not use up the one that is.
 void PbdWorld::noteParticleBounce(const ParticleBounce& b) {
   const auto i = std::size_t(b.particle);
-  bounceNoted_[i] = 1;
-  if (b.body == -2) bounceNoted_[std::size_t(b.other)] = 1;
   if (!(b.e > 0.0) || !(b.approach < 0.0) || invMassP_[i] == 0.0f || pinned_[i]) return;
   const auto bouncesAsABody = [&](std::size_t k) { return !softBounce_.empty() && bouncySoft(std::size_t(parts_.group(k))); };
   if (bouncesAsABody(i) || (b.body == -2 && bouncesAsABody(std::size_t(b.other)))) return;
+  bounceNoted_[i] = 1;
+  if (b.body == -2) bounceNoted_[std::size_t(b.other)] = 1;
   particleBounces_.push_back(b);
 }
 

@@ -545,7 +545,7 @@ TEST(Cli, PlanAllListsThePassesThatAreOffWithWhyAndPlanAfterAddsMeasuredTimes) {
             0);
   const std::string text = slurp(out);
   EXPECT_NE(text.find("off  kinematic  (no body is held"), std::string::npos) << text;
-  EXPECT_NE(text.find("off  restitution  (no dynamic rigid body's material has restitution > 0"), std::string::npos)
+  EXPECT_NE(text.find("off  restitution  (no rigid body's material has restitution > 0"), std::string::npos)
       << text;
   // A scene of rigid bodies pays for no particle-level pass (soft, rope, cloth, fluid), and holds
   // nothing for one: what each pass holds is measured (its buffers' capacity).

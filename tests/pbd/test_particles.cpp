@@ -542,6 +542,57 @@ TEST(Rope, TwoRopesSeparateAtETimesTheirApproachSpeed) {
   EXPECT_LT((momentum(w) - m0).norm(), 2e-3 * scale);
 }
 
+// A bounce is kept per particle, once per substep, from its first contact worth one. A rope A
+// of e = 0.8 (16 particles) lies along a bar C of e = 0 (8 x 2 x 2 particles, centred on it;
+// A's ends are 4 spacings past the bar, beyond the reach at which a rope's ends attach to a
+// body), touching it (one spacing apart), and both fall h0 = 0.2 m onto a fixed slab of e = 0.8
+// with no friction anywhere. Each hits with all of itself at once: A, off the slab at the pair's
+// e of 0.8, rises to 0.8^2 h0 = 0.128 m, and C, at the mean e of 0.4, to 0.4^2 h0 = 0.032 m
+// (closed forms, the cloth and ball tests'; tolerance 3 % of h0, as there). C is a rigid bar,
+// then a stiff soft one (a particle-level body, as a second rope would be, but one whose ends
+// do not attach). What this caught: the contact between A and the soft C, which neither
+// approaches, used up A's bounce (a contact was marked before it was known to be worth one),
+// so A rose 0.050 m in the three cases where C's contact came first; and a body of e = 0 did
+// not bounce off one of e > 0 (the rigid bar: not at all; the soft bar, bouncing particle by
+// particle, 0.005 m), since only bodies whose own e > 0 were given a bounce. Both orders of
+// the particle ids and both sides of A are run, so whichever contact comes first is covered.
+TEST(Rope, ATouchingNeighbourThatDoesNotBounceLeavesARopesBounceAlone) {
+  const double floor = 0.1 + 3 * kSpacing + kRadius;  // the slab's top particle centre + a spacing
+  for (MaterialKind cKind : {MaterialKind::kRigid, MaterialKind::kSoft})
+    for (bool cFirst : {true, false})
+      for (double side : {1.0, -1.0}) {
+        ParticleArrays p;
+        std::vector<Material> mats = {makeKind("a", MaterialKind::kRope), makeKind("c", cKind),
+                                      makeKind("slab", MaterialKind::kRigid)};
+        mats[0].restitution = 0.8, mats[1].restitution = 0.0, mats[2].restitution = 0.8;
+        mats[1].elastic.youngs = 5e5;  // the soft bar: stiff, so it keeps its shape as it lands
+        for (Material& m : mats) m.staticFriction = m.dynamicFriction = 0.0;
+        const Vec3 startA(0.45, floor + 0.2, 0.5);
+        // The bar's near row is one spacing from A (touching it), on the side `side`; its far
+        // row beyond it.
+        const Vec3 cornerC = startA + Vec3(4 * kSpacing, 0.0, side > 0 ? kSpacing : -2 * kSpacing);
+        std::vector<BodyRange> bodies;
+        if (cFirst) bodies.push_back(addBox(p, cornerC, 8, 2, 2, 1, 1));
+        bodies.push_back(addChain(p, startA, Vec3(1, 0, 0), 16, 0));
+        if (!cFirst) bodies.push_back(addBox(p, cornerC, 8, 2, 2, 1, 1));
+        bodies.push_back(addBox(p, Vec3(0.4, 0.1, 0.4), 21, 4, 21, 2, 2));
+        bodies.back().init.fixed = true;
+        const int a = cFirst ? 1 : 0, c = 1 - a;
+        bodies[std::size_t(a)].stroke = 0, bodies[std::size_t(c)].stroke = 1;
+        // firstBounceApex follows one body: run the same start twice, following each.
+        const auto apex = [&](int body) {
+          PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
+          return firstBounceApex(w, body, w.pose(body).centre.y() - 0.2, 0.05);
+        };
+        const double apexA = apex(a), apexC = apex(c);
+        const char* what = cKind == MaterialKind::kRigid ? "rigid" : "soft";
+        std::printf("rope along a %s bar (bar %s, side %+.0f z): apex rope %.4f (closed form 0.128), bar %.4f (0.032)\n",
+                    what, cFirst ? "first" : "second", side, apexA, apexC);
+        EXPECT_NEAR(apexA, 0.64 * 0.2, 0.03 * 0.2) << what << " bar first " << cFirst << ", side " << side;
+        EXPECT_NEAR(apexC, 0.16 * 0.2, 0.03 * 0.2) << what << " bar first " << cFirst << ", side " << side;
+      }
+}
+
 // Only what the scene calls for: a soft body runs the particle passes and cluster
 // matching but no rigid or strand pass; a rope adds the distance pass.
 TEST(Soft, PlanListsOnlyTheParticlePassesItNeeds) {
