@@ -515,6 +515,31 @@ TEST(StudyNorms, RunoutErrorFollowsLubesLaw) {
   EXPECT_NEAR(runoutError(tr, e, Vec3(0, -9.81, 0), "r.scene"), 0.0, 1e-12);
 }
 
+// Issue 9's granular column: scenes/study/mpm_sand_runout.scene, a planar sand column of aspect
+// ratio 1 (L0 = H0 = 15 spacings = 0.0993 m, across the whole domain in z between slip walls,
+// sticky floor) with the sand preset's default friction angle (30 degrees, the documented default
+// for dry sand, not tuned to the law), collapses to within 25 % of Lube et al. 2005's run-out
+// (1.2 a L0 = 0.119 m): the issue's bound, Lube's law itself holding across materials to about
+// +-20 %. Measured at grid_dx 2: 0.0235 m short (dL/L0 0.96; 0.91 at grid_dx 3 and 1.00 at
+// 1.5, converging from below; docs/accuracy.md). At the friction angle of 32 degrees the scene
+// had before, the run-out was 0.87 at 0.8 s, outside the bound. Deterministic: no margin for noise.
+TEST(StudyCli, TheSandColumnRunsOutWithinAQuarterOfLubesLaw) {
+  const fs::path dir = freshDir("runout");
+  const fs::path out = dir / "out";
+  const Result r = runCli("study '" + scene("mpm_sand_runout.scene") + "' --vary grid_dx=2 -q --out '" +
+                              out.string() + "'",
+                          dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Table rows = readCsv(out / "study.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].at("status"), "ok");
+  const double l0 = 15.0 / 151.0;  // the column's 15 particle spacings of 1/151 m (the workspace's grid)
+  const double error = std::stod(rows[0].at("error_m"));
+  std::printf("sand column: run-out off Lube's %.4f m by %.4f m (bound %.4f)\n", 1.2 * l0, error, 0.25 * 1.2 * l0);
+  EXPECT_LT(error, 0.25 * 1.2 * l0);
+  fs::remove_all(dir);
+}
+
 // The pendulum's oracle: at 0.01 rad the simple pendulum is theta0 cos(omega' t) with the
 // frequency lowered by theta0^2 / 16 (Lindstedt-Poincare), up to its third harmonic of amplitude
 // theta0^3 / 192 = 5e-9 rad, so the RK4 angle must match within 3e-8 rad over 2 s (without the
