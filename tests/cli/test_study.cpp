@@ -523,7 +523,12 @@ TEST(StudyNorms, RunoutErrorFollowsLubesLaw) {
 // +-20 %. Measured at grid_dx 2: 0.0235 m short (dL/L0 0.96; 0.91 at grid_dx 3 and 1.00 at
 // 1.5, converging from below; docs/accuracy.md). At the friction angle of 32 degrees the scene
 // had before, the run-out was 0.87 at 0.8 s, outside the bound. Deterministic: no margin for noise.
+// Not run under AddressSanitizer (make sanitize): 33,525 particles for 1.2 s take 21 s here and
+// over 600 s there; the sanitizers cover the same code through the shorter MPM sand and study tests.
 TEST(StudyCli, TheSandColumnRunsOutWithinAQuarterOfLubesLaw) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "too slow under AddressSanitizer (over 600 s); make test runs it";
+#endif
   const fs::path dir = freshDir("runout");
   const fs::path out = dir / "out";
   const Result r = runCli("study '" + scene("mpm_sand_runout.scene") + "' --vary grid_dx=2 -q --out '" +
