@@ -55,11 +55,14 @@ sanitize: deps
 	# down at exit while LeakSanitizer stops the world, crashed LSan's own tracer (signal 11)
 	# after a test had passed; images are the same either way (../shared/stack.md). The
 	# tracer still crashed about once in ten full runs (worker threads exiting), so a test
-	# that fails is run again, up to three times in all: a real ASan/UBSan finding is
-	# deterministic and fails every time. (2026-11-27: two short render tests, run side by
-	# side, crashed the tracer after passing on both of two tries.)
+	# that fails is run once more: a real ASan/UBSan finding is deterministic and fails again.
+	# Two render tests (MeshHandles.InvalidUpdateThrowsAndKeepsTheOldMesh and
+	# FreedHandleIsInvalidEverywhere) crash the tracer every time under ctest since 2026-11-27
+	# (after passing; run directly, with the same options, they pass with the leak check every
+	# time; cause not found): ctest leaves them out and they run directly after it.
 	# scripts/lsan.supp: fontconfig's process-wide cache (Cairo's text), never freed by design.
-	LP_NUM_THREADS=0 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$(CURDIR)/scripts/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS) --repeat until-pass:3
+	LP_NUM_THREADS=0 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$(CURDIR)/scripts/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS) --repeat until-pass:2 -E '^MeshHandles\.(InvalidUpdateThrowsAndKeepsTheOldMesh|FreedHandleIsInvalidEverywhere)$$'
+	cd $(BUILD_ASAN)/tests && LP_NUM_THREADS=0 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$(CURDIR)/scripts/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 ./test_render --gtest_filter='MeshHandles.InvalidUpdateThrowsAndKeepsTheOldMesh:MeshHandles.FreedHandleIsInvalidEverywhere'
 
 clean:
 	rm -rf $(BUILD) $(BUILD_ASAN) out
