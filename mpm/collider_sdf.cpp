@@ -72,6 +72,7 @@ ColliderSdf::ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, d
 }
 
 double ColliderSdf::voxel() const { return impl_->voxel; }
+double ColliderSdf::halfThickness() const { return double(impl_->shift); }
 
 ColliderSdf::~ColliderSdf() = default;
 ColliderSdf::ColliderSdf(ColliderSdf&&) noexcept = default;

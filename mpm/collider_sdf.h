@@ -25,6 +25,9 @@ class ColliderSdf {
   ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, double thickness,
               double maxBandVoxels = kMaxBandVoxels);
   double voxel() const;
+  // An open sheet's half-thickness (m): phi + halfThickness() is the distance to the sheet
+  // itself; 0 for a closed mesh.
+  double halfThickness() const;
   double area() const { return area_; }  // m^2, the scaled mesh's surface
   std::size_t bytes() const;             // what the field holds (OpenVDB's memUsage)
   ~ColliderSdf();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "mpm/constitutive.h"
 #include "mpm/kernels.h"
@@ -82,7 +83,7 @@ Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) const {
   const MatModel& m = models_[std::size_t(parts_.material[i])];
   const Eigen::Matrix3f& F = F_[i];
   switch (m.kind) {
-    case MaterialKind::kFluid: return fluidKirchhoff<float>(plastic_[i], C_[i], m.bulk, m.gamma, m.viscosity);
+    case MaterialKind::kFluid: return fluidKirchhoff<float>(fluidJ_[i], C_[i], m.bulk, m.gamma, m.viscosity);
     case MaterialKind::kSand:
     case MaterialKind::kPlasticine: return henckyKirchhoff<float>(svd3<float>(F), m.mu, m.lambda);
     case MaterialKind::kSnow: {
@@ -104,6 +105,8 @@ void MpmWorld::p2g(float h) {
       std::fill_n(gfs_.begin() + std::ptrdiff_t(first), 64, 0.0f);
       std::fill_n(gfk_.begin() + std::ptrdiff_t(first), 64, 0.0f);
     }
+    if (!jbar_.empty()) std::fill_n(jbar_.begin() + std::ptrdiff_t(2 * first), 128, 0.0f);
+    if (!side_.empty()) std::fill_n(side_.begin() + std::ptrdiff_t(3 * first), 192, 0.0f);
     std::fill_n(held_.begin() + std::ptrdiff_t(first), 64, std::uint8_t(0));
   });
   const float inv = float(1.0 / dx_), dx = float(dx_);
@@ -132,24 +135,53 @@ void MpmWorld::p2g(float h) {
     // pointer, so the grid's base and the flags would be reloaded after every node's store.
     Node* const grid = grid_.data();
     const bool mix = mixed;
-    for (int a = 0; a < 3; ++a) {
-      const F4 Ma = M + X[a];
-      for (int b = 0; b < 3; ++b) {
-        const float wab = st.w[0][a] * st.w[1][b];
-        const F4 r = Ma + Y[b];
-        const std::size_t row = st.ix[a] + st.iy[b];
-        for (int c = 0; c < 3; ++c) {
-          const float wt = wab * st.w[2][c];
-          const std::size_t node = row + st.iz[c];
-          Node* const g = grid + node;
-          (F4::load(g) + F4::splat(wt) * (r + Z[c])).store(g);
-          if (mix) {
-            gfs_[node] += wt * ms;
-            gfk_[node] += wt * mk;
+    // A fluid particle also scatters its mass and m J for J-bar, in the same loop (its own
+    // instance, so that other particles' loop carries no test for it).
+    float* const jbar = jbar_.data();
+    const float mJ = mat.kind == MaterialKind::kFluid ? mp * plastic_[i] : 0.0f;
+    const auto nodes = [&](auto fluid) {
+      for (int a = 0; a < 3; ++a) {
+        const F4 Ma = M + X[a];
+        for (int b = 0; b < 3; ++b) {
+          const float wab = st.w[0][a] * st.w[1][b];
+          const F4 r = Ma + Y[b];
+          const std::size_t row = st.ix[a] + st.iy[b];
+          for (int c = 0; c < 3; ++c) {
+            const float wt = wab * st.w[2][c];
+            const std::size_t node = row + st.iz[c];
+            Node* const g = grid + node;
+            (F4::load(g) + F4::splat(wt) * (r + Z[c])).store(g);
+            if (mix) {
+              gfs_[node] += wt * ms;
+              gfk_[node] += wt * mk;
+            }
+            if constexpr (decltype(fluid)::value) {
+              jbar[2 * node] += wt * mp;
+              jbar[2 * node + 1] += wt * mJ;
+            }
           }
         }
       }
-    }
+    };
+    if (mat.kind == MaterialKind::kFluid) nodes(std::true_type{});
+    else nodes(std::false_type{});
+    // Where colliders are, m (x_p - x_node) per axis, in a loop of its own (few scenes).
+    float* const side = side_.empty() ? nullptr : side_.data();
+    if (!side) return;
+    float s[3][3];
+    for (int k = 0; k < 3; ++k)
+      for (int axis = 0; axis < 3; ++axis) s[axis][k] = mp * (st.f[axis] - float(k)) * dx;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        const float wab = st.w[0][a] * st.w[1][b];
+        for (int c = 0; c < 3; ++c) {
+          const float wt = wab * st.w[2][c];
+          const std::size_t node = st.node(a, b, c);
+          side[3 * node] += wt * s[0][a];
+          side[3 * node + 1] += wt * s[1][b];
+          side[3 * node + 2] += wt * s[2][c];
+        }
+      }
   };
   for (const auto& blocks : colourBlocks_)
     forEach(blocks.size(), [&](std::size_t k) {
@@ -210,6 +242,13 @@ void MpmWorld::gridUpdate(float h) {
       const std::size_t node = block * 64 + std::size_t(l);
       Node& gn = grid_[node];
       const float m = gn.m;
+      if (!jbar_.empty()) {
+        // J-bar: the node's fluid J, the mass-weighted mean over its fluid particles (0 without),
+        // goes into the record's mass lane, where g2p's sum over the record makes J-bar along
+        // with v; the mass moves to jbar_ (nodeMass).
+        gn.m = jbar_[2 * node] > 0.0f ? jbar_[2 * node + 1] / jbar_[2 * node] : 0.0f;
+        jbar_[2 * node] = m;
+      }
       if (!(m > 0.0f)) {
         gn.x = gn.y = gn.z = 0.0f;
         continue;
@@ -230,7 +269,8 @@ void MpmWorld::gridUpdate(float h) {
         const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
         if (!colliders_.empty()) {
           const Vec3 x = origin_ + dx_ * Vec3(idx[0], idx[1], idx[2]);
-          collideNode(x, v, h, mixedFriction_ ? gfs_[node] / m : uniformMus_, mixedFriction_ ? gfk_[node] / m : uniformMuk_);
+          collideNode(x, v, h, mixedFriction_ ? gfs_[node] / m : uniformMus_, mixedFriction_ ? gfk_[node] / m : uniformMuk_,
+                      side_.empty() ? nullptr : &side_[3 * node], m);
         }
         for (int a = 0; a < 3; ++a) {
           const int lowest = a == 1 ? floorNode : wallLo_[a];
@@ -256,8 +296,8 @@ void MpmWorld::g2p(float h) {
     for (std::size_t o = lo; o < hi; ++o) {
       const auto i = std::size_t(order_[o]);
       const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
-      // Per node u = wt * v_node (lane 0 carries the node's mass along, unused), summed into
-      // v and into B's three columns u d_axis.
+      // Per node u = wt * v_node, summed into v and into B's three columns u d_axis. Lane 0
+      // carries the node's mass along, unused; where a fluid is, its J_node, summed into J-bar.
       F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
       for (int a = 0; a < 3; ++a) {
         const F4 d0 = F4::splat((float(a) - st.f[0]) * dx);
@@ -274,6 +314,8 @@ void MpmWorld::g2p(float h) {
           }
         }
       }
+      const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
+      const float jbar = v4.lane(0);  // a fluid's J-bar: sum over nodes of w J_node
       const float v[3] = {v4.lane(1), v4.lane(2), v4.lane(3)};
       float Bm[3][3];  // sum of w v d^T (row r, column axis)
       for (int r = 0; r < 3; ++r) {
@@ -291,10 +333,13 @@ void MpmWorld::g2p(float h) {
       parts_.y[i] += h * v[1];
       parts_.z[i] += h * v[2];
       C_[i] = C;
-      if (models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid)
-        plastic_[i] *= 1.0f + h * C.trace();  // J only: a fluid has no rest shape
-      else
+      if (fluid) {  // J only: a fluid has no rest shape
+        const float grow = 1.0f + h * C.trace();
+        fluidJ_[i] = jbar * grow;
+        plastic_[i] = ((1.0f - kJbarRelax) * plastic_[i] + kJbarRelax * jbar) * grow;
+      } else {
         F_[i] = (Eigen::Matrix3f::Identity() + h * C) * F_[i];
+      }
     }
   });
   // Carried bodies move with their prescribed velocity (fixed ones have none).
@@ -352,7 +397,7 @@ void MpmWorld::projection(int substep) {
         if (*x[a] < edgeLo[a]) wall = 2 * a;
         else if (*x[a] > edgeHi[a]) wall = 2 * a + 1;
       }
-      if (!colliders_.empty()) pushOutOfColliders(i);
+      if (!colliders_.empty()) pushOutOfColliders(i, double(lastH_));
       if (wall < 0) continue;
       ++atEdge;
       if (firstHere < 0 || std::int32_t(i) < firstHere) {  // block order, not id order
@@ -374,7 +419,7 @@ void MpmWorld::projection(int substep) {
 
 // A particle inside a collider goes back to its surface along the normal and loses its
 // velocity into it, relative to the collider (PhyVR's anti-penetration for its tools).
-void MpmWorld::pushOutOfColliders(std::size_t i) {
+void MpmWorld::pushOutOfColliders(std::size_t i, double h) {
   Collider::Probe p;
   for (const Collider& c : colliders_) {
     const Vec3 x(parts_.x[i], parts_.y[i], parts_.z[i]);
@@ -385,7 +430,7 @@ void MpmWorld::pushOutOfColliders(std::size_t i) {
     parts_.x[i] = float(to.x());
     parts_.y[i] = float(to.y());
     parts_.z[i] = float(to.z());
-    const Vec3 vc = c.velocityAt(to, p.local, std::max(double(lastH_), 1e-12));
+    const Vec3 vc = h > 0.0 ? c.velocityAt(to, p.local, h) : Vec3::Zero();
     const Vec3 rel = Vec3(parts_.vx[i], parts_.vy[i], parts_.vz[i]) - vc;
     const double vn = rel.dot(n);
     if (vn < 0.0) {

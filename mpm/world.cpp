@@ -137,6 +137,7 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   C_.assign(n, Eigen::Matrix3f::Zero());
   F_.assign(n, Eigen::Matrix3f::Identity());
   plastic_.assign(n, 0.0f);
+  fluidJ_.assign(n, 1.0f);
   for (std::size_t i = 0; i < n; ++i) initParticle(i);
   for (const BodyRange& br : bodies) {
     if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
@@ -198,6 +199,9 @@ void MpmWorld::initGrid() {
     gfs_.assign(nodes, 0.0f);
     gfk_.assign(nodes, 0.0f);
   }
+  jbar_.clear();
+  for (const MatModel& m : models_)
+    if (m.kind == MaterialKind::kFluid) jbar_.assign(2 * nodes, 0.0f);
   held_.assign(nodes, 0);
   nodeBlockMark_.assign(std::size_t(nb_) * nb_ * nb_, 0);
 }
@@ -296,6 +300,8 @@ int MpmWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
     C_.push_back(Eigen::Matrix3f::Zero());
     F_.push_back(Eigen::Matrix3f::Identity());
     plastic_.push_back(1.0f);
+    fluidJ_.push_back(1.0f);
+    placeInColliders_ = true;
     initParticle(std::size_t(id));
     parts_.phase[std::size_t(id)] = phase::make(b);
     ids.push_back(id);
@@ -457,7 +463,7 @@ StepBound MpmWorld::waveBound() const {
     used[m] = 1;
     if (models_[m].kind == MaterialKind::kSnow)
       snowFactor[m] = std::max(snowFactor[m], snowHardening(models_[m].xi, plastic_[i]));
-    if (models_[m].kind == MaterialKind::kFluid) fluidJ[m] = std::min(fluidJ[m], std::max(plastic_[i], 1e-3f));
+    if (models_[m].kind == MaterialKind::kFluid) fluidJ[m] = std::min(fluidJ[m], std::max(fluidJ_[i], 1e-3f));  // the J its pressure takes
   }
   StepBound best;
   best.h = std::numeric_limits<double>::infinity();
@@ -537,8 +543,13 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
   for (const auto& s : names) list += (list.empty() ? "" : ", ") + s;
   switch (pass) {
     case MpmPass::kP2G:
-    case MpmPass::kG2P:
-      return on ? "materials " + list : "no dynamic particle (all fixed, held or removed)";
+    case MpmPass::kG2P: {
+      if (!on) return "no dynamic particle (all fixed, held or removed)";
+      std::string extra;
+      if (!jbar_.empty()) extra += "; fluid J-bar (pressure from the grid-averaged J)";
+      if (pass == MpmPass::kP2G && !side_.empty()) extra += "; collider side field (mass moment per node)";
+      return "materials " + list + extra;
+    }
     case MpmPass::kGridUpdate:
       return on ? std::string("gravity, ") + wallsText(params_.walls) +
                       " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY) +
@@ -678,7 +689,7 @@ double MpmWorld::pressure(std::int32_t i) const {
   if (k >= parts_.size() || !phase::dynamic(parts_.phase[k])) return std::numeric_limits<double>::quiet_NaN();
   const auto& m = models_[std::size_t(parts_.material[k])];
   if (m.kind != MaterialKind::kFluid) return std::numeric_limits<double>::quiet_NaN();
-  return double(m.bulk) / double(m.gamma) * (std::pow(double(plastic_[k]), -double(m.gamma)) - 1.0);
+  return double(m.bulk) / double(m.gamma) * (std::pow(double(fluidJ_[k]), -double(m.gamma)) - 1.0);
 }
 
 // The buffers each pass owns, kept between steps (capacity): P2G the grid and the particle
@@ -687,7 +698,7 @@ double MpmWorld::pressure(std::int32_t i) const {
 std::size_t MpmWorld::passBytes(MpmPass pass) const {
   switch (pass) {
     case MpmPass::kP2G: {
-      std::size_t b = heldBytes(grid_, gfs_, gfk_, order_, blockStart_, blockKey_, activeNodeBlocks_, nodeBlockMark_);
+      std::size_t b = heldBytes(grid_, gfs_, gfk_, jbar_, side_, order_, blockStart_, blockKey_, activeNodeBlocks_, nodeBlockMark_);
       for (const auto& c : colourBlocks_) b += heldBytes(c);
       return b;
     }
@@ -696,7 +707,7 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
       for (const Collider& c : colliders_) b += c.sdf.bytes();
       return b;
     }
-    case MpmPass::kG2P: return heldBytes(C_, F_, plastic_);
+    case MpmPass::kG2P: return heldBytes(C_, F_, plastic_, fluidJ_);
     case MpmPass::kProjection: return heldBytes(edgeCounts_, edgeFirst_, edgeSide_);
     default: return 0;
   }
@@ -721,7 +732,7 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
     for (std::size_t i = 0; i < parts_.size(); ++i) {
       if (!phase::dynamic(parts_.phase[i])) continue;
       const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
-      const float J = fluid ? plastic_[i] : F_[i].determinant();
+      const float J = fluid ? std::min(plastic_[i], fluidJ_[i]) : F_[i].determinant();
       if (!(J > 0.0f)) {
         fill(i, GuardKind::kInverted, J, 0.0,
              "The deformation gradient inverted (J <= 0).");
@@ -797,6 +808,16 @@ bool MpmWorld::step() {
     return false;
   }
   lastSubsteps_ = substeps;
+  // Material sketched within a collider (a pool drawn to the brim of a cup, overlapping the
+  // cup's shell) starts on its surface: put there before the step, as the projection would
+  // in the step's first substep, so that the energy reference below is taken after the move
+  // (which lifts water out of a floor: otherwise an energy_growth trip at step 0).
+  if (placeInColliders_ && !colliders_.empty()) {
+    poseColliders(double(steps_) * params_.dt, 0.0);
+    for (std::size_t i = 0; i < parts_.size(); ++i)
+      if (phase::dynamic(parts_.phase[i])) pushOutOfColliders(i, 0.0);
+  }
+  placeInColliders_ = false;
   // After an outside event the energy reference is taken here, before the step, so that
   // growth within the step is caught.
   if (work_[std::size_t(MpmPass::kGuard)] && !energy_.armed() && energyClosed())
@@ -807,12 +828,12 @@ bool MpmWorld::step() {
   if (!validate_ || guardLog_.policy == GuardPolicy::kWarn) {
     start.x = parts_.x, start.y = parts_.y, start.z = parts_.z;
     start.vx = parts_.vx, start.vy = parts_.vy, start.vz = parts_.vz;
-    start.plastic = plastic_, start.C = C_, start.F = F_, start.atEdge = atEdge_, start.firstEdge = firstEdge_;
+    start.plastic = plastic_, start.fluidJ = fluidJ_, start.C = C_, start.F = F_, start.atEdge = atEdge_, start.firstEdge = firstEdge_;
   }
   const auto restoreStart = [&] {
     parts_.x = start.x, parts_.y = start.y, parts_.z = start.z;
     parts_.vx = start.vx, parts_.vy = start.vy, parts_.vz = start.vz;
-    plastic_ = start.plastic, C_ = start.C, F_ = start.F, atEdge_ = start.atEdge, firstEdge_ = start.firstEdge;
+    plastic_ = start.plastic, fluidJ_ = start.fluidJ, C_ = start.C, F_ = start.F, atEdge_ = start.atEdge, firstEdge_ = start.firstEdge;
   };
   const bool checks = work_[std::size_t(MpmPass::kGuard)];
   const auto endChecks = [&] {
@@ -876,6 +897,9 @@ std::vector<std::string> MpmWorld::setColliders(const std::vector<MeshCollider>&
                           " distance-field voxels at dx/2 = " + num(0.5 * dx_) + " m; the field uses " +
                           num(f.voxel()) + " m voxels instead (coarser contact; a smaller or cropped mesh keeps dx/2)");
   }
+  side_.clear();
+  if (!colliders_.empty()) side_.assign(3 * grid_.size(), 0.0f);
+  placeInColliders_ = true;
   energy_.reset();
   return notes;
 }
@@ -898,21 +922,37 @@ void MpmWorld::poseColliders(double t0, double h) {
   }
 }
 
-bool MpmWorld::Collider::probe(const Vec3& x, Probe& out) const {
+bool MpmWorld::Collider::probe(const Vec3& x, Probe& out, bool anywhere) const {
   if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) return false;
   out.local = R1.transpose() * (x - p1);
   Vec3 grad;
-  if (!sdf.sample(out.local, out.phi, grad) || out.phi >= 0.0) return false;
+  if (!sdf.sample(out.local, out.phi, grad) || (out.phi >= 0.0 && !anywhere)) return false;
   const double g = grad.norm();
   out.hasNormal = g >= 1e-6;  // deep inside a solid the field is flat: no direction out
   out.normal = out.hasNormal ? Vec3(R1 * (grad / g)) : Vec3::Zero();
   return true;
 }
 
-void MpmWorld::collideNode(const Vec3& x, float v[3], float h, float mus, float muk) const {
+void MpmWorld::collideNode(const Vec3& x, float v[3], float h, float mus, float muk, const float* side,
+                           float m) const {
   Collider::Probe p;
   for (const Collider& c : colliders_) {
-    if (!c.probe(x, p)) continue;
+    const double half = c.sdf.halfThickness();
+    const bool sided = side != nullptr && m > 0.0f;
+    if (!c.probe(x, p, sided && half > 0.0)) continue;
+    if (sided && p.hasNormal) {
+      // The normal points to the nearest surface (a sheet's: away from it on the node's side).
+      // The node's material, at x + side / m, lies behind that surface when its offset along
+      // the normal is below the node's distance to the surface: a node just past a sheet, or
+      // in the lower half of a thin closed floor, reached only by the water above. Then the
+      // wall faces the material: the normal turns round (and a sheet acts anywhere in its band).
+      const double offset = (double(side[0]) * p.normal.x() + double(side[1]) * p.normal.y() +
+                             double(side[2]) * p.normal.z()) / double(m);
+      if (p.phi + half + offset < 0.0) p.normal = -p.normal;
+      else if (p.phi >= 0.0) continue;  // outside the shell on the material's side: free
+    } else if (p.phi >= 0.0) {
+      continue;
+    }
     const Vec3 vc = c.velocityAt(x, p.local, double(h));
     Vec3 rel = Vec3(v[0], v[1], v[2]) - vc;
     if (!p.hasNormal) {
@@ -952,7 +992,7 @@ std::vector<std::string> MpmWorld::runNotes() const {
 double MpmWorld::gridMass() const {
   double m = 0.0;
   for (std::int32_t b : activeNodeBlocks_)
-    for (std::size_t l = 0; l < 64; ++l) m += grid_[std::size_t(b) * 64 + l].m;
+    for (std::size_t l = 0; l < 64; ++l) m += nodeMass(std::size_t(b) * 64 + l);
   return m;
 }
 
@@ -961,14 +1001,14 @@ Vec3 MpmWorld::gridMomentum() const {
   for (std::int32_t b : activeNodeBlocks_)
     for (std::size_t l = 0; l < 64; ++l) {
       const std::size_t k = std::size_t(b) * 64 + l;
-      p += double(grid_[k].m) * Vec3(grid_[k].x, grid_[k].y, grid_[k].z);
+      p += double(nodeMass(k)) * Vec3(grid_[k].x, grid_[k].y, grid_[k].z);
     }
   return p;
 }
 
 std::uint64_t MpmWorld::stateHash() const {
   std::uint64_t h = 1469598103934665603ull;
-  for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz, &plastic_})
+  for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz, &plastic_, &fluidJ_})
     hashBytes(h, a->data(), a->size() * sizeof(float));
   hashBytes(h, parts_.phase.data(), parts_.phase.size() * sizeof(std::uint32_t));
   for (const auto* a : {&C_, &F_})

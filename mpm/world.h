@@ -179,7 +179,7 @@ class MpmWorld final : public Solver {
   // start: its arrays keep their capacity, so a step allocates nothing (a fresh copy per step
   // cost a page fault per 4 KiB of state, 11 % of a 64k-particle step).
   struct Saved {
-    std::vector<float> x, y, z, vx, vy, vz, plastic;
+    std::vector<float> x, y, z, vx, vy, vz, plastic, fluidJ;
     std::vector<Eigen::Matrix3f> C, F;
     std::int64_t atEdge = 0;
     EdgeHit firstEdge;
@@ -218,6 +218,14 @@ class MpmWorld final : public Solver {
   // Per particle (ids as parts_): affine velocity C (1/s), deformation gradient F, plastic scalar.
   std::vector<Eigen::Matrix3f> C_, F_;
   std::vector<float> plastic_;
+  // Per particle, fluids: the J its pressure is computed from -- J-bar, the B-spline average
+  // through the grid of its neighbours' J, advanced by the substep's divergence. A particle's
+  // own J (plastic_) has modes the grid does not see (8 particles per cell, one node): next to
+  // a held node or a collider one layer kept J = 1 and the next took its load, and a collider's
+  // position projection drove single particles' J anywhere in 0.3..2 (pool in an open cup).
+  // The own J relaxes towards J-bar by kJbarRelax per substep, which bounds that drift.
+  std::vector<float> fluidJ_;
+  static constexpr float kJbarRelax = 0.05f;
   // Per body.
   std::vector<std::vector<std::int32_t>> members_;
   std::vector<Vec3i> restCell_;          // per particle: its cell in its body's rest lattice (cuts)
@@ -245,6 +253,19 @@ class MpmWorld final : public Solver {
   bool mixedFriction_ = false;
   float uniformMus_ = 0.0f, uniformMuk_ = 0.0f;
   std::vector<float> gfs_, gfk_;
+  // J-bar for fluids: per node the fluid mass and mass times J (kg), interleaved, scattered like
+  // the mass (after grid_update: the node's mass, and unused); empty without a fluid material.
+  // See fluidJ_.
+  std::vector<float> jbar_;
+  // A node's mass after grid_update (a fluid scene's record carries J_node in its mass lane then).
+  float nodeMass(std::size_t node) const { return jbar_.empty() ? grid_[node].m : jbar_[2 * node]; }
+  // Per node 3, where a mesh collider exists (else empty): sum of w m (x_p - x_node) (kg m),
+  // scattered like the mass: which side of a collider's surface the node's material is on. A
+  // sheet has two sides and no inside, and a thin closed wall's far half has its normals
+  // pointing away from the material: there a node's normal turns to face its material, so a
+  // node just past a floor, reached only by the water above it, holds that water up instead
+  // of letting it through (collideNode).
+  std::vector<float> side_;
   // Mesh colliders, and their poses at the start (0) and end (1) of the current substep.
   struct Collider {
     MeshCollider desc;
@@ -260,7 +281,8 @@ class MpmWorld final : public Solver {
       double phi = 0.0;
       bool hasNormal = false;
     };
-    bool probe(const Vec3& x, Probe& out) const;
+    // anywhere: also where phi >= 0 within the narrow band (an open sheet's far side).
+    bool probe(const Vec3& x, Probe& out, bool anywhere = false) const;
     // The collider's velocity at a world point now at x whose local point is `local`: where
     // that material point was at the substep's start, over the substep h.
     Vec3 velocityAt(const Vec3& x, const Vec3& local, double h) const { return (x - (R0 * local + p0)) / h; }
@@ -269,8 +291,13 @@ class MpmWorld final : public Solver {
   void poseColliders(double t0, double h);
   // Imposes the colliders on a node (world position x) of velocity v; mus, muk: the node's
   // material friction (a collider's friction= replaces it).
-  void collideNode(const Vec3& x, float v[3], float h, float mus, float muk) const;
-  void pushOutOfColliders(std::size_t i);
+  // side: the node's sum of w m (x_p - x_node) over its particles (kg m) and m its mass, where
+  // sheets exist (else null): which side of a sheet the node's material is on.
+  void collideNode(const Vec3& x, float v[3], float h, float mus, float muk, const float* side = nullptr,
+                   float m = 0.0f) const;
+  // h: the substep the colliders' poses span (0: they stand still, before a step).
+  void pushOutOfColliders(std::size_t i, double h);
+  bool placeInColliders_ = false;  // particles or colliders came: push material out before the next step
   float lastH_ = 0.0f;  // s, the current substep
   std::vector<std::uint8_t> held_;        // 1: a node a fixed body holds (sticky); 2: a carried body (one-sided)
   std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
