@@ -155,16 +155,19 @@ void MpmWorld::p2g(float h) {
               gfs_[node] += wt * ms;
               gfk_[node] += wt * mk;
             }
-            if constexpr (decltype(fluid)::value) {
+            if constexpr (decltype(fluid)::value == 2) {  // not every particle a fluid
               jbar[2 * node] += wt * mp;
+              jbar[2 * node + 1] += wt * mJ;
+            } else if constexpr (decltype(fluid)::value == 1) {  // all fluid: fluid mass = node mass
               jbar[2 * node + 1] += wt * mJ;
             }
           }
         }
       }
     };
-    if (mat.kind == MaterialKind::kFluid) nodes(std::true_type{});
-    else nodes(std::false_type{});
+    if (mat.kind != MaterialKind::kFluid) nodes(std::integral_constant<int, 0>{});
+    else if (fluidOnly_) nodes(std::integral_constant<int, 1>{});
+    else nodes(std::integral_constant<int, 2>{});
     // Where colliders are, m (x_p - x_node) per axis, in a loop of its own (few scenes).
     float* const side = side_.empty() ? nullptr : side_.data();
     if (!side) return;
@@ -246,7 +249,8 @@ void MpmWorld::gridUpdate(float h) {
         // J-bar: the node's fluid J, the mass-weighted mean over its fluid particles (0 without),
         // goes into the record's mass lane, where g2p's sum over the record makes J-bar along
         // with v; the mass moves to jbar_ (nodeMass).
-        gn.m = jbar_[2 * node] > 0.0f ? jbar_[2 * node + 1] / jbar_[2 * node] : 0.0f;
+        const float fluidMass = fluidOnly_ ? m : jbar_[2 * node];  // the same sum, in the same order
+        gn.m = fluidMass > 0.0f ? jbar_[2 * node + 1] / fluidMass : 0.0f;
         jbar_[2 * node] = m;
       }
       if (!(m > 0.0f)) {

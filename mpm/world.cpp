@@ -794,6 +794,9 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
 bool MpmWorld::step() {
   if (guard_.tripped()) return false;
   work_ = work();
+  fluidOnly_ = !jbar_.empty();
+  for (std::size_t i = 0; i < parts_.size() && fluidOnly_; ++i)
+    fluidOnly_ = !phase::dynamic(parts_.phase[i]) || models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
   const int substeps = substepsForNextStep();
   if (substeps == 0) {
     // `substeps auto` would need more than kMaxSubsteps: name the material that sets the bound.

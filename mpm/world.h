@@ -257,6 +257,9 @@ class MpmWorld final : public Solver {
   // the mass (after grid_update: the node's mass, and unused); empty without a fluid material.
   // See fluidJ_.
   std::vector<float> jbar_;
+  // Every dynamic particle is a fluid (set each step): a node's fluid mass is its mass, so p2g
+  // scatters m J alone and grid_update divides by the node's mass.
+  bool fluidOnly_ = false;
   // A node's mass after grid_update (a fluid scene's record carries J_node in its mass lane then).
   float nodeMass(std::size_t node) const { return jbar_.empty() ? grid_[node].m : jbar_[2 * node]; }
   // Per node 3, where a mesh collider exists (else empty): sum of w m (x_p - x_node) (kg m),

@@ -865,7 +865,7 @@ CupPool cupPool(bool closed) {
 }
 
 // Water at rest in a mesh-collider cup has hydrostatic pressure: head RMS error within 20 % of
-// the depth in the open cup (measured 0.0117 m) and 25 % in the closed one (0.0153 m). The
+// the depth in the open cup (measured 0.0117 m) and 25 % in the closed one (0.0146 m). The
 // bounds allow for the surface being taken at the highest particle (a partial top layer puts it
 // up to a spacing above the mean surface: about 0.006 m of the error), for the pool still moving
 // a little at 1.5 s, and for the lowest particles crowding onto the collider's surface: the
