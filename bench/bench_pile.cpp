@@ -1,12 +1,17 @@
 // Issue 8's rigid pile: 200 wooden boxes (5^3 particles each, 25,000 particles) dropped in 8
 // layers of a 5 x 5 grid, each layer shifted half a box and turned, so they land on each other
-// and settle into a pile; 4 substeps x 4 iterations, dt 1/60 s, 180 steps (3 s). Body-level
-// rigid contact (one contact patch per body pair) is what this measures.
-// Rows: `pbd,pile,25000,THREADS,ms_per_step,...` (median over the last 60 steps, the settled
+// and settle into a pile; 8 substeps x 4 iterations, dt 1/60 s. Body-level rigid contact (one
+// contact patch per body pair) is what this measures. Two cases:
+//   pile        sleeping off, 180 steps (3 s): the contact solver's own cost
+//   pile_sleep  sleeping on at 0.02 m/s (a scene's default: 2 spacings per second; `sleep`,
+//               docs/formats.md), 480 steps (8 s): what a pile costs once its boxes fall asleep
+// Rows: `pbd,CASE,25000,THREADS,ms_per_step,...` (median over the last 60 steps, the settled
 // pile, where every body touches others), the median of the first 60 (falling, few contacts),
 // one row per pass (ms per step over the whole run), the largest particle speed at the end
-// (m/s: the pile is at rest), and the lowest particle (m: nothing sinks into the ground).
-//   build/bench/bench_pile [--threads N]
+// (m/s), the lowest particle (m: nothing sinks into the ground), and for pile_sleep the bodies
+// asleep at the end and the time when the last one fell asleep (s; the run's length if some
+// never did).
+//   build/bench/bench_pile [--threads N] [--substeps S] [--iterations I] [--only CASE]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -27,19 +32,9 @@ using namespace physketch;
 using physketch::bench::median;
 using physketch::bench::row;
 
-int main(int argc, char** argv) {
-  int threads = tbb::info::default_concurrency();
-  int substeps = 8, iterations = 4;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--substeps") && i + 1 < argc) substeps = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::atoi(argv[++i]);
-    else {
-      std::fprintf(stderr, "usage: bench_pile [--threads N] [--substeps S] [--iterations I]\n");
-      return 1;
-    }
-  }
-  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+namespace {
+
+int runCase(const char* name, int threads, int substeps, int iterations, double sleepSpeed, int steps) {
   constexpr double h = 0.01;
   constexpr int side = 5;  // particles per box edge
   Material wood = makeMaterial(MaterialKind::kRigid, "wood");
@@ -68,31 +63,63 @@ int main(int argc, char** argv) {
   prm.particleRadius = 0.5 * h;
   prm.substeps = substeps;
   prm.iterations = iterations;
+  prm.sleepSpeed = sleepSpeed;
   pbd::PbdWorld w(p, bodies, {wood}, prm);
   std::vector<double> ms;
-  for (int s = 0; s < 180; ++s) {
+  double allAsleepAt = steps * prm.dt;
+  for (int s = 0; s < steps; ++s) {
     const double t0 = nowSeconds();
     if (!w.step()) {
-      std::fprintf(stderr, "bench_pile: %s\n", w.guard().message().c_str());
+      std::fprintf(stderr, "bench_pile: %s: %s\n", name, w.guard().message().c_str());
       return 1;
     }
     ms.push_back(1e3 * (nowSeconds() - t0));
+    if (w.sleepingCount() < w.bodyCount()) allAsleepAt = steps * prm.dt;
+    else if (allAsleepAt == steps * prm.dt) allAsleepAt = (s + 1) * prm.dt;
   }
   const std::size_t n = p.size();
-  row("pbd", "pile", n, threads, "ms_per_step", median(std::vector<double>(ms.end() - 60, ms.end())), "ms");
-  row("pbd", "pile", n, threads, "ms_per_step_falling", median(std::vector<double>(ms.begin(), ms.begin() + 60)), "ms");
+  row("pbd", name, n, threads, "ms_per_step", median(std::vector<double>(ms.end() - 60, ms.end())), "ms");
+  row("pbd", name, n, threads, "ms_per_step_falling", median(std::vector<double>(ms.begin(), ms.begin() + 60)), "ms");
   for (const Profile::Entry& e : w.profile().entries())
-    if (e.calls > 0) row("pbd", "pile", n, threads, (e.name + "_ms_per_step").c_str(), 1e3 * e.seconds / 180.0, "ms");
+    if (e.calls > 0) row("pbd", name, n, threads, (e.name + "_ms_per_step").c_str(), 1e3 * e.seconds / steps, "ms");
   const ParticleArrays& r = w.particles();
   double fastest = 0.0, lowest = 1e9;
   for (std::size_t i = 0; i < r.size(); ++i) {
     fastest = std::max(fastest, Vec3(r.vx[i], r.vy[i], r.vz[i]).norm());
     lowest = std::min(lowest, double(r.y[i]));
   }
-  row("pbd", "pile", n, threads, "max_speed_end", fastest, "m/s");
-  row("pbd", "pile", n, threads, "lowest_particle", lowest, "m");
-  row("pbd", "pile", n, threads, "bodies", double(bodies.size()), "count");
+  row("pbd", name, n, threads, "max_speed_end", fastest, "m/s");
+  row("pbd", name, n, threads, "lowest_particle", lowest, "m");
+  row("pbd", name, n, threads, "bodies", double(bodies.size()), "count");
+  if (sleepSpeed > 0.0) {
+    row("pbd", name, n, threads, "asleep_end", double(w.sleepingCount()), "count");
+    row("pbd", name, n, threads, "all_asleep_at", allAsleepAt, "s");
+  }
   // On stderr: a change meant to keep the results (a faster loop) must keep this hash.
-  std::fprintf(stderr, "bench_pile: state hash after 180 steps %016llx\n", static_cast<unsigned long long>(w.stateHash()));
+  std::fprintf(stderr, "bench_pile: %s: state hash after %d steps %016llx\n", name, steps,
+               static_cast<unsigned long long>(w.stateHash()));
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int threads = tbb::info::default_concurrency();
+  int substeps = 8, iterations = 4;
+  std::string only;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--substeps") && i + 1 < argc) substeps = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--iterations") && i + 1 < argc) iterations = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+    else {
+      std::fprintf(stderr, "usage: bench_pile [--threads N] [--substeps S] [--iterations I] [--only pile|pile_sleep]\n");
+      return 1;
+    }
+  }
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+  int rc = 0;
+  if (only.empty() || only == "pile") rc |= runCase("pile", threads, substeps, iterations, 0.0, 180);
+  if (only.empty() || only == "pile_sleep") rc |= runCase("pile_sleep", threads, substeps, iterations, 0.02, 480);
+  return rc;
 }

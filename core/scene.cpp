@@ -272,6 +272,17 @@ SceneDesc build(const RecordFile& file) {
       FieldReader f(file, r, {"spacings"});
       s.gridDx = f.inRange(0, 1.0, 4.0);
       s.gridDxLine = r.line;
+    } else if (kw == "sleep") {
+      // sleep off | sleep on | sleep SPEED [SECONDS]  (SPEED may be `auto`)
+      FieldReader f(file, r, {"speed", "seconds"}, 1);
+      s.sleepLine = r.line;
+      if (f.word(0) == "off" || f.word(0) == "on") {
+        if (f.count() > 1) f.fail(1, "'sleep " + f.word(0) + "' takes no seconds (sleep SPEED SECONDS sets both)");
+        s.sleep = f.word(0) == "on";
+      } else {
+        s.sleepSpeed = f.word(0) == "auto" ? 0.0 : f.inRange(0, 1e-6, 10.0);
+        if (f.count() > 1) s.sleepTime = f.inRange(1, 1e-3, 3600.0);
+      }
     } else if (kw == "ground") {
       FieldReader f(file, r, {"y"});
       s.groundY = f.number(0);
@@ -323,7 +334,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "walls grid_dx cfl scale ground duration fps material collider keyframe expect camera image output)");
+                                                  "walls grid_dx cfl scale sleep ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");

@@ -95,6 +95,14 @@ struct SceneDesc {
   int scaleLine = 0;
   Vec3 gravityUnscaled{0.0, -9.81, 0.0};
   std::vector<Material> materialsUnscaled;
+  // solver pbd: sleeping (`sleep`): a rigid body whose every point has moved slower than
+  // sleepSpeed for sleepTime seconds, with what it touches, rests until something moving
+  // touches it. On by default; sleepSpeed 0 = auto: two particle spacings per second (so a body
+  // still for the default 0.5 s stays within one spacing).
+  bool sleep = true;
+  double sleepSpeed = 0.0;   // m/s
+  double sleepTime = 0.5;    // s
+  int sleepLine = 0;
   double groundY = 0.0;      // m, height of the ground plane (y up)
   double duration = 2.0;     // s of simulated time
   double fps = 30.0;         // frames per simulated second; 1/fps is a whole number of steps

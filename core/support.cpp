@@ -92,6 +92,9 @@ void checkSupport(const SceneDesc& scene, const SketchUses& uses, const SolverSu
                          std::string(name) + ": " + solverText(scene) +
                              " has no domain walls or background grid (the record is for solver mpm)");
   }
+  if (!support.sleeping && scene.sleepLine > 0)
+    throw InputError(scene.path, scene.sleepLine, "record",
+                     "sleep: " + solverText(scene) + " has no bodies to put to sleep (the record is for solver pbd)");
   checkFeature(uses.toolStroke, support.toolStrokes, scene, "tool strokes");
   checkFeature(uses.velocity, support.initialMotion, scene, "initial velocities (vel=, spin=)");
   checkFeature(uses.fixedBody, support.fixedBodies, scene, "fixed bodies");

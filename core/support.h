@@ -43,6 +43,7 @@ struct SolverSupport {
   bool initialMotion = false;       // vel= and spin=
   bool fixedBodies = false;         // the `fixed` flag
   bool domainGrid = false;          // scene `walls` and `grid_dx` (a background grid in a walled domain)
+  bool sleeping = false;            // scene `sleep` (rigid bodies at rest stop being simulated)
   // Material parameters the solver's kinds have in the table but the solver does not
   // simulate yet: setting one is an error naming it, never silently ignored.
   std::vector<std::string> paramsNotYet;

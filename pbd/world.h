@@ -18,6 +18,12 @@
 //   write_particles  x_i = R r_i + c, v_i = v + w x R r_i, once per step
 //   guard            first NaN / explosion / penetration, once per step
 //
+// Sleeping (PbdParams::sleepSpeed; updateSleep): after a step, a dynamic rigid body that has
+// stayed within sleepSpeed x sleepTime of one pose for sleepTime falls asleep: v = w = 0, its
+// particles at rest, and every pass treats it as fixed (moving() is false) until find_contacts
+// finds something moving touching it (a carried body, or an awake one faster than 4 x sleepSpeed)
+// or an awake body touching it leaves its still ball; any outside change wakes all.
+//
 // Soft bodies, ropes and cloth (and fluids) are simulated particle by particle, in the
 // same substeps (Macklin et al. 2014, Alg. 1, with XPBD compliance, Macklin et al. 2016):
 //     predict          v += g h, p = x + v h for their dynamic particles
@@ -70,6 +76,12 @@ struct PbdParams {
   double maxSpeed = 100.0;    // m/s; the guard's explosion bound
   double maxCompression = 0.1;  // the guard's bound on a fluid's mean rho/rho0 - 1 (10 %: sloshing
                                 // water stays near 1 %; beyond this the fluid visibly shrinks)
+  // Sleeping (docs/formats.md, `sleep`): a dynamic rigid body none of whose points has moved
+  // farther than sleepSpeed x sleepTime in sleepTime seconds (m/s, s), with the bodies it touches,
+  // stops being simulated until something wakes it. 0 = no body sleeps (the API's default; a
+  // scene file's default is on, paramsFromScene).
+  double sleepSpeed = 0.0;
+  double sleepTime = 0.5;     // s
 };
 
 // The solver settings a scene file asks for; the radius is half the sketch's voxel size.
@@ -146,6 +158,10 @@ class PbdWorld final : public Solver {
   // hands body_contact (for tests and tools; it refreshes the kept lists, which never changes
   // what a later step does).
   const BodyPairContacts& bodyPairsNow();
+  // Whether a body is asleep (params().sleepSpeed): not simulated until something wakes it.
+  bool asleep(int body) const { return std::size_t(body) < asleep_.size() && asleep_[std::size_t(body)] != 0; }
+  // Bodies asleep now.
+  long sleepingCount() const;
   // Total mass (kg) and rest-frame inertia tensor (kg m^2) of a body.
   double bodyMass(int body) const;
   Mat3 bodyInertiaRest(int body) const;
@@ -166,6 +182,7 @@ class PbdWorld final : public Solver {
   struct Census {
     long bodies = 0;        // not emptied
     long rigidDynamic = 0, looseDynamic = 0, kinematic = 0, kinematicLoose = 0;
+    long asleep = 0;        // dynamic rigid bodies asleep (not in rigidDynamic)
     long soft = 0, strands = 0, fluid = 0;  // dynamic particle-level bodies by kind
     long bouncy = 0;        // dynamic rigid bodies that may bounce (anyBouncyRigid)
     long plastic = 0;       // clusters of dynamic soft bodies with plastic_creep > 0
@@ -297,7 +314,29 @@ class PbdWorld final : public Solver {
   std::vector<double> reach_;               // m, max |rest offset| + particle radius
   std::vector<Eigen::AlignedBox3d> restBox_;  // per body: the box of its rest offsets (m), grown by r
   std::vector<BodyMode> mode_;
-  std::vector<std::int32_t> active_;        // dynamic bodies this step
+  std::vector<std::int32_t> active_;        // dynamic bodies awake this substep, ascending
+  // Sleeping (PbdParams::sleepSpeed). Per body: asleep (its v and w are 0, its particles' velocities
+  // 0; the passes treat it as fixed) and how long it has been slower than the sleep speed (s).
+  // sleepAllowed_: this step, whether any body may sleep (a scene of rigid bodies only, no collider
+  // moving along keyframes: particle-level contacts and moving colliders do not wake sleepers).
+  std::vector<char> asleep_;
+  std::vector<double> stillFor_;
+  // Per body: the pose its still time is measured from (Jolt's sleep test, by displacement): a body
+  // counts as still while every point stays within sleepSpeed x sleepTime of where it was then, so
+  // a body jittering in place sleeps and one creeping steadily does not.
+  struct StillRef {
+    Vec3 c = Vec3::Zero();
+    Quat q = Quat::Identity();
+  };
+  std::vector<StillRef> stillRef_;
+  bool sleepAllowed_ = false;
+  std::uint64_t sleepEdits_ = 0;  // bodyEdits_ when the last step began
+  bool moving(std::size_t b) const { return mode_[b] == BodyMode::kDynamic && !(b < asleep_.size() && asleep_[b]); }
+  double pointSpeed(std::size_t b, const Vec3& v) const { return v.norm() + motion_[b].w.norm() * reach_[b]; }
+  bool sleepPossible() const;
+  void wake(std::size_t b);
+  void wakeAll();
+  void updateSleep();
   ContactSet contacts_;                     // found once per substep
   // Per body: the ground candidates of the last full scan, reused while the body has
   // moved less than half the scan's extra margin (a resting body is scanned once).
@@ -312,6 +351,9 @@ class PbdWorld final : public Solver {
   std::vector<Motion> startMotion_;
   std::vector<GroundCache> startCache_;
   std::vector<float> startLoose_;
+  std::vector<char> startAsleep_;
+  std::vector<double> startStill_;
+  std::vector<StillRef> startStillRef_;
   // --- particle-level kinds -------------------------------------------------
   std::vector<MaterialKind> kind_;  // per body: what it runs as (solverModel(kind, pbd).runsAs)
   std::vector<float> strandRadius_;  // per body: a rope's or cloth's radius from the brush (m), else 0

@@ -769,6 +769,49 @@ TEST(Support, WallsAndGridDxAreForSolverMpm) {
   EXPECT_NE(std::string(c.what()).find("cfl: solver pbd (the default) has no domain walls"), std::string::npos) << c.what();
 }
 
+// sleep: on by default (speed 0 = auto, 0.5 s); off, on, or SPEED [SECONDS], each number checked.
+TEST(Scene, SleepIsOnByDefaultAndEveryBadValueNamesItsField) {
+  const SceneDesc d = parseScene(kGood, "dir/x.scene");
+  EXPECT_TRUE(d.sleep);
+  EXPECT_EQ(d.sleepSpeed, 0.0);
+  EXPECT_DOUBLE_EQ(d.sleepTime, 0.5);
+  const SceneDesc off = parseScene(std::string(kGood) + "sleep off\n", "dir/x.scene");
+  EXPECT_FALSE(off.sleep);
+  EXPECT_EQ(off.sleepLine, 10);
+  const SceneDesc set = parseScene(std::string(kGood) + "sleep 0.03 2\n", "dir/x.scene");
+  EXPECT_TRUE(set.sleep);
+  EXPECT_DOUBLE_EQ(set.sleepSpeed, 0.03);
+  EXPECT_DOUBLE_EQ(set.sleepTime, 2.0);
+  EXPECT_EQ(sceneError("sleep -0.1\n").field(), "speed");
+  EXPECT_EQ(sceneError("sleep nan\n").field(), "speed");
+  EXPECT_EQ(sceneError("sleep sometimes\n").field(), "speed");
+  EXPECT_EQ(sceneError("sleep 11\n").field(), "speed");
+  EXPECT_EQ(sceneError("sleep 0.02 0\n").field(), "seconds");
+  EXPECT_EQ(sceneError("sleep 0.02 inf\n").field(), "seconds");
+  EXPECT_EQ(sceneError("sleep off 2\n").field(), "seconds");
+  EXPECT_EQ(sceneError("sleep\n").field(), "speed");
+  EXPECT_EQ(sceneError("sleep off\nsleep on\n").field(), "record");
+}
+
+TEST(Support, SleepIsForSolverPbd) {
+  const SceneDesc scene = parseScene(std::string(kGood) + "solver mpm\nsleep off\n", "dir/x.scene");
+  SolverSupport mpm;
+  mpm.solver = SolverKind::kMpm;
+  mpm.kinds = {MaterialKind::kElastic};
+  mpm.domainGrid = true;
+  const InputError e = supportError(scene, usesOfMaterials({{"wood", 2}}), mpm);
+  EXPECT_EQ(e.line(), 11);
+  EXPECT_NE(std::string(e.what()).find("sleep: solver mpm (line 10) has no bodies to put to sleep"), std::string::npos)
+      << e.what();
+  SolverSupport pbd = mpm;
+  pbd.solver = SolverKind::kPbd;
+  pbd.kinds = {MaterialKind::kRigid};
+  pbd.domainGrid = false;
+  pbd.sleeping = true;
+  const SceneDesc p = parseScene(std::string(kGood) + "sleep off\n", "dir/x.scene");
+  EXPECT_NO_THROW(checkSupport(p, usesOfMaterials({{"wood", 2}}), pbd));
+}
+
 // scale k (PhysGen3D §A.4): g' = k g; mass held, so density' = density / k^3; E' = E / k (the
 // paper's rule), and the other stresses and the dynamic viscosity likewise; dimensionless
 // parameters unchanged. Closed forms: E'/density' = k^2 E/density (wave speeds scale with

@@ -41,6 +41,21 @@ inline BodyRange addBox(ParticleArrays& p, const Vec3& corner, int nx, int ny, i
   return b;
 }
 
+// A cube of side^3 particles at kSpacing centred at `centre`, turned by R: the next body.
+inline void addTurnedCube(ParticleArrays& p, std::vector<BodyRange>& bodies, const Vec3& centre, const Mat3& R, int side) {
+  BodyRange b;
+  b.first = static_cast<std::int32_t>(p.size());
+  for (int k = 0; k < side; ++k)
+    for (int j = 0; j < side; ++j)
+      for (int i = 0; i < side; ++i) {
+        const Vec3 x = centre + R * (kSpacing * (Vec3(i, j, k) - Vec3::Constant(0.5 * (side - 1))));
+        p.push(float(x.x()), float(x.y()), float(x.z()), int(bodies.size()), 0);
+      }
+  b.count = side * side * side;
+  b.stroke = int(bodies.size());
+  bodies.push_back(b);
+}
+
 // A bar tilted in the x-y plane, `len` particles long and 3x3 thick.
 inline BodyRange addTiltedBar(ParticleArrays& p, const Vec3& start, int len, double angleRad, int stroke = 0) {
   BodyRange b;

@@ -400,22 +400,6 @@ TEST(RigidBody, APileSearchesItsBodyPairsInParallelWithTheSameResult) {
   for (std::size_t step = 0; step < one.size(); ++step) ASSERT_EQ(one[step], two[step]) << "diverged at step " << step;
 }
 
-namespace {
-// A cube of side^3 particles at kSpacing centred at `centre`, turned by R: the next body.
-void addTurnedCube(ParticleArrays& p, std::vector<BodyRange>& bodies, const Vec3& centre, const Mat3& R, int side) {
-  BodyRange b;
-  b.first = static_cast<std::int32_t>(p.size());
-  for (int k = 0; k < side; ++k)
-    for (int j = 0; j < side; ++j)
-      for (int i = 0; i < side; ++i) {
-        const Vec3 x = centre + R * (kSpacing * (Vec3(i, j, k) - Vec3::Constant(0.5 * (side - 1))));
-        p.push(float(x.x()), float(x.y()), float(x.z()), int(bodies.size()), 0);
-      }
-  b.count = side * side * side;
-  b.stroke = int(bodies.size());
-  bodies.push_back(b);
-}
-}  // namespace
 
 // Layers of boxes landing on each other (bench_pile's pile, 4 layers of 4 x 4 boxes of 5^3
 // particles, each layer turned and shifted): body_contact, solved after the ground, pressed the
