@@ -28,6 +28,7 @@ constexpr KnobSpec kKnobs[] = {
      "voxel size = particle spacing (m); the workspace edge becomes 151 voxels, centred as in the scene"},
     {"grid_dx", 1.0, 4.0, false, "solver mpm: grid spacing in particle spacings (scene record 'grid_dx')"},
     {"cfl", 1e-3, 1.0, false, "solver mpm with 'substeps auto': the Courant number C (scene record 'cfl')"},
+    {"sleep", 0, 10, false, "solver pbd: the sleep speed in m/s, 0 = off (scene record 'sleep'; its time stays the scene's)"},
     {"smoothing", 0, 100, true, "mean-curvature smoothing iterations of deforming surfaces meshed from cells (run --smooth)",
      true},
     {"mesh_resolution", 0.1, 1.0, false,
@@ -194,7 +195,12 @@ void applySetting(const Setting& s, SceneDesc& scene, const std::string& option)
         throw InputError(where, 0, knob, "knob 'cfl' acts through 'substeps auto'; the scene fixes substeps");
       (knob == "cfl" ? scene.cfl : scene.gridDx) = v;
     }
-    else if (knob == "dt") {
+    else if (knob == "sleep") {
+      if (scene.solver != SolverKind::kPbd)
+        throw InputError(where, 0, knob, std::string("knob 'sleep' is solver pbd's; the scene runs solver ") + toString(scene.solver));
+      scene.sleep = v > 0.0;
+      scene.sleepSpeed = v;
+    } else if (knob == "dt") {
       // Frames land on step boundaries (as the scene file checks for its own dt).
       const double ratio = 1.0 / (scene.fps * v);
       if (std::abs(ratio - std::round(ratio)) > 1e-6 * ratio || std::round(ratio) < 1.0)

@@ -139,6 +139,20 @@ TEST(StudyKnobs, ProductHasEveryCombinationOnce) {
   EXPECT_EQ(parseSetting(settingText(odd), "--only"), odd);
 }
 
+// The sleep knob sets the scene's sleep speed (0: off) and is solver pbd's alone.
+TEST(StudyKnobs, SleepSetsTheSleepSpeedAndZeroTurnsItOff) {
+  SceneDesc sc;
+  applySetting({{"sleep", 0.05}}, sc, "--only");
+  EXPECT_TRUE(sc.sleep);
+  EXPECT_DOUBLE_EQ(sc.sleepSpeed, 0.05);
+  applySetting({{"sleep", 0.0}}, sc, "--only");
+  EXPECT_FALSE(sc.sleep);
+  EXPECT_THROW(parseVary("sleep=-0.01"), InputError);
+  EXPECT_THROW(parseVary("sleep=11"), InputError);
+  sc.solver = SolverKind::kMpm;
+  EXPECT_THROW(applySetting({{"sleep", 0.05}}, sc, "--only"), InputError);
+}
+
 TEST(StudyKnobs, VoxelSetsTheWorkspaceEdgeAndDtMustDivideAFrame) {
   SceneDesc sc;
   sc.fps = 30;
