@@ -45,6 +45,21 @@ double lowestOf(const PbdWorld& w, int body) {
   return y;
 }
 
+// A 6x4x6 box on the ground with a 4x4x4 box on it (bodies 0 and 1), and a 3x3x6 pusher (body 2,
+// carried once the world is made) on the ground at x = pusherX, clear of the lower box.
+std::vector<BodyRange> stackAndPusher(ParticleArrays& p, double pusherX) {
+  return {addBox(p, Vec3(0.0, kRadius, 0.0), 6, 4, 6, 0), addBox(p, Vec3(0.01, kRadius + 4 * kSpacing, 0.01), 4, 4, 4, 1),
+          addBox(p, Vec3(pusherX, kRadius, 0.0), 3, 3, 6, 2)};
+}
+
+// Makes body 2 a carried pusher, held still, and runs 1.5 s: both boxes must be asleep.
+void settleAsleep(PbdWorld& w) {
+  w.setMode(2, BodyMode::kKinematic);
+  for (int s = 0; s < 90; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  ASSERT_TRUE(w.asleep(0));
+  ASSERT_TRUE(w.asleep(1));
+}
+
 }  // namespace
 
 // A box dropped 2 cm onto the ground lands at 0.06 s and then rests: it must be asleep within
@@ -152,14 +167,9 @@ TEST(Sleep, ASleeperHitByAMovingBodyWakesAndMomentumIsConserved) {
 // within 20 % of r) instead of staying where it slept, 4 spacings up in the air.
 TEST(Sleep, ABoxWhoseSupportIsPushedAwayWakesAndFalls) {
   ParticleArrays p;
-  std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, kRadius, 0.0), 6, 4, 6, 0),
-                                addBox(p, Vec3(0.01, kRadius + 4 * kSpacing, 0.01), 4, 4, 4, 1),
-                                addBox(p, Vec3(-0.08, kRadius, 0.0), 3, 3, 6, 2)};
-  PbdWorld w(p, bodies, rigidMaterial(0.5), sleepy());
-  w.setMode(2, BodyMode::kKinematic);
-  for (int s = 0; s < 90; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
-  ASSERT_TRUE(w.asleep(0));
-  ASSERT_TRUE(w.asleep(1));
+  PbdWorld w(p, stackAndPusher(p, -0.08), rigidMaterial(0.5), sleepy());
+  settleAsleep(w);
+  if (HasFatalFailure()) return;
   const double upperY = lowestOf(w, 1);
   ASSERT_GT(upperY, kRadius + 3.5 * kSpacing);
   const double speed = 2.0;
@@ -181,14 +191,9 @@ TEST(Sleep, ABoxWhoseSupportIsPushedAwayWakesAndFalls) {
 // 20 % of r). Left asleep, it would hang in the air where it fell asleep.
 TEST(Sleep, ASleeperOnASlowlyPushedBoxWakesAndIsCarriedAlong) {
   ParticleArrays p;
-  std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, kRadius, 0.0), 6, 4, 6, 0),
-                                addBox(p, Vec3(0.01, kRadius + 4 * kSpacing, 0.01), 4, 4, 4, 1),
-                                addBox(p, Vec3(-0.04, kRadius, 0.0), 3, 3, 6, 2)};
-  PbdWorld w(p, bodies, rigidMaterial(0.5), sleepy());
-  w.setMode(2, BodyMode::kKinematic);
-  for (int s = 0; s < 90; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
-  ASSERT_TRUE(w.asleep(0));
-  ASSERT_TRUE(w.asleep(1));
+  PbdWorld w(p, stackAndPusher(p, -0.04), rigidMaterial(0.5), sleepy());
+  settleAsleep(w);
+  if (HasFatalFailure()) return;
   const Vec3 lower0 = w.pose(0).centre, upper0 = w.pose(1).centre;
   const double speed = 0.05;
   for (int s = 0; s < 180; ++s) {
