@@ -1232,7 +1232,7 @@ bool PbdWorld::bodiesMayTouch() const {
 // makes its lists once, not every substep). Pairs are in a fixed order (body pair, then
 // (a's particle, b's particle) ascending) made from the positions now, whatever list they
 // come from: the same for any thread count, and for a replayed step.
-void PbdWorld::findBodyPairs() {
+void PbdWorld::findBodyPairs(bool mayWake) {
   BodyPairContacts& pairs = contacts_.bodyPair;
   const double r = params_.particleRadius, margin = 2.0 * r, h = params_.dt / params_.substeps;
   const double skin = 2.0 * r;
@@ -1332,7 +1332,7 @@ void PbdWorld::findBodyPairs() {
   // speed at the end of the last substep (v less this substep's gravity), wakes now, before the
   // pair is solved: it then takes its share of the impact. A body woken here has not moved yet
   // and wakes nothing itself this substep (what it does next wakes its neighbours).
-  if (sleepAllowed_) {
+  if (sleepAllowed_ && mayWake) {
     const double wakeSpeed = 4.0 * params_.sleepSpeed;
     const Vec3 gh = h * params_.gravity;
     std::vector<std::int32_t> woken;
@@ -1458,7 +1458,7 @@ void PbdWorld::updateSleep() {
 
 const BodyPairContacts& PbdWorld::bodyPairsNow() {
   contacts_.bodyPair.clear();
-  findBodyPairs();
+  findBodyPairs(/*mayWake=*/false);  // a look, not a step: wakes nobody
   return contacts_.bodyPair;
 }
 

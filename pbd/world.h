@@ -155,8 +155,8 @@ class PbdWorld final : public Solver {
   // (fluidCount 0 when the scene has no moving fluid).
   DensityError fluidDensityError() const;
   // The particle pairs of the body pairs that may touch, at the poses now: what find_contacts
-  // hands body_contact (for tests and tools; it refreshes the kept lists, which never changes
-  // what a later step does).
+  // hands body_contact (for tests and tools; it refreshes the kept lists and wakes no sleeper,
+  // so it never changes what a later step does).
   const BodyPairContacts& bodyPairsNow();
   // Whether a body is asleep (params().sleepSpeed): not simulated until something wakes it.
   bool asleep(int body) const { return std::size_t(body) < asleep_.size() && asleep_[std::size_t(body)] != 0; }
@@ -226,7 +226,7 @@ class PbdWorld final : public Solver {
   void kinematic(int substep);
   void findContacts();
   void rigidContact();
-  void findBodyPairs();
+  void findBodyPairs(bool mayWake = true);  // mayWake: wake the sleepers it finds touched (a step's, not bodyPairsNow's)
   // Per body pair that may touch: the particle pairs within the pair radius plus kPairSkin of
   // each other when the list was made, and the two bodies' poses then. A later substep
   // reuses the list while the two bodies together have moved less than the skin since (no

@@ -206,6 +206,34 @@ TEST(Sleep, ASleeperOnASlowlyPushedBoxWakesAndIsCarriedAlong) {
   EXPECT_NEAR(lowestOf(w, 1) - lowestOf(w, 0), 4 * kSpacing, 0.2 * kRadius);
 }
 
+// bodyPairsNow() is a look at the pairs, not a step: it must wake nobody. At one substep the
+// check a step makes (the toucher's speed less this substep's gravity, g h = 0.16 m/s) would,
+// between steps, read a resting toucher as moving at g h, twice the touch-wake speed (0.08 m/s).
+// A box held awake by a carried body beside it rests on a sleeping box: a world that asks for the
+// pairs after every step must run bit-identically to one that does not, its lower box asleep.
+TEST(Sleep, AskingForTheBodyPairsWakesNobody) {
+  const auto run = [](bool ask, std::vector<std::uint64_t>& hashes) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, kRadius, 0.0), 6, 4, 6, 0),
+                                  addBox(p, Vec3(0.01, kRadius + 4 * kSpacing, 0.01), 3, 3, 3, 1),
+                                  addBox(p, Vec3(-0.0195, kRadius + 5 * kSpacing, 0.01), 2, 3, 3, 2)};
+    PbdWorld w(p, bodies, rigidMaterial(0.5), sleepy(1));
+    w.setMode(2, BodyMode::kKinematic);
+    for (int s = 0; s < 90; ++s) {
+      EXPECT_TRUE(w.step()) << w.guard().message();
+      if (ask) w.bodyPairsNow();
+      hashes.push_back(w.stateHash());
+    }
+    EXPECT_TRUE(w.asleep(0)) << (ask ? "asking" : "not asking");
+    EXPECT_FALSE(w.asleep(1)) << "the box beside the carried body must stay awake";
+  };
+  std::vector<std::uint64_t> plain, asked;
+  run(false, plain);
+  run(true, asked);
+  ASSERT_EQ(plain.size(), asked.size());
+  for (std::size_t s = 0; s < plain.size(); ++s) ASSERT_EQ(plain[s], asked[s]) << "diverged at step " << s;
+}
+
 // Sleeping decides nothing that depends on threads: a landing pile (2 layers of 3 x 3 boxes, each
 // layer turned) gives bit-identical states for 1 and 2 threads at every step while its boxes fall
 // asleep (some must, or the test would not test it).
