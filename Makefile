@@ -56,13 +56,14 @@ sanitize: deps
 	# after a test had passed; images are the same either way (../shared/stack.md). The
 	# tracer still crashed about once in ten full runs (worker threads exiting), so a test
 	# that fails is run once more: a real ASan/UBSan finding is deterministic and fails again.
-	# Two render tests (MeshHandles.InvalidUpdateThrowsAndKeepsTheOldMesh and
-	# FreedHandleIsInvalidEverywhere) crash the tracer every time under ctest since 2026-11-27
-	# (after passing; run directly, with the same options, they pass with the leak check every
-	# time; cause not found): ctest leaves them out and they run directly after it.
+	# intercept_tls_get_addr=0: LSan's tracer walked the dynamic TLS blocks it had recorded and
+	# crashed on one that no longer existed ("DTLS 11 at 0x11e8", signal 11 reading 0x11e8; with
+	# LSAN_OPTIONS=verbosity=1:log_threads=1), every time two MeshHandles tests ran side by side
+	# under ctest -j 2 (they were run apart from ctest until 2026-11-27). Static TLS is still
+	# scanned, and a leak is still reported (checked with a program that leaks). The whole suite
+	# passed so, 463 of 463 with those two side by side (2026-11-27).
 	# scripts/lsan.supp: fontconfig's process-wide cache (Cairo's text), never freed by design.
-	LP_NUM_THREADS=0 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$(CURDIR)/scripts/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS) --repeat until-pass:2 -E '^MeshHandles\.(InvalidUpdateThrowsAndKeepsTheOldMesh|FreedHandleIsInvalidEverywhere)$$'
-	cd $(BUILD_ASAN)/tests && LP_NUM_THREADS=0 ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$(CURDIR)/scripts/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 ./test_render --gtest_filter='MeshHandles.InvalidUpdateThrowsAndKeepsTheOldMesh:MeshHandles.FreedHandleIsInvalidEverywhere'
+	LP_NUM_THREADS=0 ASAN_OPTIONS=detect_leaks=1:intercept_tls_get_addr=0 LSAN_OPTIONS=suppressions=$(CURDIR)/scripts/lsan.supp UBSAN_OPTIONS=print_stacktrace=1 ctest --test-dir $(BUILD_ASAN) --output-on-failure -j $(JOBS) --repeat until-pass:2
 
 clean:
 	rm -rf $(BUILD) $(BUILD_ASAN) out
