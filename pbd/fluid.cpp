@@ -104,6 +104,10 @@ void FluidSolver::setKernel(Kernel k) {
 void FluidSolver::checkInput(const FluidInput& in) const {
   require(in.count < (std::size_t(1) << 30), "too many particles (" + std::to_string(in.count) + ")");
   if (!in.count) return;
+  require(std::isfinite(in.substep) && in.substep >= 0.0f, "substep must be >= 0 and finite");
+  require(in.iterations >= 0, "iterations must be >= 0");
+  require(std::isfinite(in.soundSpeed) && in.soundSpeed >= 0.0f, "soundSpeed must be >= 0 and finite");
+  require(in.soundSpeed == 0.0f || in.substep > 0.0f, "a soundSpeed needs the substep");
   require(in.x && in.y && in.z && in.invMass && in.fluid && in.restDensity, "an input array is null");
   for (std::size_t i = 0; i < in.count; ++i) {  // messages built only on failure (80k per substep)
     const float w = in.invMass[i];
@@ -118,6 +122,7 @@ void FluidSolver::checkInput(const FluidInput& in) const {
 void FluidSolver::begin(const FluidInput& in) {
   checkInput(in);
   n_ = in.count;
+  substep_ = in.substep, iterations_ = in.iterations, soundSpeed_ = in.soundSpeed;
   if (!n_) {
     rec_.clear(), bidx_.clear(), boff_.assign(1, 0), bk_.clear();
     return;
@@ -142,6 +147,7 @@ void FluidSolver::loadRecords(const FluidInput& in) {
     rec_[r * kRecord + kX] = rec_[r * kRecord + kY] = rec_[r * kRecord + kZ] = kGhostCoord;
   dx_.assign(nPad, 0.0f), dy_.assign(nPad, 0.0f), dz_.assign(nPad, 0.0f);
   comp_.assign(nPad, 0.0f);
+  lambdaSum_.assign(nPad, 0.0f);
   const float* sx = grid_.sortedX();
   const float* sy = grid_.sortedY();
   const float* sz = grid_.sortedZ();
@@ -269,15 +275,29 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
 void FluidSolver::lambdaPass() {
   PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   a.comp = comp_.data();
+  if (soundSpeed_ > 0.0f) {
+    const float ch = soundSpeed_ * substep_;
+    a.alphaK = 1.0f / (ch * ch);
+    a.lambdaSum = lambdaSum_.data();
+  }
   const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? lambdaBlocksAvx2(a, b0, b1) : lambdaBlocksScalar(a, b0, b1);
   });
 }
 
+float FluidSolver::autoSoundSpeed(float gravity, float height, float vmax) {
+  const float g = std::max(std::fabs(gravity), 9.81f);
+  return 15.0f * std::max(std::sqrt(2.0f * g * std::max(height, 0.0f)), std::fabs(vmax));
+}
+
 void FluidSolver::correctionPass() {
-  const PairArgs a =
+  PairArgs a =
       pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  if (substep_ > 0.0f && iterations_ > 0) {  // s_corr as a force below kScorrStep (FluidParams::scorrK)
+    const float r = substep_ / kScorrStep;
+    a.scorrK *= std::min(1.0f, (r * r) * (float(kScorrIterations) / float(iterations_)));
+  }
   const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? correctionBlocksAvx2(a, b0, b1) : correctionBlocksScalar(a, b0, b1);
@@ -484,7 +504,7 @@ std::size_t FluidSolver::neighborBytes() const {
 }
 
 std::size_t FluidSolver::solverBytes() const {
-  return heldBytes(wallB_, wallDB_, rec_, dx_, dy_, dz_, comp_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
+  return heldBytes(wallB_, wallDB_, rec_, dx_, dy_, dz_, comp_, lambdaSum_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
                    omega_[1], omega_[2]);
 }
 

@@ -59,7 +59,12 @@ struct FluidParams {
   // relaxation * w_i * (V cs h^2)^2, i.e. relative to one neighbour's gradient term at
   // distance 0, cs = 45 / (pi h^6).
   float relaxation = 0.1f;
-  // Artificial pressure s_corr = -k (W(r) / W(dq))^n (Eq. 13); dq in units of h.
+  // Artificial pressure s_corr = -k (W(r) / W(dq))^n (Eq. 13); dq in units of h. The paper's
+  // s_corr is a displacement per iteration, so its push per second grew with the substeps
+  // and iterations (a dam break's front ran ahead 3x at 32 substeps). Given the substep h and
+  // the iterations I (FluidInput), each iteration applies k min(1, (h / kScorrStep)^2 *
+  // kScorrIterations / I): a force (h^2 per substep, shared by the iterations) wherever h
+  // is below kScorrStep, the paper's displacement (bounded, stable at one substep) above it.
   float scorrK = 0.01f;
   int scorrN = 4;                // 1..8
   float scorrDq = 0.3f;
@@ -85,6 +90,14 @@ struct FluidInput {
   // Rest density (kg/m^3) per fluid particle: its rest volume is m / rho0 = 1 / (w rho0).
   // Ignored for solids. All fluid particles share the spacing 2r; rho0 differs by fluid.
   const float* restDensity = nullptr;
+  // The substep h (s) and the density iterations it will run. With h > 0 the artificial
+  // pressure acts as a force (see FluidParams::scorrK) and a sound speed may be given; 0
+  // keeps the per-iteration displacement of Macklin & Muller 2013 (unit tests of one pass).
+  float substep = 0.0f;
+  int iterations = 0;
+  // Sound speed c (m/s) of the XPBD compliance alpha_i = w_i / c^2 (needs substep > 0);
+  // 0 = no compliance (the incompressible PBF of the paper). See autoSoundSpeed().
+  float soundSpeed = 0.0f;
 };
 
 struct DensityError {
@@ -96,6 +109,20 @@ struct DensityError {
 
 class FluidSolver {
  public:
+  // Where k of s_corr is the paper's displacement per iteration (FluidParams::scorrK): a
+  // 1/240 s substep (a 60 Hz step in 4 substeps) of 8 iterations, the tests' tuning.
+  static constexpr float kScorrStep = 1.0f / 240.0f;
+  static constexpr int kScorrIterations = 8;
+  // The sound speed of a weakly compressible fluid, after Monaghan 1994's rule for SPH (ten
+  // times the fastest flow, so that density varies by about 1 %): c = 15 max(sqrt(2 g H),
+  // v_max), H (m) the fluid's height, v_max (m/s) its fastest particle, g = max(|gravity|,
+  // 9.81) (a fluid in zero gravity keeps the stiffness of one on Earth). Its hydrostatic
+  // compression g H / c^2 is at most 0.23 %. 15, not 10: at 10 a resting column kept
+  // oscillating at 0.013 m/s (FluidRest.ColumnAtRestStaysStill's bound is 0.01), at 20 and
+  // above the front of a dam break at 32 substeps ran ahead again (RMSE 0.108 at 20, 0.147
+  // at 30; FluidDamBreak.FrontConvergesWithSubsteps's bound is 0.10).
+  static float autoSoundSpeed(float gravity, float height, float vmax);
+
   // Which pair kernel densityIteration runs; kAuto takes AVX2 where the CPU has it. All
   // give identical bits (tested).
   enum class Kernel { kAuto, kScalar, kAvx2 };
@@ -111,7 +138,18 @@ class FluidSolver {
   void begin(const FluidInput& in);
 
   // One Jacobi density iteration (lambda pass, then dp pass); corrections stay inside until
-  // applied or read. Walls are folded into fluid particles' dp.
+  // applied or read. Walls are folded into fluid particles' dp. With a sound speed c the
+  // lambda pass is XPBD's (Macklin et al. 2016, Eq. 18) for the unilateral constraint:
+  //     dlambda_i = (-C_i - at_i lambda_i) / (denominator above + at_i),  at_i = w_i / (c h)^2,
+  // lambda_i (summed over this substep's iterations) kept <= 0 and updated only where C_i > 0
+  // (unilateral as above: updating it where C_i <= 0 too pulled particles back together and a
+  // resting column jittered at 0.42 m/s), and dp uses dlambda: the
+  // constraint's energy is K V C^2 / 2 with K = rho0 c^2, so the fluid's stiffness is a
+  // bulk modulus, the same for any substeps and iterations. Without it the stiffness is
+  // whatever the iterations reach per substep: a volume error (presumably a disordered
+  // packing reading denser than the lattice; not verified) is released faster the more
+  // iterations run per second, and a dam break's front ran further ahead the more substeps
+  // it had (docs/accuracy.md).
   void densityIteration();
   void lambdaPass();       // the two halves, for benchmarks and tests
   void correctionPass();
@@ -177,6 +215,9 @@ class FluidSolver {
   std::vector<float> rec_;
   std::vector<float> dx_, dy_, dz_;   // dp by rank (m)
   std::vector<float> comp_;           // by rank: max(C_i, 0) of fluid particles in the last lambda pass
+  std::vector<float> lambdaSum_;      // by rank: XPBD's lambda summed over this substep's iterations
+  float substep_ = 0.0f, soundSpeed_ = 0.0f;
+  int iterations_ = 0;
   // Neighbour lists in blocks of 8 ranks, slot-major: the k-th neighbour of rank 8b + l is
   // bidx_[(boff_[b] + k) * 8 + l], k < bk_[b] = the block's largest count; the rest of a
   // shorter row points to the ghost.

@@ -31,8 +31,10 @@ struct PairArgs {
   float cp = 0;                        // poly6 constant 315 / (64 pi h^9)
   float cs = 0;                        // spiky gradient constant 45 / (pi h^6)
   float epsK = 0;                      // eps_i = epsK * w_i
+  float alphaK = 0;                    // XPBD: at_i = alphaK * w_i = w_i / (c h)^2; 0 = no compliance
+  float* lambdaSum = nullptr;          // XPBD (alphaK > 0): lambda summed over the substep, by rank
   float invWdq = 0;                    // 1 / (h^2 - (dq h)^2)^3: W / W(dq) without cp
-  float scorrK = 0;                    // k V h^2 / 2 (kg-free: times m_i + m_j)
+  float scorrK = 0;                    // k V h^2 / 2 (kg-free: times m_i + m_j), times the force scale
   int scorrN = 4;
   float wallLo[3] = {0, 0, 0};         // box for fluid centres (walls already moved in by r)
   float wallHi[3] = {0, 0, 0};

@@ -5,7 +5,9 @@
 // in for it until the fluid is integrated there.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <ctime>
 #include <cstdint>
 #include <vector>
@@ -30,6 +32,9 @@ struct FluidSim {
   int substeps = 1;
   int iterations = 8;
   float gravity = -9.81f;   // m/s^2 along y
+  // Sound speed (m/s) of the density constraint's compliance: < 0 picks
+  // FluidSolver::autoSoundSpeed each substep (the PBD world's default), 0 = none.
+  float soundSpeed = -1.0f;
   FluidSolver::Kernel kernel = FluidSolver::Kernel::kAuto;
 
   std::vector<float> x, y, z, vx, vy, vz;  // positions (m), velocities (m/s), by id
@@ -62,14 +67,22 @@ struct FluidSim {
     solver_.setKernel(kernel);
     for (int s = 0; s < substeps; ++s) {
       Stamp t = now();
+      float lo = 0.0f, hi = 0.0f, v2 = 0.0f;  // the fluid's height and fastest speed, for c
       for (std::size_t i = 0; i < n; ++i) {  // predict (Alg. 1 lines 1-3)
         vy[i] += h * gravity;
         px_[i] = x[i] + h * vx[i], py_[i] = y[i] + h * vy[i], pz_[i] = z[i] + h * vz[i];
+        if (!fluid[i]) continue;
+        lo = i ? std::min(lo, py_[i]) : py_[i], hi = i ? std::max(hi, py_[i]) : py_[i];
+        v2 = std::max(v2, (vx[i] * vx[i] + vy[i] * vy[i]) + vz[i] * vz[i]);
       }
       lap(t, kPredict);
       FluidInput in;
       in.count = n, in.x = px_.data(), in.y = py_.data(), in.z = pz_.data();
       in.invMass = w.data(), in.fluid = fluid.data(), in.restDensity = rho0.data();
+      in.substep = h, in.iterations = iterations;
+      if (soundSpeed < 0.0f)
+        autoC_ = std::max(autoC_, FluidSolver::autoSoundSpeed(gravity, hi - lo + 2.0f * params.particleRadius, std::sqrt(v2)));
+      in.soundSpeed = soundSpeed < 0.0f ? autoC_ : soundSpeed;
       solver_.begin(in);
       lap(t, kNeighbors);
       for (int it = 0; it < iterations; ++it) {
@@ -111,6 +124,7 @@ struct FluidSim {
   }
   FluidSolver solver_;
   std::vector<float> px_, py_, pz_;
+  float autoC_ = 0.0f;
 };
 
 }  // namespace physketch::pbd::testing
