@@ -91,6 +91,9 @@ struct Material {
     double vorticity = 0.0;       // pbd: vorticity confinement epsilon (Eq. 16), m/s
     double cohesion = 0.0;        // pbd: cohesion gamma (Akinci et al. 2013), m/s^2
     double relaxation = 0.1;      // pbd: constraint relaxation epsilon (Eq. 11), relative (pbd/fluid.h)
+    // pbd: sound speed c (m/s) of the density constraint's XPBD compliance (pbd/fluid.h);
+    // NaN = auto (FluidSolver::autoSoundSpeed from the fluid's height and fastest particle).
+    double soundSpeed = std::numeric_limits<double>::quiet_NaN();
     double bulkModulus = 1e5;     // mpm: K, Pa; p = K/gamma ((rho/rho0)^gamma - 1)
     double gamma = 7.0;           // mpm: EOS exponent
     double viscosity = 1e-3;      // mpm: dynamic viscosity, Pa*s

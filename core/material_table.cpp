@@ -55,6 +55,7 @@ std::vector<ParamSpec> buildTable() {
   t.push_back(number("fluid", "vorticity", "m/s", 0, closed(0, 100), P, PHYSKETCH_FIELD(fluid.vorticity)));
   t.push_back(number("fluid", "cohesion", "m/s^2", 0, closed(0, 10), P, PHYSKETCH_FIELD(fluid.cohesion)));
   t.push_back(number("fluid", "relaxation", "-", 0.1, openLo(0, 1000), P, PHYSKETCH_FIELD(fluid.relaxation)));
+  t.push_back(number("fluid", "sound_speed", "m/s", kNone, openLo(0, 1e5), P, PHYSKETCH_FIELD(fluid.soundSpeed)));
   t.push_back(number("fluid", "bulk_modulus", "Pa", 1e5, openLo(0, 1e10), M, PHYSKETCH_FIELD(fluid.bulkModulus)));
   t.push_back(number("fluid", "gamma", "-", 7, closed(1, 10), M, PHYSKETCH_FIELD(fluid.gamma)));
   t.push_back(number("fluid", "viscosity", "Pa*s", 1e-3, closed(0, 1e6), M, PHYSKETCH_FIELD(fluid.viscosity)));

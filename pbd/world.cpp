@@ -1,6 +1,7 @@
 #include "pbd/world.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -642,8 +643,15 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
     case PbdPass::kColliderContact:
       return on ? n(c.rigidDynamic, "dynamic rigid bodies and mesh colliders")
                 : (colliders_ && colliders_->size() > 0 ? "no dynamic rigid body" : "no mesh collider in the scene");
-    case PbdPass::kFluidNeighbors:
-    case PbdPass::kDensity: return on ? n(c.fluid, "dynamic fluid bodies") : "no fluid in the scene (or all of it fixed)";
+    case PbdPass::kFluidNeighbors: return on ? n(c.fluid, "dynamic fluid bodies") : "no fluid in the scene (or all of it fixed)";
+    case PbdPass::kDensity: {
+      if (!on) return "no fluid in the scene (or all of it fixed)";
+      char c2[96];  // the compliance's sound speed (pbd/fluid.h)
+      if (!fluidSoundAuto_) std::snprintf(c2, sizeof c2, "; sound speed %.3g m/s", double(fluidSoundSpeed_));
+      else if (fluidSoundSpeed_ > 0.0f) std::snprintf(c2, sizeof c2, "; sound speed auto, now %.3g m/s", double(fluidSoundSpeed_));
+      else std::snprintf(c2, sizeof c2, "; sound speed auto, 15 max(sqrt(2 g H), v_max)");
+      return n(c.fluid, "dynamic fluid bodies") + c2;
+    }
     case PbdPass::kFluidVelocity:
       return on ? "a fluid sets xsph_viscosity, vorticity or cohesion"
                 : (c.fluid == 0 ? "no fluid in the scene" : "its fluids set no xsph_viscosity, vorticity or cohesion");
@@ -919,6 +927,7 @@ bool PbdWorld::step() {
     startAsleep_ = asleep_;
     startStill_ = stillFor_;
     startStillRef_ = stillRef_;
+    startSoundSpeed_ = fluidSoundSpeed_;
     looseStart.resize(6 * loose_.size());
     std::size_t at = 0;
     for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
@@ -930,6 +939,7 @@ bool PbdWorld::step() {
     asleep_ = startAsleep_;
     stillFor_ = startStill_;
     stillRef_ = startStillRef_;
+    fluidSoundSpeed_ = startSoundSpeed_;
     std::size_t at = 0;
     for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
       for (std::int32_t i : loose_) (*a)[std::size_t(i)] = looseStart[at++];

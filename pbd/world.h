@@ -479,6 +479,10 @@ class PbdWorld final : public Solver {
   std::vector<BodyColliderContacts> bodyHits_;
   std::vector<std::int32_t> fluidIds_;
   std::size_t fluidCount_ = 0;
+  // The fluid's sound speed (m/s): the material's, or the largest autoSoundSpeed so far (it
+  // only rises: a stiffness that rose and fell with the fluid's height would pump energy).
+  float fluidSoundSpeed_ = 0.0f, startSoundSpeed_ = 0.0f;
+  bool fluidSoundAuto_ = true;
   std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;
   std::vector<std::uint8_t> fflag_;
   void makeFluidSolver();

@@ -8,6 +8,7 @@
 // Every constraint loop here is a Gauss-Seidel sweep in a fixed order (pairs by id,
 // clusters by index): deterministic, the same state for any thread count.
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -1173,6 +1174,8 @@ void PbdWorld::makeFluidSolver() {
   fp.cohesion = static_cast<float>(first->fluid.cohesion);
   fp.wallLo[1] = static_cast<float>(params_.groundY);
   fluid_ = std::make_unique<FluidSolver>(fp);
+  fluidSoundSpeed_ = std::isnan(first->fluid.soundSpeed) ? 0.0f : static_cast<float>(first->fluid.soundSpeed);
+  fluidSoundAuto_ = std::isnan(first->fluid.soundSpeed);
 }
 
 // The kernel's particles this substep: every dynamic fluid particle, then the solid
@@ -1183,14 +1186,21 @@ void PbdWorld::makeFluidSolver() {
 void PbdWorld::fluidNeighbors() {
   fluidIds_.clear();
   Eigen::AlignedBox3d box;
+  float v2 = 0.0f;  // the fastest fluid particle's speed squared
   for (std::int32_t i : loose_) {
     const auto k = std::size_t(i);
     if (!phase::has(parts_.phase[k], phase::kFluid) || invMassP_[k] == 0.0f) continue;
     fluidIds_.push_back(i);
     box.extend(at(px_, py_, pz_, k));
+    v2 = std::max(v2, (parts_.vx[k] * parts_.vx[k] + parts_.vy[k] * parts_.vy[k]) + parts_.vz[k] * parts_.vz[k]);
   }
   fluidCount_ = fluidIds_.size();
   if (fluidCount_ == 0) return;
+  if (fluidSoundAuto_) {
+    const double height = box.max().y() - box.min().y() + 2.0 * params_.particleRadius;
+    fluidSoundSpeed_ = std::max(fluidSoundSpeed_, FluidSolver::autoSoundSpeed(static_cast<float>(params_.gravity.norm()),
+                                                                               static_cast<float>(height), std::sqrt(v2)));
+  }
   const double reachH = fluid_->params().kernelRadius;
   box.min().array() -= reachH;
   box.max().array() += reachH;
@@ -1222,6 +1232,9 @@ void PbdWorld::fluidNeighbors() {
   in.invMass = fw_.data();
   in.fluid = fflag_.data();
   in.restDensity = frho_.data();
+  in.substep = static_cast<float>(params_.dt / params_.substeps);
+  in.iterations = params_.iterations;
+  in.soundSpeed = fluidSoundSpeed_;
   fluid_->begin(in);
 }
 
@@ -1355,6 +1368,15 @@ GuardRecord PbdWorld::checkCompression() const {
   r.value = e.meanCompression;
   r.bound = params_.maxCompression;
   r.hint = "The fluid is compressed beyond the bound.";
+  if (!fluidSoundAuto_) {  // a soft fluid by choice: its own weight compresses it by g d / c^2
+    const double c = fluidSoundSpeed_, g = std::max(params_.gravity.norm(), 9.81);
+    char note[200];
+    std::snprintf(note, sizeof note,
+                  " Its material's sound_speed %.3g m/s lets its own weight compress it by g d / c^2 = %.3g %% per metre"
+                  " of depth d: raise sound_speed.",
+                  c, 100.0 * g / (c * c));
+    r.hint += note;
+  }
   return r;
 }
 
