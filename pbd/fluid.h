@@ -61,10 +61,11 @@ struct FluidParams {
   float relaxation = 0.1f;
   // Artificial pressure s_corr = -k (W(r) / W(dq))^n (Eq. 13); dq in units of h. The paper's
   // s_corr is a displacement per iteration, so its push per second grew with the substeps
-  // and iterations (a dam break's front ran ahead 3x at 32 substeps). Given the substep h and
-  // the iterations I (FluidInput), each iteration applies k min(1, (h / kScorrStep)^2 *
-  // kScorrIterations / I): a force (h^2 per substep, shared by the iterations) wherever h
-  // is below kScorrStep, the paper's displacement (bounded, stable at one substep) above it.
+  // and iterations (a dam break's front RMSE grew from 0.07 to 1.96 at 32 substeps,
+  // docs/accuracy.md). Given the substep h and the iterations I (FluidInput), each iteration
+  // applies k min(1, (h / kScorrStep)^2 kScorrIterations / I): a force (h^2 per substep,
+  // shared by the iterations) wherever h is below kScorrStep, the paper's displacement
+  // (bounded, stable at one substep) above it.
   float scorrK = 0.01f;
   int scorrN = 4;                // 1..8
   float scorrDq = 0.3f;
@@ -117,7 +118,7 @@ class FluidSolver {
   // times the fastest flow, so that density varies by about 1 %): c = 15 max(sqrt(2 g H),
   // v_max), H (m) the fluid's height, v_max (m/s) its fastest particle, g = max(|gravity|,
   // 9.81) (a fluid in zero gravity keeps the stiffness of one on Earth). Its hydrostatic
-  // compression g H / c^2 is at most 0.23 %. 15, not 10: at 10 a resting column kept
+  // compression g H / c^2 is at most 1/450 = 0.22 %. 15, not 10: at 10 a resting column kept
   // oscillating at 0.013 m/s (FluidRest.ColumnAtRestStaysStill's bound is 0.01), at 20 and
   // above the front of a dam break at 32 substeps ran ahead again (RMSE 0.108 at 20, 0.147
   // at 30; FluidDamBreak.FrontConvergesWithSubsteps's bound is 0.10).

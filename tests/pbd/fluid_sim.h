@@ -67,12 +67,12 @@ struct FluidSim {
     solver_.setKernel(kernel);
     for (int s = 0; s < substeps; ++s) {
       Stamp t = now();
-      float lo = 0.0f, hi = 0.0f, v2 = 0.0f;  // the fluid's height and fastest speed, for c
+      float lo = 1e30f, hi = -1e30f, v2 = 0.0f;  // the fluid's height and fastest speed, for c
       for (std::size_t i = 0; i < n; ++i) {  // predict (Alg. 1 lines 1-3)
         vy[i] += h * gravity;
         px_[i] = x[i] + h * vx[i], py_[i] = y[i] + h * vy[i], pz_[i] = z[i] + h * vz[i];
         if (!fluid[i]) continue;
-        lo = i ? std::min(lo, py_[i]) : py_[i], hi = i ? std::max(hi, py_[i]) : py_[i];
+        lo = std::min(lo, py_[i]), hi = std::max(hi, py_[i]);
         v2 = std::max(v2, (vx[i] * vx[i] + vy[i] * vy[i]) + vz[i] * vz[i]);
       }
       lap(t, kPredict);
@@ -81,7 +81,8 @@ struct FluidSim {
       in.invMass = w.data(), in.fluid = fluid.data(), in.restDensity = rho0.data();
       in.substep = h, in.iterations = iterations;
       if (soundSpeed < 0.0f)
-        autoC_ = std::max(autoC_, FluidSolver::autoSoundSpeed(gravity, hi - lo + 2.0f * params.particleRadius, std::sqrt(v2)));
+        autoC_ = std::max(autoC_, FluidSolver::autoSoundSpeed(gravity, std::max(hi - lo, 0.0f) + 2.0f * params.particleRadius,
+                                                              std::sqrt(v2)));
       in.soundSpeed = soundSpeed < 0.0f ? autoC_ : soundSpeed;
       solver_.begin(in);
       lap(t, kNeighbors);
