@@ -342,20 +342,19 @@ PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256
   const __m256 denom = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ri[kW], grad2), _mm256_mul_ps(_mm256_mul_ps(cs, cs), den)),
                                      _mm256_mul_ps(_mm256_set1_ps(a.epsK), ri[kW]));
   const __m256 fluidLane = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+  const __m256 on = _mm256_and_ps(fluidLane, _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
+  const __m256 negC = _mm256_xor_ps(c, _mm256_set1_ps(-0.0f));
   __m256 lambda;
   if (a.alphaK > 0.0f) {  // XPBD, as the scalar finish: min_ps(0, x) is std::min(x, 0.0f)
     const __m256 at = _mm256_mul_ps(_mm256_set1_ps(a.alphaK), ri[kW]);
     float* sum = a.lambdaSum + b * kLanes;  // padded to whole blocks
     const __m256 before = _mm256_loadu_ps(sum);
-    const __m256 step = _mm256_div_ps(_mm256_sub_ps(_mm256_xor_ps(c, _mm256_set1_ps(-0.0f)), _mm256_mul_ps(at, before)),
-                                      _mm256_add_ps(denom, at));
+    const __m256 step = _mm256_div_ps(_mm256_sub_ps(negC, _mm256_mul_ps(at, before)), _mm256_add_ps(denom, at));
     const __m256 after = _mm256_min_ps(zero, _mm256_add_ps(before, step));
-    const __m256 on = _mm256_and_ps(fluidLane, _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
     lambda = _mm256_and_ps(on, _mm256_sub_ps(after, before));
     _mm256_storeu_ps(sum, _mm256_blendv_ps(before, after, on));
   } else {
-    const __m256 on = _mm256_and_ps(fluidLane, _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
-    lambda = _mm256_and_ps(on, _mm256_div_ps(_mm256_xor_ps(c, _mm256_set1_ps(-0.0f)), denom));
+    lambda = _mm256_and_ps(on, _mm256_div_ps(negC, denom));
   }
   alignas(32) float l8[8], c8[8];
   _mm256_store_ps(l8, lambda);
