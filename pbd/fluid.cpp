@@ -109,6 +109,23 @@ void FluidSolver::checkInput(const FluidInput& in) const {
   require(std::isfinite(in.soundSpeed) && in.soundSpeed >= 0.0f, "soundSpeed must be >= 0 and finite");
   require(in.soundSpeed == 0.0f || in.substep > 0.0f, "a soundSpeed needs the substep");
   require(in.x && in.y && in.z && in.invMass && in.fluid && in.restDensity, "an input array is null");
+  require(!in.soundSpeeds || in.substep > 0.0f, "per-particle soundSpeeds need the substep");
+  struct PerParticle {
+    const float* v;
+    const char* name;
+    float hi;
+  };
+  const PerParticle per[] = {{in.relaxation, "relaxation", 1e30f},
+                             {in.xsph, "xsph", 1.0f},
+                             {in.vorticity, "vorticity", 1e30f},
+                             {in.cohesion, "cohesion", 1e30f},
+                             {in.soundSpeeds, "soundSpeed", 1e30f}};
+  for (const PerParticle& q : per)
+    if (q.v)
+      for (std::size_t i = 0; i < in.count; ++i)
+        if (in.fluid[i] && !(std::isfinite(q.v[i]) && q.v[i] >= 0.0f && q.v[i] <= q.hi))
+          require(false, "fluid particle " + std::to_string(i) + ": " + q.name + " " + std::to_string(q.v[i]) +
+                             " must be finite, >= 0" + (q.hi < 1e30f ? " and <= " + std::to_string(q.hi) : std::string()));
   for (std::size_t i = 0; i < in.count; ++i) {  // messages built only on failure (80k per substep)
     const float w = in.invMass[i];
     if (!(std::isfinite(w) && w >= 0.0f))
@@ -137,6 +154,52 @@ void FluidSolver::begin(const FluidInput& in) {
   }
   buildBlockedLists();
   computeSolidVolumes();
+  loadParticleParams(in);
+}
+
+namespace {
+// (V cs h^2)^2: one neighbour's |nu gradW|^2 at distance 0 (1/m^2); eps_i = relaxation * this * w_i.
+float epsScale(const FluidParams& p) {
+  const float h = p.kernelRadius, spacing = 2.0f * p.particleRadius;
+  const float ref = (spacing * spacing * spacing) * (45.0f / (kPi * std::pow(h, 6.0f))) * (h * h);
+  return ref * ref;
+}
+// 1 / (c h)^2 of XPBD's compliance, 0 without a sound speed.
+float complianceScale(float c, float substep) {
+  const float ch = c * substep;
+  return c > 0.0f ? 1.0f / (ch * ch) : 0.0f;
+}
+}  // namespace
+
+// The per-particle parameters by rank (FluidInput's per-particle arrays), and which velocity
+// passes any fluid particle needs.
+void FluidSolver::loadParticleParams(const FluidInput& in) {
+  const std::size_t nPad = std::size_t(ghost_);
+  const std::int32_t* order = grid_.order().data();
+  const auto byRank = [&](const float* v, std::vector<float>& out, float scale, bool& any) {
+    any = false;
+    if (!v) return out.clear();
+    out.assign(nPad, 0.0f);
+    for (std::size_t r = 0; r < n_; ++r)
+      if (rec_[r * kRecord + kFluid] != 0.0f) {
+        out[r] = v[order[r]] * scale;
+        any |= out[r] > 0.0f;
+      }
+  };
+  bool unused = false;
+  byRank(in.relaxation, epsR_, epsScale(params_), unused);
+  byRank(in.xsph, xsphR_, 1.0f, xsphOn_);
+  byRank(in.vorticity, vortR_, 1.0f, vortOn_);
+  byRank(in.cohesion, cohR_, 1.0f, cohOn_);
+  alphaR_.clear();
+  if (in.soundSpeeds) {
+    alphaR_.assign(nPad, 0.0f);
+    for (std::size_t r = 0; r < n_; ++r)
+      if (rec_[r * kRecord + kFluid] != 0.0f) alphaR_[r] = complianceScale(in.soundSpeeds[order[r]], substep_);
+  }
+  if (!in.xsph) xsphOn_ = params_.xsph > 0.0f;
+  if (!in.vorticity) vortOn_ = params_.vorticity > 0.0f;
+  if (!in.cohesion) cohOn_ = params_.cohesion > 0.0f;
 }
 
 void FluidSolver::loadRecords(const FluidInput& in) {
@@ -253,8 +316,7 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
   a.cs = 45.0f / (kPi * std::pow(h, 6.0f));
   const float spacing = 2.0f * p.particleRadius;
   const float volume = spacing * spacing * spacing;
-  const float ref = volume * a.cs * a.h2;  // |nu gradW| of one neighbour at distance 0, 1/m
-  a.epsK = p.relaxation * ref * ref;
+  a.epsK = p.relaxation * epsScale(p);
   const float sdq = a.h2 - (p.scorrDq * h) * (p.scorrDq * h);
   a.invWdq = 1.0f / ((sdq * sdq) * sdq);
   a.scorrK = p.scorrK * volume * a.h2 * 0.5f;
@@ -275,11 +337,10 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
 void FluidSolver::lambdaPass() {
   PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   a.comp = comp_.data();
-  if (soundSpeed_ > 0.0f) {
-    const float ch = soundSpeed_ * substep_;
-    a.alphaK = 1.0f / (ch * ch);
-    a.lambdaSum = lambdaSum_.data();
-  }
+  if (!epsR_.empty()) a.epsR = epsR_.data();
+  a.alphaK = complianceScale(soundSpeed_, substep_);
+  if (!alphaR_.empty()) a.alphaR = alphaR_.data();
+  if (a.alphaK > 0.0f || a.alphaR) a.lambdaSum = lambdaSum_.data();
   const bool simd = useSimd();
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? lambdaBlocksAvx2(a, b0, b1) : lambdaBlocksScalar(a, b0, b1);
@@ -365,7 +426,7 @@ bool FluidSolver::useSimd() const {
 // vorticity omega (Eq. 15), both from the same velocities (Jacobi), then one for the
 // confinement (Eq. 16), then cohesion. Solids take no part and keep their velocities.
 void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
-  if (!n_ || (params_.xsph <= 0.0f && params_.vorticity <= 0.0f && params_.cohesion <= 0.0f)) return;
+  if (!n_ || !(xsphOn_ || vortOn_ || cohOn_)) return;
   require(std::isfinite(h) && h > 0.0f, "velocityPasses: substep h must be positive");
   const std::size_t nPad = std::size_t(ghost_);
   const std::int32_t* order = grid_.order().data();
@@ -382,15 +443,19 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
       q[kVX] = v_[0][r] = vx[id], q[kVY] = v_[1][r] = vy[id], q[kVZ] = v_[2][r] = vz[id];
     }
   });
-  if (params_.xsph > 0.0f || params_.vorticity > 0.0f) {
+  if (xsphOn_ || vortOn_) {
     VelocityArgs a;
     a.vrec = vrec_.data(), a.bidx = bidx_.data(), a.boff = boff_.data(), a.bk = bk_.data(), a.n = n_;
     const float kh = params_.kernelRadius;
     a.h = kh, a.h2 = kh * kh;
     a.cs = 45.0f / (kPi * std::pow(kh, 6.0f));
-    a.xsph = params_.xsph * (315.0f / (64.0f * kPi * std::pow(kh, 9.0f)));
+    a.cp = 315.0f / (64.0f * kPi * std::pow(kh, 9.0f));
+    a.xsph = params_.xsph * a.cp;
     a.vortStep = params_.vorticity * h;
-    for (int k = 0; k < 3; ++k) a.out[k] = v_[k].data(), a.omega[k] = params_.vorticity > 0.0f ? omega_[k].data() : nullptr;
+    a.substepH = h;
+    if (!xsphR_.empty()) a.xsphR = xsphR_.data();
+    if (!vortR_.empty()) a.vortR = vortR_.data();
+    for (int k = 0; k < 3; ++k) a.out[k] = v_[k].data(), a.omega[k] = vortOn_ ? omega_[k].data() : nullptr;
     const bool simd = useSimd();
     forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
       simd ? smoothingBlocksAvx2(a, b0, b1) : smoothingBlocksScalar(a, b0, b1);
@@ -400,7 +465,7 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
         simd ? confinementBlocksAvx2(a, b0, b1) : confinementBlocksScalar(a, b0, b1);
       });
   }
-  if (params_.cohesion > 0.0f) cohesionPass(v_[0].data(), v_[1].data(), v_[2].data(), h);
+  if (cohOn_) cohesionPass(v_[0].data(), v_[1].data(), v_[2].data(), h);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t r = b; r < e; ++r)
       if (rec_[r * kRecord + kFluid] != 0.0f) {
@@ -414,13 +479,15 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
 // V C(r) (p_i - p_j) / r over fluid j, C the cohesion spline with 32 / (pi h^9), V = (2r)^3.
 void FluidSolver::cohesionPass(float* vx, float* vy, float* vz, float h) const {
   const float kh = params_.kernelRadius, spacing = 2.0f * params_.particleRadius;
-  const float scale = params_.cohesion * spacing * spacing * spacing * 32.0f / (kPi * std::pow(kh, 9.0f));
+  const float unit = spacing * spacing * spacing * 32.0f / (kPi * std::pow(kh, 9.0f));
   const int width = lists_.width;
   std::vector<float> a(3 * n_, 0.0f);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const float* ri = &rec_[i * kRecord];
       if (ri[kFluid] == 0.0f) continue;
+      const float scale = (cohR_.empty() ? params_.cohesion : cohR_[i]) * unit;
+      if (!(scale > 0.0f)) continue;
       for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
         const std::size_t j = std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]);
         const float* rj = &rec_[j * kRecord];

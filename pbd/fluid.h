@@ -99,6 +99,16 @@ struct FluidInput {
   // Sound speed c (m/s) of the XPBD compliance alpha_i = w_i / c^2 (needs substep > 0);
   // 0 = no compliance (the incompressible PBF of the paper). See autoSoundSpeed().
   float soundSpeed = 0.0f;
+  // Per-particle parameters, by id, for a scene of several fluids (each particle takes its
+  // fluid's): read for fluid particles only. Null takes FluidParams's value (soundSpeed
+  // above) for every particle. Each acts on particle i's own equation, so a particle's
+  // lambda and velocity passes are those of a scene of its fluid alone (tested); at an
+  // interface of two viscosities each side smooths with its own XSPH c.
+  const float* relaxation = nullptr;   // FluidParams::relaxation, >= 0
+  const float* xsph = nullptr;         // FluidParams::xsph, [0, 1]
+  const float* vorticity = nullptr;    // FluidParams::vorticity, >= 0
+  const float* cohesion = nullptr;     // FluidParams::cohesion, >= 0
+  const float* soundSpeeds = nullptr;  // m/s, >= 0 (0: no compliance for that particle); needs substep > 0
 };
 
 struct DensityError {
@@ -193,6 +203,7 @@ class FluidSolver {
   void buildBlockedLists();
   void computeSolidVolumes();
   void buildWallTable();
+  void loadParticleParams(const FluidInput& in);
   bool useSimd() const;
   void cohesionPass(float* vx, float* vy, float* vz, float h) const;
 
@@ -217,6 +228,12 @@ class FluidSolver {
   std::vector<float> dx_, dy_, dz_;   // dp by rank (m)
   std::vector<float> comp_;           // by rank: max(C_i, 0) of fluid particles in the last lambda pass
   std::vector<float> lambdaSum_;      // by rank: XPBD's lambda summed over this substep's iterations
+  // By rank (padded to whole blocks with 0), from FluidInput's per-particle arrays; empty when
+  // not given: eps coefficient relaxation_i * (V cs h^2)^2, compliance 1 / (c_i h)^2 (0: none),
+  // XSPH c_i, vorticity epsilon_i (m/s), cohesion gamma_i (m/s^2).
+  std::vector<float> epsR_, alphaR_, xsphR_, vortR_, cohR_;
+  // Whether any fluid particle has XSPH, vorticity or cohesion (the velocity passes' gates).
+  bool xsphOn_ = false, vortOn_ = false, cohOn_ = false;
   float substep_ = 0.0f, soundSpeed_ = 0.0f;
   int iterations_ = 0;
   // Neighbour lists in blocks of 8 ranks, slot-major: the k-th neighbour of rank 8b + l is

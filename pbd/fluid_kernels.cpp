@@ -53,9 +53,10 @@ void finishLambda(const PairArgs& a, std::size_t i, const LambdaAcc& acc) {
       // grad_i C_i = -cs sum_j nu_j g_ij d_ij + the walls' gradient
       const float gx = wall.g[0] - a.cs * acc.gx, gy = wall.g[1] - a.cs * acc.gy, gz = wall.g[2] - a.cs * acc.gz;
       const float grad2 = (gx * gx + gy * gy) + gz * gz;
-      const float denom = (ri[kW] * grad2 + (a.cs * a.cs) * acc.den) + a.epsK * ri[kW];
-      if (a.alphaK > 0.0f) {  // XPBD with compliance at = w / (c h)^2, the substep's sum kept <= 0 (pbd/fluid.h)
-        const float at = a.alphaK * ri[kW];
+      const float denom = (ri[kW] * grad2 + (a.cs * a.cs) * acc.den) + (a.epsR ? a.epsR[i] : a.epsK) * ri[kW];
+      const float alphaK = a.alphaR ? a.alphaR[i] : a.alphaK;
+      if (alphaK > 0.0f) {  // XPBD with compliance at = w / (c h)^2, the substep's sum kept <= 0 (pbd/fluid.h)
+        const float at = alphaK * ri[kW];
         const float before = a.lambdaSum[i];
         const float after = std::min(before + (-c - at * before) / (denom + at), 0.0f);
         lambda = after - before;
@@ -173,7 +174,8 @@ void finishSmoothing(const VelocityArgs& a, std::size_t i, const float sum[3], c
   if (i >= a.n) return;
   float* vi = a.vrec + i * kRecord;
   if (!(vi[kNu] > 0.0f)) return;  // solids keep their velocity
-  for (int k = 0; k < 3; ++k) a.out[k][i] = vi[kVX + k] + a.xsph * sum[k];
+  const float xsph = a.xsphR ? a.xsphR[i] * a.cp : a.xsph;
+  for (int k = 0; k < 3; ++k) a.out[k][i] = vi[kVX + k] + xsph * sum[k];
   if (!a.omega[0]) return;
   const float o[3] = {-a.cs * w[0], -a.cs * w[1], -a.cs * w[2]};
   for (int k = 0; k < 3; ++k) a.omega[k][i] = o[k];
@@ -187,9 +189,10 @@ void finishConfinement(const VelocityArgs& a, std::size_t i, const float acc[3])
   if (!(len > 1e-12f)) return;
   const float nn[3] = {eta[0] / len, eta[1] / len, eta[2] / len};
   const float w[3] = {a.omega[0][i], a.omega[1][i], a.omega[2][i]};
-  a.out[0][i] += a.vortStep * (nn[1] * w[2] - nn[2] * w[1]);
-  a.out[1][i] += a.vortStep * (nn[2] * w[0] - nn[0] * w[2]);
-  a.out[2][i] += a.vortStep * (nn[0] * w[1] - nn[1] * w[0]);
+  const float step = a.vortR ? a.vortR[i] * a.substepH : a.vortStep;
+  a.out[0][i] += step * (nn[1] * w[2] - nn[2] * w[1]);
+  a.out[1][i] += step * (nn[2] * w[0] - nn[0] * w[2]);
+  a.out[2][i] += step * (nn[0] * w[1] - nn[1] * w[0]);
 }
 
 }  // namespace
@@ -339,20 +342,25 @@ PHYSKETCH_AVX2 void finishLambda8(const PairArgs& a, std::size_t b, const __m256
   const __m256 y = _mm256_sub_ps(wall.g[1], _mm256_mul_ps(cs, gy));
   const __m256 z = _mm256_sub_ps(wall.g[2], _mm256_mul_ps(cs, gz));
   const __m256 grad2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x, x), _mm256_mul_ps(y, y)), _mm256_mul_ps(z, z));
+  const std::size_t i0 = b * kLanes;  // per-rank arrays are padded to whole blocks
+  const __m256 eps = a.epsR ? _mm256_loadu_ps(a.epsR + i0) : _mm256_set1_ps(a.epsK);
   const __m256 denom = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ri[kW], grad2), _mm256_mul_ps(_mm256_mul_ps(cs, cs), den)),
-                                     _mm256_mul_ps(_mm256_set1_ps(a.epsK), ri[kW]));
+                                     _mm256_mul_ps(eps, ri[kW]));
   const __m256 fluidLane = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
   const __m256 on = _mm256_and_ps(fluidLane, _mm256_cmp_ps(c, zero, _CMP_GT_OQ));
   const __m256 negC = _mm256_xor_ps(c, _mm256_set1_ps(-0.0f));
   __m256 lambda;
-  if (a.alphaK > 0.0f) {  // XPBD, as the scalar finish: min_ps(0, x) is std::min(x, 0.0f)
-    const __m256 at = _mm256_mul_ps(_mm256_set1_ps(a.alphaK), ri[kW]);
-    float* sum = a.lambdaSum + b * kLanes;  // padded to whole blocks
+  if (a.alphaK > 0.0f || a.alphaR) {  // XPBD, as the scalar finish: min_ps(0, x) is std::min(x, 0.0f)
+    const __m256 alpha = a.alphaR ? _mm256_loadu_ps(a.alphaR + i0) : _mm256_set1_ps(a.alphaK);
+    // Lanes without compliance (alpha 0, only with per-rank alphas) take the plain step below.
+    const __m256 xpbd = _mm256_and_ps(on, _mm256_cmp_ps(alpha, zero, _CMP_GT_OQ));
+    const __m256 at = _mm256_mul_ps(alpha, ri[kW]);
+    float* sum = a.lambdaSum + i0;
     const __m256 before = _mm256_loadu_ps(sum);
     const __m256 step = _mm256_div_ps(_mm256_sub_ps(negC, _mm256_mul_ps(at, before)), _mm256_add_ps(denom, at));
     const __m256 after = _mm256_min_ps(zero, _mm256_add_ps(before, step));
-    lambda = _mm256_and_ps(on, _mm256_sub_ps(after, before));
-    _mm256_storeu_ps(sum, _mm256_blendv_ps(before, after, on));
+    lambda = _mm256_and_ps(on, _mm256_blendv_ps(_mm256_div_ps(negC, denom), _mm256_sub_ps(after, before), xpbd));
+    _mm256_storeu_ps(sum, _mm256_blendv_ps(before, after, xpbd));
   } else {
     lambda = _mm256_and_ps(on, _mm256_div_ps(negC, denom));
   }
@@ -411,7 +419,8 @@ PHYSKETCH_AVX2 void finishSmoothing8(const VelocityArgs& a, std::size_t b, const
   if (!mask) return;
   const __m256i store = _mm256_castps_si256(live);
   const std::size_t i0 = b * kLanes;
-  const __m256 xsph = _mm256_set1_ps(a.xsph);
+  const __m256 xsph =
+      a.xsphR ? _mm256_mul_ps(_mm256_loadu_ps(a.xsphR + i0), _mm256_set1_ps(a.cp)) : _mm256_set1_ps(a.xsph);
   for (int k = 0; k < 3; ++k)
     _mm256_maskstore_ps(a.out[k] + i0, store, _mm256_add_ps(vi[kVX + k], _mm256_mul_ps(xsph, sum[k])));
   if (!a.omega[0]) return;
@@ -438,7 +447,8 @@ PHYSKETCH_AVX2 void finishConfinement8(const VelocityArgs& a, std::size_t b, con
   const std::size_t i0 = b * kLanes;
   const __m256 nn[3] = {_mm256_div_ps(eta[0], len), _mm256_div_ps(eta[1], len), _mm256_div_ps(eta[2], len)};
   const __m256 w[3] = {_mm256_loadu_ps(a.omega[0] + i0), _mm256_loadu_ps(a.omega[1] + i0), _mm256_loadu_ps(a.omega[2] + i0)};
-  const __m256 step = _mm256_set1_ps(a.vortStep);
+  const __m256 step =
+      a.vortR ? _mm256_mul_ps(_mm256_loadu_ps(a.vortR + i0), _mm256_set1_ps(a.substepH)) : _mm256_set1_ps(a.vortStep);
   const __m256 cross[3] = {_mm256_sub_ps(_mm256_mul_ps(nn[1], w[2]), _mm256_mul_ps(nn[2], w[1])),
                            _mm256_sub_ps(_mm256_mul_ps(nn[2], w[0]), _mm256_mul_ps(nn[0], w[2])),
                            _mm256_sub_ps(_mm256_mul_ps(nn[0], w[1]), _mm256_mul_ps(nn[1], w[0]))};

@@ -32,7 +32,10 @@ struct PairArgs {
   float cs = 0;                        // spiky gradient constant 45 / (pi h^6)
   float epsK = 0;                      // eps_i = epsK * w_i
   float alphaK = 0;                    // XPBD: at_i = alphaK * w_i = w_i / (c h)^2; 0 = no compliance
-  float* lambdaSum = nullptr;          // XPBD (alphaK > 0): lambda summed over the substep, by rank
+  // Per rank (padded to whole blocks), or null for epsK / alphaK above: a scene of several fluids.
+  const float* epsR = nullptr;
+  const float* alphaR = nullptr;
+  float* lambdaSum = nullptr;          // XPBD (alphaK > 0 or alphaR): lambda summed over the substep, by rank
   float invWdq = 0;                    // 1 / (h^2 - (dq h)^2)^3: W / W(dq) without cp
   float scorrK = 0;                    // k V h^2 / 2 (kg-free: times m_i + m_j), times the force scale
   int scorrN = 4;
@@ -60,6 +63,11 @@ struct VelocityArgs {
   float h = 0, h2 = 0, cs = 0;
   float xsph = 0;                      // c * cp (XSPH, Eq. 17)
   float vortStep = 0;                  // eps * substep h (vorticity confinement, Eq. 16)
+  // Per rank (padded to whole blocks), or null for the two above: c_i (times cp here) and
+  // eps_i (times substepH here).
+  const float* xsphR = nullptr;
+  const float* vortR = nullptr;
+  float cp = 0, substepH = 0;
   float* out[3] = {nullptr, nullptr, nullptr};    // smoothed velocities by rank
   float* omega[3] = {nullptr, nullptr, nullptr};  // vorticity by rank; null: confinement off
 };

@@ -550,9 +550,7 @@ std::vector<bool> PbdWorld::work() const {
   on[int(PbdPass::kFindColliders)] = anyColliders && (rigid || loose);
   on[int(PbdPass::kColliderContact)] = anyColliders && rigid;
   on[int(PbdPass::kDensity)] = c.fluid > 0;
-  on[int(PbdPass::kFluidVelocity)] = c.fluid > 0 && fluid_ &&
-                                     (fluid_->params().xsph > 0.0f || fluid_->params().vorticity > 0.0f ||
-                                      fluid_->params().cohesion > 0.0f);
+  on[int(PbdPass::kFluidVelocity)] = c.fluid > 0 && fluidVelocity_;
   on[int(PbdPass::kClusterMatch)] = c.soft > 0;
   on[int(PbdPass::kDistance)] = loose && c.distances;
   on[int(PbdPass::kRigidContact)] = rigid;
@@ -646,11 +644,7 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
     case PbdPass::kFluidNeighbors: return on ? n(c.fluid, "dynamic fluid bodies") : "no fluid in the scene (or all of it fixed)";
     case PbdPass::kDensity: {
       if (!on) return "no fluid in the scene (or all of it fixed)";
-      char c2[96];  // the compliance's sound speed (pbd/fluid.h)
-      if (!fluidSoundAuto_) std::snprintf(c2, sizeof c2, "; sound speed %.3g m/s", double(fluidSoundSpeed_));
-      else if (fluidSoundSpeed_ > 0.0f) std::snprintf(c2, sizeof c2, "; sound speed auto, now %.3g m/s", double(fluidSoundSpeed_));
-      else std::snprintf(c2, sizeof c2, "; sound speed auto, 15 max(sqrt(2 g H), v_max)");
-      return n(c.fluid, "dynamic fluid bodies") + c2;
+      return n(c.fluid, "dynamic fluid bodies") + fluidSoundText();  // the compliance's sound speed (pbd/fluid.h)
     }
     case PbdPass::kFluidVelocity:
       return on ? "a fluid sets xsph_viscosity, vorticity or cohesion"

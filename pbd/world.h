@@ -482,8 +482,17 @@ class PbdWorld final : public Solver {
   // The fluid's sound speed (m/s): the material's, or the largest autoSoundSpeed so far (it
   // only rises: a stiffness that rose and fell with the fluid's height would pump energy).
   float fluidSoundSpeed_ = 0.0f, startSoundSpeed_ = 0.0f;
-  bool fluidSoundAuto_ = true;
+  bool fluidSoundAuto_ = true;  // some fluid material leaves sound_speed unset
+  // The fluid materials in the scene (indices into materials_, by first appearance); with
+  // more than one parameter set among them (fluidMixed_) the kernel takes per-particle
+  // parameters (FluidInput), else one set.
+  std::vector<std::size_t> fluidMaterials_;
+  bool fluidMixed_ = false;
+  bool fluidVelocity_ = false;  // some fluid material sets xsph_viscosity, vorticity or cohesion
+  float fluidSoundOf(const Material& m) const;
+  std::string fluidSoundText() const;
   std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;
+  std::vector<float> frelax_, fxsph_, fvort_, fcoh_, fsound_;  // per kernel particle, fluidMixed_ only
   std::vector<std::uint8_t> fflag_;
   void makeFluidSolver();
   bool looseDirty_ = true;             // loose_ must be rebuilt before the next step  // per particle: vy before the solve when it touched the ground, else 0

@@ -1154,28 +1154,69 @@ namespace physketch::pbd {
 
 // --- fluids (pbd/fluid.h) -------------------------------------------------------------
 
-// One kernel for every fluid of the scene; its parameters come from the first fluid
-// material (xsph_viscosity, vorticity, cohesion, relaxation); each particle keeps its own
-// rest density, so fluids of different densities layer. Kernel radius 2.1 spacings (~30
-// neighbours, Macklin & Müller 2013).
+// One kernel for every fluid of the scene, kernel radius 2.1 spacings (~30 neighbours,
+// Macklin & Müller 2013). Each particle keeps its own rest density, so fluids of different
+// densities layer, and its own material's xsph_viscosity, vorticity, cohesion, relaxation
+// and sound_speed (per-particle parameters when the scene's fluids differ in any of them).
+// Called again for every body added after play: a new fluid material joins the list.
 void PbdWorld::makeFluidSolver() {
-  if (fluid_) return;
-  const Material* first = nullptr;
-  for (std::size_t b = 0; b < kind_.size() && !first; ++b)
-    if (kind_[b] == MaterialKind::kFluid && !members_[b].empty())
-      first = &materials_[std::size_t(parts_.material[std::size_t(members_[b].front())])];
-  if (!first) return;
-  FluidParams fp;
-  fp.particleRadius = static_cast<float>(params_.particleRadius);
-  fp.kernelRadius = static_cast<float>(2.1 * 2.0 * params_.particleRadius);
-  fp.relaxation = static_cast<float>(first->fluid.relaxation);
-  fp.xsph = static_cast<float>(first->fluid.xsphViscosity);
-  fp.vorticity = static_cast<float>(first->fluid.vorticity);
-  fp.cohesion = static_cast<float>(first->fluid.cohesion);
-  fp.wallLo[1] = static_cast<float>(params_.groundY);
-  fluid_ = std::make_unique<FluidSolver>(fp);
-  fluidSoundSpeed_ = std::isnan(first->fluid.soundSpeed) ? 0.0f : static_cast<float>(first->fluid.soundSpeed);
-  fluidSoundAuto_ = std::isnan(first->fluid.soundSpeed);
+  const bool hadAuto = fluid_ && fluidSoundAuto_;
+  fluidMaterials_.clear();
+  for (std::size_t b = 0; b < kind_.size(); ++b)
+    if (kind_[b] == MaterialKind::kFluid && !members_[b].empty()) {
+      const auto m = std::size_t(parts_.material[std::size_t(members_[b].front())]);
+      if (std::find(fluidMaterials_.begin(), fluidMaterials_.end(), m) == fluidMaterials_.end()) fluidMaterials_.push_back(m);
+    }
+  if (fluidMaterials_.empty()) return;
+  const Material::Fluid& first = materials_[fluidMaterials_.front()].fluid;
+  if (!fluid_) {
+    FluidParams fp;
+    fp.particleRadius = static_cast<float>(params_.particleRadius);
+    fp.kernelRadius = static_cast<float>(2.1 * 2.0 * params_.particleRadius);
+    fp.relaxation = static_cast<float>(first.relaxation);
+    fp.xsph = static_cast<float>(first.xsphViscosity);
+    fp.vorticity = static_cast<float>(first.vorticity);
+    fp.cohesion = static_cast<float>(first.cohesion);
+    fp.wallLo[1] = static_cast<float>(params_.groundY);
+    fluid_ = std::make_unique<FluidSolver>(fp);
+  }
+  fluidMixed_ = false, fluidSoundAuto_ = false, fluidVelocity_ = false;
+  const auto same = [](double a, double b) { return a == b || (std::isnan(a) && std::isnan(b)); };
+  for (std::size_t m : fluidMaterials_) {
+    const Material::Fluid& f = materials_[m].fluid;
+    fluidMixed_ |= !same(f.relaxation, first.relaxation) || !same(f.xsphViscosity, first.xsphViscosity) ||
+                   !same(f.vorticity, first.vorticity) || !same(f.cohesion, first.cohesion) ||
+                   !same(f.soundSpeed, first.soundSpeed);
+    fluidSoundAuto_ |= std::isnan(f.soundSpeed);
+    fluidVelocity_ |= f.xsphViscosity > 0.0 || f.vorticity > 0.0 || f.cohesion > 0.0;
+  }
+  // The auto sound speed (it starts at 0 and rises, and keeps rising after a new body), or
+  // the single material's.
+  if (!fluidSoundAuto_) fluidSoundSpeed_ = static_cast<float>(first.soundSpeed);
+  else if (!hadAuto) fluidSoundSpeed_ = 0.0f;
+}
+
+// A fluid material's sound speed now: its own, or the automatic one.
+float PbdWorld::fluidSoundOf(const Material& m) const {
+  return std::isnan(m.fluid.soundSpeed) ? fluidSoundSpeed_ : static_cast<float>(m.fluid.soundSpeed);
+}
+
+// The density pass's sound speeds, for the plan: "sound speed 4 m/s", "sound speed auto,
+// now 12 m/s", or per material with several fluids ("sound speed water 4 m/s, oil auto; auto
+// now 12 m/s").
+std::string PbdWorld::fluidSoundText() const {
+  char c[96];
+  if (fluidSoundSpeed_ > 0.0f) std::snprintf(c, sizeof c, "auto, now %.3g m/s", double(fluidSoundSpeed_));
+  const std::string autoText = fluidSoundSpeed_ > 0.0f ? std::string(c) : "auto, 15 max(sqrt(2 g H), v_max)";
+  std::string out = "; sound speed ";
+  for (std::size_t k = 0; k < fluidMaterials_.size() && (k == 0 || fluidMixed_); ++k) {
+    const Material& m = materials_[fluidMaterials_[k]];
+    if (fluidMixed_) out += (k ? ", " : "") + m.name + " ";
+    std::snprintf(c, sizeof c, "%.3g m/s", m.fluid.soundSpeed);
+    out += !std::isnan(m.fluid.soundSpeed) ? std::string(c) : fluidMixed_ ? std::string("auto") : autoText;
+  }
+  if (fluidMixed_ && fluidSoundAuto_) out += "; " + autoText;
+  return out;
 }
 
 // The kernel's particles this substep: every dynamic fluid particle, then the solid
@@ -1226,6 +1267,17 @@ void PbdWorld::fluidNeighbors() {
     fw_[k] = rigid ? (mode_[b] == BodyMode::kDynamic ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i];
     frho_[k] = static_cast<float>(materials_[std::size_t(parts_.material[i])].density);
   }
+  if (fluidMixed_) {  // each fluid particle its material's parameters (solids' entries unread)
+    frelax_.assign(n, 0.0f), fxsph_.assign(n, 0.0f), fvort_.assign(n, 0.0f), fcoh_.assign(n, 0.0f), fsound_.assign(n, 0.0f);
+    for (std::size_t k = 0; k < fluidCount_; ++k) {
+      const Material& m = materials_[std::size_t(parts_.material[std::size_t(fluidIds_[k])])];
+      frelax_[k] = static_cast<float>(m.fluid.relaxation);
+      fxsph_[k] = static_cast<float>(m.fluid.xsphViscosity);
+      fvort_[k] = static_cast<float>(m.fluid.vorticity);
+      fcoh_[k] = static_cast<float>(m.fluid.cohesion);
+      fsound_[k] = fluidSoundOf(m);
+    }
+  }
   FluidInput in;
   in.count = n;
   in.x = fx_.data(), in.y = fy_.data(), in.z = fz_.data();
@@ -1235,6 +1287,10 @@ void PbdWorld::fluidNeighbors() {
   in.substep = static_cast<float>(params_.dt / params_.substeps);
   in.iterations = params_.iterations;
   in.soundSpeed = fluidSoundSpeed_;
+  if (fluidMixed_) {
+    in.relaxation = frelax_.data(), in.xsph = fxsph_.data(), in.vorticity = fvort_.data(), in.cohesion = fcoh_.data();
+    in.soundSpeeds = fsound_.data();
+  }
   fluid_->begin(in);
 }
 
@@ -1368,13 +1424,19 @@ GuardRecord PbdWorld::checkCompression() const {
   r.value = e.meanCompression;
   r.bound = params_.maxCompression;
   r.hint = "The fluid is compressed beyond the bound.";
-  if (!fluidSoundAuto_) {  // a soft fluid by choice: its own weight compresses it by g d / c^2
-    const double c = fluidSoundSpeed_, g = std::max(params_.gravity.norm(), 9.81);
-    char note[200];
+  // A soft fluid by choice (the lowest sound_speed a fluid material sets): its own weight
+  // compresses it by g d / c^2.
+  const Material* soft = nullptr;
+  for (std::size_t m : fluidMaterials_)
+    if (!std::isnan(materials_[m].fluid.soundSpeed) && (!soft || materials_[m].fluid.soundSpeed < soft->fluid.soundSpeed))
+      soft = &materials_[m];
+  if (soft) {
+    const double c = soft->fluid.soundSpeed, g = std::max(params_.gravity.norm(), 9.81);
+    char note[300];
     std::snprintf(note, sizeof note,
-                  " Its material's sound_speed %.3g m/s lets its own weight compress it by g d / c^2 = %.3g %% per metre"
-                  " of depth d: raise sound_speed.",
-                  c, 100.0 * g / (c * c));
+                  " Fluid material '%s' has sound_speed %.3g m/s: its own weight compresses it by g d / c^2 = %.3g %% per"
+                  " metre of depth d: raise sound_speed.",
+                  soft->name.c_str(), c, 100.0 * g / (c * c));
     r.hint += note;
   }
   return r;

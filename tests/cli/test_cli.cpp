@@ -297,6 +297,22 @@ TEST(Cli, LintAndRunTheRopeAndClothExamples) {
   fs::remove_all(dir);
 }
 
+// The two-fluid example runs, and its plan names each fluid's sound speed (the density pass
+// takes every fluid material's own parameters).
+TEST(Cli, TheTwoFluidExampleRuns) {
+  const fs::path dir = freshDir("honey");
+  const std::string scene = std::string(PHYSKETCH_SOURCE_DIR) + "/scenes/honey.scene";
+  const std::string planFile = (dir / "plan.txt").string();
+  const int status = std::system((std::string(PHYSKETCH_CLI) + " plan '" + scene + "' > '" + planFile + "' 2>&1").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  ASSERT_EQ(WEXITSTATUS(status), 0);
+  const std::string plan = slurp(planFile);
+  EXPECT_NE(plan.find("sound speed water auto, honey auto"), std::string::npos) << plan;
+  const Result r = runCli("run '" + scene + "' -q --frames 2 --out '" + (dir / "run").string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "run" / "frames" / "frame_0001.png"));
+}
+
 TEST(Cli, AnUnstableRunExitsTwoAndTheReportNamesTheGuardRecord) {
   // 1000 m/s^2 sideways with 0.1 s steps: the box passes the 100 m/s explosion bound within two steps.
   const fs::path dir = freshDir("unstable");

@@ -239,6 +239,101 @@ TEST(FluidKernel, ScalarAndSimdKernelsAreBitIdentical) {
       << "the compliance changed no position: the XPBD path did not run";
 }
 
+// Several fluids in one kernel, each with its own relaxation, XSPH c, vorticity, cohesion
+// and sound speed (FluidInput's per-particle arrays). Each of them acts on particle i's own
+// equation, so a fluid-A particle's first lambda and its velocity passes are exactly those of
+// a run where every particle has A's parameters (the one-set path, itself checked against
+// the brute force above): the oracle, bit for bit, for both kernels. The first lambda, not
+// later ones: from the corrections on, a particle's neighbours of the other fluid have moved
+// by the other fluid's lambdas.
+TEST(FluidKernel, EachParticleTakesItsOwnFluidsParameters) {
+  struct Set {
+    float relaxation, xsph, vorticity, cohesion, sound;
+  };
+  const Set sets[2] = {{0.5f, 0.05f, 0.02f, 0.3f, 2.4f}, {4.0f, 0.6f, 0.2f, 2.0f, 0.9f}};
+  const FluidParams base = smallParams();
+  const RandomSet set = randomSet(base, 1000, 5);
+  const std::size_t n = set.x.size();
+  const float substep = 1.0f / 480.0f, h = 1.0f / 240.0f;
+  const auto fluidOf = [&](std::size_t i) { return set.rho[i] < 2000.0f ? 0 : 1; };  // fluid A or B
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> v0(3 * n);
+  for (float& x : v0) x = u(rng);
+  // The first lambdas and the velocities after the velocity passes, by id.
+  const auto run = [&](FluidSolver::Kernel kernel, int uniform) {
+    FluidParams p = base;
+    std::vector<float> per[5];
+    FluidInput in = set.input();
+    in.substep = substep, in.iterations = 2;
+    if (uniform >= 0) {
+      const Set& q = sets[uniform];
+      p.relaxation = q.relaxation, p.xsph = q.xsph, p.vorticity = q.vorticity, p.cohesion = q.cohesion;
+      in.soundSpeed = q.sound;
+    } else {
+      for (auto& a : per) a.assign(n, 0.0f);
+      for (std::size_t i = 0; i < n; ++i) {
+        if (!set.fluid[i]) continue;
+        const Set& q = sets[fluidOf(i)];
+        per[0][i] = q.relaxation, per[1][i] = q.xsph, per[2][i] = q.vorticity, per[3][i] = q.cohesion, per[4][i] = q.sound;
+      }
+      in.relaxation = per[0].data(), in.xsph = per[1].data(), in.vorticity = per[2].data();
+      in.cohesion = per[3].data(), in.soundSpeeds = per[4].data();
+    }
+    FluidSolver solver(p);
+    solver.setKernel(kernel);
+    solver.begin(in);
+    std::vector<float> out(4 * n);
+    std::copy(v0.begin(), v0.end(), out.begin() + n);
+    solver.velocityPasses(out.data() + n, out.data() + 2 * n, out.data() + 3 * n, h);
+    solver.lambdaPass();
+    solver.lambdas(out.data());
+    return out;
+  };
+  std::vector<FluidSolver::Kernel> kernels = {FluidSolver::Kernel::kScalar};
+  if (__builtin_cpu_supports("avx2")) kernels.push_back(FluidSolver::Kernel::kAvx2);
+  for (FluidSolver::Kernel kernel : kernels) {
+    const std::vector<float> mixed = run(kernel, -1), one[2] = {run(kernel, 0), run(kernel, 1)};
+    std::size_t checked[2] = {0, 0}, differ[2] = {0, 0}, wrong = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!set.fluid[i]) continue;
+      const int f = fluidOf(i);
+      for (std::size_t k = 0; k < 4; ++k) {
+        const float got = mixed[k * n + i], want = one[f][k * n + i], other = one[1 - f][k * n + i];
+        if (std::memcmp(&got, &want, sizeof got) != 0 && ++wrong <= 5)  // five are enough to read
+          ADD_FAILURE() << "particle " << i << " of fluid " << f << (k ? ", velocity " : ", lambda ") << got << " vs "
+                        << want;
+        ++checked[k ? 1 : 0];
+        differ[k ? 1 : 0] += other != want;
+      }
+    }
+    EXPECT_EQ(wrong, 0u) << "particles whose values are not their own fluid's";
+    // The two parameter sets give different results for most particles: the test can tell.
+    EXPECT_GT(differ[0], checked[0] / 2) << "lambdas";
+    EXPECT_GT(differ[1], checked[1] / 2) << "velocities";
+  }
+}
+
+// A per-particle parameter out of its range is refused, naming the particle and parameter.
+TEST(FluidKernel, RejectsABadPerParticleParameter) {
+  const RandomSet set = randomSet(smallParams(), 50, 1);
+  std::vector<float> v(set.x.size(), 0.1f);
+  for (const char* name : {"xsph", "soundSpeed"}) {
+    FluidInput in = set.input();
+    in.substep = 1.0f / 240.0f;
+    std::vector<float> bad = v;
+    bad[2] = name[0] == 'x' ? 1.5f : std::nanf("");  // particle 2 is fluid (randomSet: i % 5 < 4)
+    (name[0] == 'x' ? in.xsph : in.soundSpeeds) = bad.data();
+    FluidSolver solver(smallParams());
+    try {
+      solver.begin(in);
+      ADD_FAILURE() << name << " accepted";
+    } catch (const RuntimeError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("particle 2: ") + name), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(FluidKernel, RejectsBadInput) {
   FluidParams p = smallParams();
   p.kernelRadius = 0.015f;  // below the spacing
