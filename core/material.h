@@ -96,7 +96,7 @@ struct Material {
     double soundSpeed = std::numeric_limits<double>::quiet_NaN();
     double bulkModulus = 1e5;     // mpm: K, Pa; p = K/gamma ((rho/rho0)^gamma - 1)
     double gamma = 7.0;           // mpm: EOS exponent
-    double viscosity = 1e-3;      // mpm: dynamic viscosity, Pa*s
+    double viscosity = 1e-3;      // mpm, pbd (implicit, above 10x water's mu / rho0): dynamic viscosity, Pa*s
   } fluid;
 
   // rope, cloth: XPBD distance and bending constraints.

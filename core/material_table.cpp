@@ -58,7 +58,7 @@ std::vector<ParamSpec> buildTable() {
   t.push_back(number("fluid", "sound_speed", "m/s", kNone, openLo(0, 1e5), P, PHYSKETCH_FIELD(fluid.soundSpeed)));
   t.push_back(number("fluid", "bulk_modulus", "Pa", 1e5, openLo(0, 1e10), M, PHYSKETCH_FIELD(fluid.bulkModulus)));
   t.push_back(number("fluid", "gamma", "-", 7, closed(1, 10), M, PHYSKETCH_FIELD(fluid.gamma)));
-  t.push_back(number("fluid", "viscosity", "Pa*s", 1e-3, closed(0, 1e6), M, PHYSKETCH_FIELD(fluid.viscosity)));
+  t.push_back(number("fluid", "viscosity", "Pa*s", 1e-3, closed(0, 1e6), B, PHYSKETCH_FIELD(fluid.viscosity)));
   // rope, cloth (pbd only).
   for (const char* k : {"rope", "cloth"}) {
     t.push_back(number(k, "stretch_compliance", "m/N", 0, closed(0, 1), P, PHYSKETCH_FIELD(strand.stretchCompliance)));

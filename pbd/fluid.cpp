@@ -46,6 +46,7 @@ FluidSolver::FluidSolver(const FluidParams& p) : params_(p) {
   require(nonNegative(p.xsph) && p.xsph <= 1.0f, "xsph must be in [0, 1]");
   require(nonNegative(p.vorticity), "vorticity must be >= 0 and finite");
   require(nonNegative(p.cohesion), "cohesion must be >= 0 and finite");
+  require(nonNegative(p.viscosity), "viscosity must be >= 0 and finite");
   require(nonNegative(p.solidScale), "solidScale must be >= 0 and finite");
   for (int k = 0; k < 3; ++k)
     require(!std::isnan(p.wallLo[k]) && !std::isnan(p.wallHi[k]) &&
@@ -62,6 +63,19 @@ FluidSolver::FluidSolver(const FluidParams& p) : params_(p) {
         if (s > 0.0) sum += cp * s * s * s;
       }
   latticeScale_ = float(1.0 / (sum * d * d * d));
+  // The viscosity's Laplacian, calibrated the same way: on the lattice it gives exactly 1 for
+  // the field (e . x)^2 / 2, i.e. sum_j nu cs |gradW| r / (r^2 + 0.01 h^2) (x_j . e)^2 = 1
+  // (uncalibrated, Brookshaw's form with the spiky gradient read 0.90 of a shear wave's
+  // viscous decay rate).
+  double second = 0.0;
+  const double cs = 45.0 / (3.14159265358979323846 * std::pow(h, 6)), nu = double(latticeScale_) * d * d * d;
+  for (int i = -reach; i <= reach; ++i)
+    for (int j = -reach; j <= reach; ++j)
+      for (int k = -reach; k <= reach; ++k) {
+        const double r2 = d * d * double(i * i + j * j + k * k), r = std::sqrt(r2);
+        if (r > 0.0 && r < h) second += nu * cs * (h - r) * (h - r) * r / (r2 + 0.01 * h * h) * (d * i) * (d * i);
+      }
+  laplaceScale_ = float(1.0 / second);
   buildWallTable();
 }
 
@@ -76,10 +90,11 @@ void FluidSolver::buildWallTable() {
   const double cp = 315.0 / (64.0 * 3.14159265358979323846 * std::pow(h, 9));
   const double nu = double(latticeScale_) * d * d * d;
   const int reach = int(std::ceil(h / d));
-  wallB_.assign(kWallSamples, 0.0f), wallDB_.assign(kWallSamples, 0.0f);
+  const double cs = 45.0 / (3.14159265358979323846 * std::pow(h, 6));
+  wallB_.assign(kWallSamples, 0.0f), wallDB_.assign(kWallSamples, 0.0f), wallV_.assign(kWallSamples, 0.0f);
   for (int s = 0; s < kWallSamples; ++s) {
     const double y = h * double(s) / double(kWallSamples - 1);
-    double b = 0, db = 0;
+    double b = 0, db = 0, v = 0;
     for (int k = 0;; ++k) {
       const double z = y + r + double(k) * d;  // normal distance to ghost layer k
       if (z >= h) break;
@@ -89,9 +104,11 @@ void FluidSolver::buildWallTable() {
           if (q <= 0) continue;
           b += nu * cp * q * q * q;
           db += nu * cp * 3.0 * q * q * (-2.0 * z);  // dz/dy = 1
+          const double r2 = h * h - q, rr = std::sqrt(r2);  // distance to the ghost sample
+          v += nu * cs * (h - rr) * (h - rr) * rr / (r2 + 0.01 * h * h) * laplaceScale_;
         }
     }
-    wallB_[s] = float(b), wallDB_[s] = float(db);
+    wallB_[s] = float(b), wallDB_[s] = float(db), wallV_[s] = float(v);
   }
 }
 
@@ -119,6 +136,7 @@ void FluidSolver::checkInput(const FluidInput& in) const {
                              {in.xsph, "xsph", 1.0f},
                              {in.vorticity, "vorticity", 1e30f},
                              {in.cohesion, "cohesion", 1e30f},
+                             {in.viscosity, "viscosity", 1e30f},
                              {in.soundSpeeds, "soundSpeed", 1e30f}};
   for (const PerParticle& q : per)
     if (q.v)
@@ -196,6 +214,16 @@ void FluidSolver::loadParticleParams(const FluidInput& in) {
     alphaR_.assign(nPad, 0.0f);
     for (std::size_t r = 0; r < n_; ++r)
       if (rec_[r * kRecord + kFluid] != 0.0f) alphaR_[r] = complianceScale(in.soundSpeeds[order[r]], substep_);
+  }
+  // Viscosity: mu by rank when some fluid's mu / rho0 is above the negligible one.
+  viscOn_ = false;
+  for (std::size_t i = 0; i < n_ && !viscOn_; ++i)
+    viscOn_ = in.fluid[i] && (in.viscosity ? in.viscosity[i] : params_.viscosity) / in.restDensity[i] > kNegligibleViscosity;
+  muR_.clear();
+  if (viscOn_) {
+    muR_.assign(n_, 0.0f);
+    for (std::size_t r = 0; r < n_; ++r)
+      if (rec_[r * kRecord + kFluid] != 0.0f) muR_[r] = in.viscosity ? in.viscosity[order[r]] : params_.viscosity;
   }
   if (!in.xsph) xsphOn_ = params_.xsph > 0.0f;
   if (!in.vorticity) vortOn_ = params_.vorticity > 0.0f;
@@ -426,7 +454,8 @@ bool FluidSolver::useSimd() const {
 // vorticity omega (Eq. 15), both from the same velocities (Jacobi), then one for the
 // confinement (Eq. 16), then cohesion. Solids take no part and keep their velocities.
 void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
-  if (!n_ || !(xsphOn_ || vortOn_ || cohOn_)) return;
+  viscIterations_ = 0;
+  if (!n_ || !(xsphOn_ || vortOn_ || cohOn_ || viscOn_)) return;
   require(std::isfinite(h) && h > 0.0f, "velocityPasses: substep h must be positive");
   const std::size_t nPad = std::size_t(ghost_);
   const std::int32_t* order = grid_.order().data();
@@ -466,6 +495,7 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
       });
   }
   if (cohOn_) cohesionPass(v_[0].data(), v_[1].data(), v_[2].data(), h);
+  if (viscOn_) viscosityPass(h);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t r = b; r < e; ++r)
       if (rec_[r * kRecord + kFluid] != 0.0f) {
@@ -501,6 +531,156 @@ void FluidSolver::cohesionPass(float* vx, float* vy, float* vz, float h) const {
     }
   });
   for (std::size_t i = 0; i < n_; ++i) vx[i] += h * a[3 * i], vy[i] += h * a[3 * i + 1], vz[i] += h * a[3 * i + 2];
+}
+
+// The implicit viscosity step (velocityPasses, pbd/fluid.h) on v_ by rank: Jacobi-
+// preconditioned CG on (M + h K) v' = M v + h K_b v_b (solids and walls), the three
+// components one vector of 3n unknowns
+// (one matrix, shared step sizes). Solids' rows are empty (their entries stay 0 in r, p, q).
+// Dot products sum fixed chunks into partial_ and the partials in chunk order: the same bits
+// for any thread count.
+void FluidSolver::viscosityPass(float h) {
+  const float kh = params_.kernelRadius, kh2 = kh * kh, eta2 = 0.01f * kh2;
+  const float cs = 45.0f / (kPi * std::pow(kh, 6.0f));
+  const std::size_t width = std::size_t(lists_.width);
+  viscK_.resize(n_ * width), viscDiag_.resize(n_), viscExtra_.resize(n_);
+  for (int k = 0; k < 3; ++k)
+    cgR_[k].resize(n_), cgZ_[k].resize(n_), cgP_[k].resize(n_), cgQ_[k].resize(n_), viscRhs_[k].resize(n_);
+  const float invStep = float(wallV_.size() - 1) / kh;
+  // h K_ij = h 2 V_i V_j mu_ij |gradW_ij| r / (r^2 + 0.01 h^2), |gradW| = cs (h - r)^2, between
+  // fluid particles (viscK_); a solid neighbour j and the walls' ghost samples are fixed
+  // velocities (no-slip, one way: they are not pushed back): their weights go to the
+  // diagonal (viscExtra_) and, times v_j, to the right-hand side (walls: v = 0).
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const float* ri = &rec_[i * kRecord];
+      float extra = 0.0f, rhs[3] = {0.0f, 0.0f, 0.0f};
+      for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {
+        const std::size_t j = std::size_t(lists_.index[i * width + k]);
+        const float* rj = &rec_[j * kRecord];
+        float w = 0.0f;
+        if (ri[kFluid] != 0.0f) {
+          const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
+          const float r2 = (dx * dx + dy * dy) + dz * dz, r = std::sqrt(r2);
+          if (r < kh) {
+            const float t = kh - r, mu = rj[kFluid] != 0.0f ? 0.5f * (muR_[i] + muR_[j]) : muR_[i];
+            w = h * 2.0f * (ri[kNu] * rj[kNu]) * mu * cs * (t * t) * r / (r2 + eta2) * laplaceScale_;
+          }
+        }
+        if (rj[kFluid] == 0.0f) {
+          extra += w;
+          for (int c = 0; c < 3; ++c) rhs[c] += w * v_[c][j];
+          w = 0.0f;
+        }
+        viscK_[i * width + k] = w;
+      }
+      if (ri[kFluid] != 0.0f) {
+        const float scale = h * 2.0f * ri[kNu] * muR_[i];
+        for (int axis = 0; axis < 3; ++axis)
+          for (const float y : {ri[axis] - params_.wallLo[axis], params_.wallHi[axis] - ri[axis]}) {
+            if (!(y < kh)) continue;
+            const float u = std::max(y, 0.0f) * invStep;
+            const int sIdx = std::min(int(u), int(wallV_.size()) - 2);
+            const float f = u - float(sIdx);
+            extra += scale * (wallV_[std::size_t(sIdx)] + f * (wallV_[std::size_t(sIdx) + 1] - wallV_[std::size_t(sIdx)]));
+          }
+      }
+      viscExtra_[i] = extra;
+      for (int c = 0; c < 3; ++c) viscRhs_[c][i] = rhs[c];
+    }
+  });
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {  // the diagonal, for Jacobi
+    for (std::size_t i = b; i < e; ++i) {
+      float d = rec_[i * kRecord + kMass] + viscExtra_[i];
+      for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) d += viscK_[i * width + k];
+      viscDiag_[i] = rec_[i * kRecord + kFluid] != 0.0f ? d : 1.0f;
+    }
+  });
+  const std::size_t units = (n_ + kParticleChunk - 1) / kParticleChunk;
+  partial_.resize(units);
+  const auto sum = [&](auto&& term) {  // sum over ranks of term(i), in fixed chunk order
+    forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+      double s = 0.0;
+      for (std::size_t i = b; i < e; ++i) s += term(i);
+      partial_[b / kParticleChunk] = s;
+    });
+    double s = 0.0;
+    for (double x : partial_) s += x;
+    return s;
+  };
+  const auto fluid = [&](std::size_t i) { return rec_[i * kRecord + kFluid] != 0.0f; };
+  // out = (M + h K) in, on fluid rows.
+  const auto apply = [&](std::vector<float>* in, std::vector<float>* out) {
+    forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        if (!fluid(i)) {
+          for (int c = 0; c < 3; ++c) out[c][i] = 0.0f;
+          continue;
+        }
+        const float m = rec_[i * kRecord + kMass] + viscExtra_[i];
+        float acc[3] = {m * in[0][i], m * in[1][i], m * in[2][i]};
+        for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {
+          const float w = viscK_[i * width + k];
+          if (w == 0.0f) continue;
+          const std::size_t j = std::size_t(lists_.index[i * width + k]);
+          for (int c = 0; c < 3; ++c) acc[c] += w * (in[c][i] - in[c][j]);
+        }
+        for (int c = 0; c < 3; ++c) out[c][i] = acc[c];
+      }
+    });
+  };
+  // r = M v - A v (x0 = v), z = r / diag, p = z.
+  apply(v_, cgQ_);
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i)
+      for (int c = 0; c < 3; ++c) {
+        const float m = fluid(i) ? rec_[i * kRecord + kMass] : 0.0f;
+        cgR_[c][i] = fluid(i) ? (m * v_[c][i] + viscRhs_[c][i]) - cgQ_[c][i] : 0.0f;
+        cgP_[c][i] = cgZ_[c][i] = cgR_[c][i] / viscDiag_[i];
+      }
+  });
+  // The scale: |M v| in the same weighted norm (b^T D^-1 b), or the mass times 1 m/s if the
+  // fluid is at rest.
+  const double bnorm = sum([&](std::size_t i) {
+    if (!fluid(i)) return 0.0;
+    const double m = rec_[i * kRecord + kMass];
+    double s = 0.0;
+    for (int c = 0; c < 3; ++c) s += (m * v_[c][i]) * (m * v_[c][i]);
+    return std::max(s, m * m) / viscDiag_[i];
+  });
+  const double tol2 = double(kViscosityTolerance) * kViscosityTolerance * bnorm;
+  double rz = sum([&](std::size_t i) {
+    return double(cgR_[0][i]) * cgZ_[0][i] + double(cgR_[1][i]) * cgZ_[1][i] + double(cgR_[2][i]) * cgZ_[2][i];
+  });
+  int it = 0;
+  while (it < kViscosityMaxIterations && rz > tol2) {
+    apply(cgP_, cgQ_);
+    const double pq = sum([&](std::size_t i) {
+      return double(cgP_[0][i]) * cgQ_[0][i] + double(cgP_[1][i]) * cgQ_[1][i] + double(cgP_[2][i]) * cgQ_[2][i];
+    });
+    if (!(pq > 0.0)) break;
+    const float alpha = float(rz / pq);
+    forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i)
+        for (int c = 0; c < 3; ++c) {
+          if (!fluid(i)) continue;
+          v_[c][i] += alpha * cgP_[c][i];
+          cgR_[c][i] -= alpha * cgQ_[c][i];
+          cgZ_[c][i] = cgR_[c][i] / viscDiag_[i];
+        }
+    });
+    const double rzNew = sum([&](std::size_t i) {
+      return double(cgR_[0][i]) * cgZ_[0][i] + double(cgR_[1][i]) * cgZ_[1][i] + double(cgR_[2][i]) * cgZ_[2][i];
+    });
+    const float beta = float(rzNew / rz);
+    rz = rzNew;
+    forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i)
+        for (int c = 0; c < 3; ++c) cgP_[c][i] = cgZ_[c][i] + beta * cgP_[c][i];
+    });
+    ++it;
+  }
+  viscIterations_ = it;
 }
 
 // ---- density error -------------------------------------------------------------------

@@ -72,6 +72,9 @@ struct FluidParams {
   float xsph = 0.0f;             // XSPH c (Eq. 17), dimensionless; 0 = off
   float vorticity = 0.0f;        // vorticity confinement epsilon (Eq. 16), m/s; 0 = off
   float cohesion = 0.0f;         // Akinci 2013 cohesion gamma, m/s^2; 0 = off
+  // Dynamic viscosity mu (Pa s), solved implicitly among the fluid particles (viscosity pass
+  // below) wherever some fluid's kinematic mu / rho0 exceeds kNegligibleViscosity; 0 = off.
+  float viscosity = 0.0f;
   float solidScale = 1.0f;       // s: scales a solid particle's boundary volume (Akinci 2012)
   // Axis-aligned box the fluid particles stay in (their centres stay r inside), m. The
   // ground is lo[1]; +-infinity leaves a side open.
@@ -108,6 +111,7 @@ struct FluidInput {
   const float* xsph = nullptr;         // FluidParams::xsph, [0, 1]
   const float* vorticity = nullptr;    // FluidParams::vorticity, >= 0
   const float* cohesion = nullptr;     // FluidParams::cohesion, >= 0
+  const float* viscosity = nullptr;    // FluidParams::viscosity (Pa s), >= 0
   const float* soundSpeeds = nullptr;  // m/s, >= 0 (0: no compliance for that particle); needs substep > 0
 };
 
@@ -133,6 +137,14 @@ class FluidSolver {
   // above the front of a dam break at 32 substeps ran ahead again (RMSE 0.108 at 20, 0.147
   // at 30; FluidDamBreak.FrontConvergesWithSubsteps's bound is 0.10).
   static float autoSoundSpeed(float gravity, float height, float vmax);
+  // Below this kinematic viscosity (m^2/s, ten times water's) the viscosity pass does not run:
+  // water's own viscosity damps a 5 cm wave by 1.6 % a second, far less than XSPH's smoothing
+  // and the solver's own dissipation, and the solve costs a velocity pass per CG iteration.
+  static constexpr float kNegligibleViscosity = 1e-5f;
+  // The viscosity solve's stopping rule: relative residual (in the Jacobi-weighted norm) and
+  // the most CG iterations a substep runs.
+  static constexpr float kViscosityTolerance = 1e-4f;
+  static constexpr int kViscosityMaxIterations = 200;
 
   // Which pair kernel densityIteration runs; kAuto takes AVX2 where the CPU has it. All
   // give identical bits (tested).
@@ -177,10 +189,25 @@ class FluidSolver {
   // Replaces the positions (by id) of every particle, e.g. after the caller moved solids.
   void setPositions(const float* x, const float* y, const float* z);
 
-  // XSPH, vorticity confinement and cohesion on the fluid particles' velocities (m/s, by
-  // id, read and written; solids' entries untouched), with the substep h (s). Uses the
-  // current positions and the neighbour structure of begin().
+  // XSPH, vorticity confinement, cohesion and viscosity on the fluid particles' velocities
+  // (m/s, by id, read and written; solids' entries untouched), with the substep h (s). Uses
+  // the current positions and the neighbour structure of begin().
+  //
+  // Viscosity: backward Euler of m_i dv_i/dt = V_i mu lap(v)_i with the SPH Laplacian in
+  // Brookshaw's form (1985): lap(v)_i = 2 sum_j V_j (v_j - v_i)
+  // |gradW_ij| r_ij / (r_ij^2 + 0.01 h^2) (times a calibration that makes it exact for
+  // quadratic fields on the sketch's lattice), mu_ij the mean of the two particles' mu. The
+  // pair weights are symmetric (every fluid particle has the same volume V), so the system
+  // (M + h K) v' = M v is symmetric positive definite, conserves the fluid's momentum
+  // among its own particles and is solved by
+  // Jacobi-preconditioned CG to kViscosityTolerance: stable for any viscosity and substep,
+  // where an explicit step of honey's would need substeps of microseconds. Solid particles
+  // and the walls (their ghost lattice, as for the density) take part as fixed velocities
+  // (the walls' 0): honey sticks to the ground and to a moving spoon, one way (the solid is
+  // not dragged back; the fluid's momentum changes by what the walls and solids take).
   void velocityPasses(float* vx, float* vy, float* vz, float h);
+  // CG iterations the last viscosity solve took (0: none ran).
+  int lastViscosityIterations() const { return viscIterations_; }
 
   // rho / rho0 - 1 over fluid particles at the current positions.
   DensityError densityError() const;
@@ -206,6 +233,7 @@ class FluidSolver {
   void loadParticleParams(const FluidInput& in);
   bool useSimd() const;
   void cohesionPass(float* vx, float* vy, float* vz, float h) const;
+  void viscosityPass(float h);
 
   FluidParams params_;
   Kernel kernel_ = Kernel::kAuto;
@@ -217,8 +245,12 @@ class FluidSolver {
   // tests place fluid particles) is exactly at rest, C = 0, so a sketched volume keeps its
   // size (SPH's sum of V W over a lattice is 1 only in the continuum limit).
   float latticeScale_ = 1.0f;
+  float laplaceScale_ = 1.0f;  // the viscosity's Laplacian, exact for quadratics on that lattice
   static constexpr int kWallSamples = 256;
   std::vector<float> wallB_, wallDB_;  // the walls' density term, see buildWallTable()
+  // The walls' share of the viscosity's Laplacian weight: sum over ghost samples g of
+  // nu_g |gradW| r / (r^2 + 0.01 h^2) (calibrated), by distance from the plane as wallB_.
+  std::vector<float> wallV_;
   // Per particle, in rank (cell) order, one 32-byte record so that a neighbour's data is
   // one load (the SIMD kernel transposes 8 records into 8 lanes, no gathers):
   //   x, y, z (m), nu (m^3, rest volume), w (1/kg), lambda, fluid (0/1), m (kg; 0 for solids)
@@ -232,8 +264,14 @@ class FluidSolver {
   // not given: eps coefficient relaxation_i * (V cs h^2)^2, compliance 1 / (c_i h)^2 (0: none),
   // XSPH c_i, vorticity epsilon_i (m/s), cohesion gamma_i (m/s^2).
   std::vector<float> epsR_, alphaR_, xsphR_, vortR_, cohR_;
-  // Whether any fluid particle has XSPH, vorticity or cohesion (the velocity passes' gates).
-  bool xsphOn_ = false, vortOn_ = false, cohOn_ = false;
+  // Whether any fluid particle has XSPH, vorticity, cohesion or viscosity (the velocity
+  // passes' gates).
+  bool xsphOn_ = false, vortOn_ = false, cohOn_ = false, viscOn_ = false;
+  // The viscosity solve: mu by rank (empty when off), pair weights h K_ij by list slot, the
+  // diagonal, CG's vectors (3 components each) and per-chunk partial sums.
+  std::vector<float> muR_, viscK_, viscDiag_, viscExtra_, viscRhs_[3], cgR_[3], cgZ_[3], cgP_[3], cgQ_[3];
+  std::vector<double> partial_;
+  int viscIterations_ = 0;
   float substep_ = 0.0f, soundSpeed_ = 0.0f;
   int iterations_ = 0;
   // Neighbour lists in blocks of 8 ranks, slot-major: the k-th neighbour of rank 8b + l is

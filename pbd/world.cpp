@@ -647,8 +647,9 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
       return n(c.fluid, "dynamic fluid bodies") + fluidSoundText();  // the compliance's sound speed (pbd/fluid.h)
     }
     case PbdPass::kFluidVelocity:
-      return on ? "a fluid sets xsph_viscosity, vorticity or cohesion"
-                : (c.fluid == 0 ? "no fluid in the scene" : "its fluids set no xsph_viscosity, vorticity or cohesion");
+      return on ? "a fluid sets xsph_viscosity, vorticity, cohesion or a viscosity above 10x water's (implicit solve)"
+                : (c.fluid == 0 ? "no fluid in the scene"
+                                : "its fluids set no xsph_viscosity, vorticity or cohesion, and no viscosity above 10x water's");
     case PbdPass::kDistance:
       return on ? n(c.strands, "dynamic ropes or cloths (or attachments)") : "no rope or cloth moves";
     case PbdPass::kPlasticity:

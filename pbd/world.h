@@ -488,11 +488,13 @@ class PbdWorld final : public Solver {
   // parameters (FluidInput), else one set.
   std::vector<std::size_t> fluidMaterials_;
   bool fluidMixed_ = false;
-  bool fluidVelocity_ = false;  // some fluid material sets xsph_viscosity, vorticity or cohesion
+  // Some fluid material sets xsph_viscosity, vorticity, cohesion or a viscosity above
+  // FluidSolver::kNegligibleViscosity.
+  bool fluidVelocity_ = false;
   float fluidSoundOf(const Material& m) const;
   std::string fluidSoundText() const;
   std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;
-  std::vector<float> frelax_, fxsph_, fvort_, fcoh_, fsound_;  // per kernel particle, fluidMixed_ only
+  std::vector<float> frelax_, fxsph_, fvort_, fcoh_, fsound_, fmu_;  // per kernel particle, fluidMixed_ only
   std::vector<std::uint8_t> fflag_;
   void makeFluidSolver();
   bool looseDirty_ = true;             // loose_ must be rebuilt before the next step  // per particle: vy before the solve when it touched the ground, else 0

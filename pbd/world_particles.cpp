@@ -1177,6 +1177,7 @@ void PbdWorld::makeFluidSolver() {
     fp.xsph = static_cast<float>(first.xsphViscosity);
     fp.vorticity = static_cast<float>(first.vorticity);
     fp.cohesion = static_cast<float>(first.cohesion);
+    fp.viscosity = static_cast<float>(first.viscosity);
     fp.wallLo[1] = static_cast<float>(params_.groundY);
     fluid_ = std::make_unique<FluidSolver>(fp);
   }
@@ -1186,9 +1187,10 @@ void PbdWorld::makeFluidSolver() {
     const Material::Fluid& f = materials_[m].fluid;
     fluidMixed_ |= !same(f.relaxation, first.relaxation) || !same(f.xsphViscosity, first.xsphViscosity) ||
                    !same(f.vorticity, first.vorticity) || !same(f.cohesion, first.cohesion) ||
-                   !same(f.soundSpeed, first.soundSpeed);
+                   !same(f.soundSpeed, first.soundSpeed) || !same(f.viscosity, first.viscosity);
     fluidSoundAuto_ |= std::isnan(f.soundSpeed);
-    fluidVelocity_ |= f.xsphViscosity > 0.0 || f.vorticity > 0.0 || f.cohesion > 0.0;
+    fluidVelocity_ |= f.xsphViscosity > 0.0 || f.vorticity > 0.0 || f.cohesion > 0.0 ||
+                      f.viscosity / materials_[m].density > double(FluidSolver::kNegligibleViscosity);
   }
   // The auto sound speed (it starts at 0 and rises, and keeps rising after a new body), or
   // the single material's.
@@ -1269,6 +1271,7 @@ void PbdWorld::fluidNeighbors() {
   }
   if (fluidMixed_) {  // each fluid particle its material's parameters (solids' entries unread)
     frelax_.assign(n, 0.0f), fxsph_.assign(n, 0.0f), fvort_.assign(n, 0.0f), fcoh_.assign(n, 0.0f), fsound_.assign(n, 0.0f);
+    fmu_.assign(n, 0.0f);
     for (std::size_t k = 0; k < fluidCount_; ++k) {
       const Material& m = materials_[std::size_t(parts_.material[std::size_t(fluidIds_[k])])];
       frelax_[k] = static_cast<float>(m.fluid.relaxation);
@@ -1276,6 +1279,7 @@ void PbdWorld::fluidNeighbors() {
       fvort_[k] = static_cast<float>(m.fluid.vorticity);
       fcoh_[k] = static_cast<float>(m.fluid.cohesion);
       fsound_[k] = fluidSoundOf(m);
+      fmu_[k] = static_cast<float>(m.fluid.viscosity);
     }
   }
   FluidInput in;
@@ -1289,7 +1293,7 @@ void PbdWorld::fluidNeighbors() {
   in.soundSpeed = fluidSoundSpeed_;
   if (fluidMixed_) {
     in.relaxation = frelax_.data(), in.xsph = fxsph_.data(), in.vorticity = fvort_.data(), in.cohesion = fcoh_.data();
-    in.soundSpeeds = fsound_.data();
+    in.soundSpeeds = fsound_.data(), in.viscosity = fmu_.data();
   }
   fluid_->begin(in);
 }

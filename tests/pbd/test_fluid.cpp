@@ -314,6 +314,101 @@ TEST(FluidKernel, EachParticleTakesItsOwnFluidsParameters) {
   }
 }
 
+// Viscosity against a closed form: a shear wave v_x = A sin(k y) in a viscous fluid decays as
+// exp(-nu k^2 t) (the Navier-Stokes equations reduce to the heat equation for it), and the
+// backward-Euler step divides it by exactly 1 + h nu k^2 per substep, at any h nu k^2. A
+// lattice block of 20 x 96 x 20 particles holds four wavelengths of 24 spacings across y; the
+// amplitude is fitted on the particles at least 8 spacings from the x and z faces (the wave
+// does not vary along them) and 24 from the y faces (free faces miss neighbours, and the
+// implicit solve carries that inwards by a few sqrt(h nu): 0.3 spacings for honey-like
+// nu = 0.01 m^2/s, 3.2 for the stiff case's 1 m^2/s; with 12 spacings the stiff case read
+// 1.19). Tolerance 5 % of the rate: the calibrated SPH Laplacian is exact for quadratic
+// fields on the lattice; at 24 spacings a wavelength its next-order error is about
+// (k h)^2 / 12 = 2.5 % (measured 0.975 and 0.958). The stiff case (h nu k^2 = 0.7 a substep)
+// would blow up an explicit step (stable only below h nu / spacing^2 of about 0.1; it is 10
+// here): the implicit one still decays at the viscous rate. Momentum: equal masses, so the
+// sum of v_x stays (symmetric pair weights).
+TEST(FluidViscosity, AShearWaveDecaysAtTheViscousRate) {
+  for (const float mu : {12.0f, 1200.0f}) {
+    FluidParams p = smallParams();
+    p.scorrK = 0.0f;
+    const float d = 2.0f * p.particleRadius, rho = 1200.0f, nu = mu / rho;
+    const int nx = 20, ny = 96, nz = 20, wave = 24;
+    const float k = 2.0f * 3.14159265f / (float(wave) * d), h = 1.0f / 240.0f;
+    std::vector<float> x, y, z, w, r, vx, vy, vz;
+    std::vector<std::uint8_t> fl;
+    for (int a = 0; a < nx; ++a)
+      for (int b = 0; b < ny; ++b)
+        for (int c = 0; c < nz; ++c) {
+          x.push_back(d * float(a)), y.push_back(d * float(b)), z.push_back(d * float(c));
+          w.push_back(1.0f / (rho * d * d * d)), r.push_back(rho), fl.push_back(1);
+          vx.push_back(std::sin(k * y.back())), vy.push_back(0.0f), vz.push_back(0.0f);
+        }
+    FluidInput in;
+    in.count = x.size(), in.x = x.data(), in.y = y.data(), in.z = z.data();
+    in.invMass = w.data(), in.fluid = fl.data(), in.restDensity = r.data();
+    p.viscosity = mu;
+    FluidSolver solver(p);
+    solver.begin(in);
+    const auto interior = [&](std::size_t i) {
+      const float m = 8.0f * d - 1e-6f, my = 24.0f * d - 1e-6f;
+      return x[i] >= m && x[i] <= d * float(nx - 1) - m && y[i] >= my && y[i] <= d * float(ny - 1) - my && z[i] >= m &&
+             z[i] <= d * float(nz - 1) - m;
+    };
+    const auto amplitude = [&]() {
+      double num = 0, den = 0;
+      for (std::size_t i = 0; i < x.size(); ++i)
+        if (interior(i)) num += double(vx[i]) * std::sin(k * y[i]), den += std::sin(k * y[i]) * std::sin(k * y[i]);
+      return num / den;
+    };
+    const auto sums = [&](double& sum, double& abs) {
+      sum = abs = 0.0;
+      for (float v : vx) sum += v, abs += std::fabs(v);
+    };
+    double p0 = 0, scale = 0, p1 = 0, unused = 0;
+    sums(p0, scale);
+    const double a0 = amplitude();
+    const int steps = 4;
+    for (int s = 0; s < steps; ++s) {
+      solver.velocityPasses(vx.data(), vy.data(), vz.data(), h);
+      EXPECT_GT(solver.lastViscosityIterations(), 0);
+    }
+    const double rate = (std::pow(a0 / amplitude(), 1.0 / steps) - 1.0) / h;  // per substep: 1 + h rate
+    const double expected = double(nu) * k * k;
+    std::printf("shear wave, mu %g Pa s: decay rate %.4f 1/s against nu k^2 = %.4f (h nu k^2 = %.3f; %d CG iterations)\n",
+                double(mu), rate, expected, h * expected, solver.lastViscosityIterations());
+    EXPECT_NEAR(rate / expected, 1.0, 0.05);
+    sums(p1, unused);
+    EXPECT_NEAR(p1, p0, 1e-4 * scale) << "sum of v_x changed";
+  }
+}
+
+// The viscosity pass runs only above the negligible viscosity: water's 1e-3 Pa s leaves the
+// velocities as they were (no pass), honey's changes them.
+TEST(FluidViscosity, WatersOwnViscosityIsNotSolved) {
+  const RandomSet set = randomSet(smallParams(), 400, 9);
+  const std::size_t n = set.x.size();
+  for (const float mu : {1e-3f, 10.0f}) {
+    FluidParams p = smallParams();
+    p.viscosity = mu;
+    FluidSolver solver(p);
+    solver.begin(set.input());
+    std::vector<float> v(3 * n);
+    std::mt19937 rng(4);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (float& c : v) c = u(rng);
+    const std::vector<float> before = v;
+    solver.velocityPasses(v.data(), v.data() + n, v.data() + 2 * n, 1.0f / 240.0f);
+    if (mu < 1.0f) {
+      EXPECT_EQ(solver.lastViscosityIterations(), 0);
+      EXPECT_EQ(v, before);
+    } else {
+      EXPECT_GT(solver.lastViscosityIterations(), 0);
+      EXPECT_NE(v, before);
+    }
+  }
+}
+
 // A per-particle parameter out of its range is refused, naming the particle and parameter.
 TEST(FluidKernel, RejectsABadPerParticleParameter) {
   const RandomSet set = randomSet(smallParams(), 50, 1);
@@ -658,18 +753,22 @@ TEST(FluidTwoDensities, HeavyOverLightSinks) {
 std::vector<float> runMixed(int threads) {
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
   FluidParams p = smallParams();
-  p.xsph = 0.05f, p.vorticity = 0.01f, p.cohesion = 0.5f;
+  p.xsph = 0.05f, p.vorticity = 0.01f, p.cohesion = 0.5f, p.viscosity = 5.0f;  // the CG's sums too
   p.wallLo[1] = 0.0f;
   RandomSet set = randomSet(p, 6000, 5);
   FluidSolver solver(p);
   std::vector<float> state;
   std::vector<float> v[3];
-  for (auto& a : v) a.assign(set.x.size(), 0.1f);
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<float> u(-0.1f, 0.1f);
+  for (auto& a : v)
+    for (std::size_t i = 0; i < set.x.size(); ++i) a.push_back(u(rng));
   for (int sub = 0; sub < 3; ++sub) {
     solver.begin(set.input());
     for (int it = 0; it < 4; ++it) solver.densityIteration(), solver.applyCorrections(true);
     solver.positions(set.x.data(), set.y.data(), set.z.data());
     solver.velocityPasses(v[0].data(), v[1].data(), v[2].data(), 1.0f / 240.0f);
+    EXPECT_GT(solver.lastViscosityIterations(), 1);
   }
   std::vector<float> dp(3 * set.x.size()), lambda(set.x.size());
   solver.corrections(dp.data(), dp.data() + set.x.size(), dp.data() + 2 * set.x.size());

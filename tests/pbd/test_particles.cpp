@@ -799,32 +799,95 @@ TEST(Fluid, TheGuardNamesATooLowSoundSpeed) {
 // neither's stiffness depends on the other's height or speed (the automatic one is the
 // scene's). Tolerance 5 % of each spread: the runs may differ in rounding (a neighbour grid
 // of another origin can sum in another order), which a collapse amplifies, but not to 5 %
-// in 24 steps (measured: equal to 4 digits); the two fluids' spreads differ by 28 %.
+// in 24 steps (measured: equal to 4 digits); the two fluids' spreads differ by 28 %. The
+// same with the dynamic viscosity (implicit, pbd/fluid.h): honey of 20 Pa s beside water
+// (its front advanced 0.10 m against the water's 0.27 m).
 TEST(Fluid, EachFluidMaterialKeepsItsOwnViscosity) {
-  std::vector<Material> mats = {makeKind("water", MaterialKind::kFluid), makeKind("honey", MaterialKind::kFluid)};
-  mats[0].fluid.xsphViscosity = 0.0, mats[1].fluid.xsphViscosity = 1.0;
-  for (Material& m : mats) m.fluid.soundSpeed = 20.0;
-  const int side = 12;
-  const auto spreads = [&](bool water, bool honey) {
-    ParticleArrays p;
-    std::vector<BodyRange> bodies;
-    if (water) bodies.push_back(addBox(p, Vec3(kRadius, kRadius, kRadius), side, side, side, 1, 0));
-    if (honey) bodies.push_back(addBox(p, Vec3(kRadius, kRadius, 0.5 + kRadius), side, side, side, 2, 1));
-    PbdWorld w(p, bodies, mats, params(2, 4));
-    for (int s = 0; s < 24; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
-    std::vector<double> out;  // each body's largest x (its front, from x = side spacings at the start)
-    for (const BodyRange& b : bodies) {
-      float x = -1e30f;
-      for (std::int32_t i = b.first; i < b.first + b.count; ++i) x = std::max(x, w.particles().x[std::size_t(i)]);
-      out.push_back(double(x) - side * kSpacing);
+  for (const bool dynamic : {false, true}) {
+    SCOPED_TRACE(dynamic ? "viscosity" : "xsph_viscosity");
+    std::vector<Material> mats = {makeKind("water", MaterialKind::kFluid), makeKind("honey", MaterialKind::kFluid)};
+    mats[0].fluid.xsphViscosity = 0.0, mats[1].fluid.xsphViscosity = dynamic ? 0.0 : 1.0;
+    if (dynamic) mats[1].fluid.viscosity = 20.0;
+    for (Material& m : mats) m.fluid.soundSpeed = 20.0;
+    const int side = 12;
+    const auto spreads = [&](bool water, bool honey) {
+      ParticleArrays p;
+      std::vector<BodyRange> bodies;
+      if (water) bodies.push_back(addBox(p, Vec3(kRadius, kRadius, kRadius), side, side, side, 1, 0));
+      if (honey) bodies.push_back(addBox(p, Vec3(kRadius, kRadius, 0.5 + kRadius), side, side, side, 2, 1));
+      PbdWorld w(p, bodies, mats, params(2, 4));
+      for (int s = 0; s < 24; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+      std::vector<double> out;  // each body's largest x (its front, from x = side spacings at the start)
+      for (const BodyRange& b : bodies) {
+        float x = -1e30f;
+        for (std::int32_t i = b.first; i < b.first + b.count; ++i) x = std::max(x, w.particles().x[std::size_t(i)]);
+        out.push_back(double(x) - side * kSpacing);
+      }
+      return out;
+    };
+    const std::vector<double> both = spreads(true, true), water = spreads(true, false), honey = spreads(false, true);
+    std::printf("front advance (m): water %.4f alone %.4f; honey %.4f alone %.4f\n", both[0], water[0], both[1], honey[0]);
+    ASSERT_GT(water[0] - honey[0], 0.15 * water[0]) << "the viscosities make no difference: the test cannot tell";
+    EXPECT_NEAR(both[0], water[0], 0.05 * water[0]);
+    EXPECT_NEAR(both[1], honey[0], 0.05 * honey[0]);
+  }
+}
+
+// A viscous fluid spreading on the ground against Huppert 1982's similarity solution for an
+// axisymmetric viscous gravity current of constant volume V on a rigid no-slip surface at low
+// Reynolds number: r_N(t) = 0.894 (rho g V^3 t / (3 mu))^(1/8) (J. Fluid Mech. 121, 43-58). A
+// 16^3-particle cube of honey (1400 kg/m^3) let go on the ground; the front is the particle
+// centre furthest from the axis. It needs the implicit viscosity and the walls' no-slip (with
+// the ground slipping the pool spreads like water). Returns the ratio to Huppert's front at
+// 1 s and 2 s (the cube has spread to 3 times its half width and the similarity solution
+// holds; Re = rho U H / mu is below 0.1).
+std::vector<double> huppertRatios(double mu, int substeps) {
+  std::vector<Material> mats = {makeKind("honey", MaterialKind::kFluid, 1400.0)};
+  mats[0].fluid.viscosity = mu;
+  const int side = 16;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies = {addBox(p, Vec3(kRadius, kRadius, kRadius), side, side, side, 1, 0)};
+  PbdWorld w(p, bodies, mats, params(substeps, 4));
+  const double V = std::pow(side * kSpacing, 3), c = 0.5 * side * kSpacing;
+  std::vector<double> out;
+  int steps = 0;
+  for (const double t : {1.0, 2.0}) {
+    for (; steps < int(std::lround(t * 60.0)); ++steps) {
+      EXPECT_TRUE(w.step()) << w.guard().message();
+      if (::testing::Test::HasFailure()) return out;
     }
-    return out;
-  };
-  const std::vector<double> both = spreads(true, true), water = spreads(true, false), honey = spreads(false, true);
-  std::printf("front advance (m): water %.4f alone %.4f; honey %.4f alone %.4f\n", both[0], water[0], both[1], honey[0]);
-  ASSERT_GT(water[0] - honey[0], 0.15 * water[0]) << "the viscosities make no difference: the test cannot tell";
-  EXPECT_NEAR(both[0], water[0], 0.05 * water[0]);
-  EXPECT_NEAR(both[1], honey[0], 0.05 * honey[0]);
+    double r = 0.0;
+    for (std::int32_t i = 0; i < bodies[0].count; ++i) {
+      const auto k = std::size_t(i);
+      r = std::max(r, std::hypot(double(w.particles().x[k]) - c, double(w.particles().z[k]) - c));
+    }
+    const double huppert = 0.894 * std::pow(1400.0 * 9.81 * V * V * V * t / (3.0 * mu), 1.0 / 8.0);
+    std::printf("mu %g Pa s, %d substeps, t %.0f s: front %.4f m, Huppert %.4f m (ratio %.3f)\n", mu, substeps, t, r,
+                huppert, r / huppert);
+    out.push_back(r / huppert);
+  }
+  return out;
+}
+
+// 50 Pa s at 4 substeps: within 10 % of Huppert's front (measured 1.05-1.07 from 0.5 to 4 s;
+// PBF's pressure acts through position corrections outside the viscous step, a splitting
+// error of first order in the substep, below).
+TEST(Fluid, AViscousPoolSpreadsAsHuppertsGravityCurrent) {
+  for (double ratio : huppertRatios(50.0, 4)) EXPECT_NEAR(ratio, 1.0, 0.10);
+}
+
+// The splitting error shrinks with the substep: at 200 Pa s the front at 2 s runs 22 % ahead
+// of Huppert's with 2 substeps and 8 % with 8 (measured; 4 substeps 13 %). Asserted: 8
+// substeps' error below half of 2 substeps', and within 12 %.
+TEST(Fluid, AVeryViscousPoolConvergesToHuppertWithSubsteps) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "too slow under AddressSanitizer; make test runs it (the other Huppert test covers the code)";
+#endif
+  const std::vector<double> coarse = huppertRatios(200.0, 2), fine = huppertRatios(200.0, 8);
+  ASSERT_EQ(coarse.size(), 2u);
+  ASSERT_EQ(fine.size(), 2u);
+  EXPECT_LT(std::fabs(fine[1] - 1.0), 0.5 * std::fabs(coarse[1] - 1.0));
+  EXPECT_NEAR(fine[1], 1.0, 0.12);
 }
 
 // Several fluids, one of them soft by choice: oil (auto sound speed) floats on water of
