@@ -97,7 +97,7 @@ void parseKeyframe(const RecordFile& file, const Record& r, std::vector<MeshColl
 }
 
 // expect freefall | expect rest | expect height BODY Y | expect dam_break A | expect runout |
-// expect hydrostatic | expect pendulum BODY PX PY PZ | expect sphere CX CY CZ R
+// expect hydrostatic | expect pendulum BODY PX PY PZ | expect sphere CX CY CZ R | expect viscous_spread
 // (docs/formats.md, "Expected answers").
 Expectation parseExpect(const RecordFile& file, const Record& r, const std::vector<Expectation>& existing) {
   const std::string first = r.tokens.size() > 1 ? r.tokens[1] : "";
@@ -118,8 +118,10 @@ Expectation parseExpect(const RecordFile& file, const Record& r, const std::vect
   else if (kind == "hydrostatic") e.kind = Expectation::Kind::kHydrostatic;
   else if (kind == "pendulum") e.kind = Expectation::Kind::kPendulum;
   else if (kind == "sphere") e.kind = Expectation::Kind::kSphere;
+  else if (kind == "viscous_spread") e.kind = Expectation::Kind::kViscousSpread;
   else
-    f.fail(0, "unknown expectation '" + kind + "' (known: freefall, rest, height, dam_break, runout, hydrostatic, pendulum, sphere)");
+    f.fail(0, "unknown expectation '" + kind +
+                  "' (known: freefall, rest, height, dam_break, runout, hydrostatic, pendulum, sphere, viscous_spread)");
   if (f.count() < want)
     f.fail(f.count(), kind == "height"     ? "expect height needs BODY and Y (m): expect height NAME Y"
                       : kind == "pendulum" ? "expect pendulum needs BODY and the pivot (m): expect pendulum NAME PX PY PZ"
@@ -390,6 +392,7 @@ const char* toString(Expectation::Kind kind) {
     case Expectation::Kind::kPendulum: return "pendulum";
     case Expectation::Kind::kHydrostatic: return "hydrostatic";
     case Expectation::Kind::kSphere: return "sphere";
+    case Expectation::Kind::kViscousSpread: return "viscous_spread";
   }
   return "?";
 }

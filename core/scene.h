@@ -48,7 +48,7 @@ struct MeshCollider {
 // run's error against (docs/formats.md, "Expected answers"; docs/accuracy.md, the norms).
 // `physketch run` ignores it.
 struct Expectation {
-  enum class Kind { kFreefall, kRest, kHeight, kDamBreak, kRunout, kHydrostatic, kPendulum, kSphere };
+  enum class Kind { kFreefall, kRest, kHeight, kDamBreak, kRunout, kHydrostatic, kPendulum, kSphere, kViscousSpread };
   Kind kind = Kind::kFreefall;
   std::string body;   // kHeight, kPendulum: the body's name (body=NAME, or "stroke N" written stroke_N)
   double value = 0.0; // kHeight: the final height of its centre of mass (m); kDamBreak: the column's width a (m);

@@ -77,6 +77,7 @@ void observeStart(const Solver& solver, const sketch::Sketch& sk, Trajectory& tr
     const Vec3 x(p.x[i], p.y[i], p.z[i]);
     tr.lo0 = tr.lo0.cwiseMin(x);
     tr.hi0 = tr.hi0.cwiseMax(x);
+    ++tr.dynamic0Count;
   }
   for (int b = 0; b < solver.bodyCount(); ++b) {
     const Vec3 c = solver.pose(b).centre;
@@ -99,7 +100,8 @@ using nlohmann::json;
 
 // 2: trajectories carry the front, the t = 0 extent and the hydrostatic error (expect dam_break, runout, hydrostatic).
 // 3: and the last frame's surface (meshing knobs, expect sphere).
-constexpr int kPartVersion = 3;
+// 4: and the count of dynamic particles at t = 0 (expect viscous_spread).
+constexpr int kPartVersion = 4;
 
 // --- one run ------------------------------------------------------------------------
 
@@ -154,7 +156,7 @@ json trajectoryJson(const Trajectory& tr) {
   return {{"t", tr.t},           {"centres", centres},   {"velocity0", v0},
           {"reach", tr.reach},   {"dynamic0", tr.dynamic0}, {"names", tr.names},
           {"max_displacement_m", tr.maxDisplacement}, {"max_speed_mps", tr.maxSpeed}, {"spacing_m", tr.spacing},
-          {"front_x", tr.front}, {"lo0", finiteVec(tr.lo0)}, {"hi0", finiteVec(tr.hi0)},
+          {"front_x", tr.front}, {"lo0", finiteVec(tr.lo0)}, {"hi0", finiteVec(tr.hi0)}, {"dynamic0_count", tr.dynamic0Count},
           {"hydrostatic_m", finiteList(tr.hydrostatic)}, {"surface", surfaceJson(tr.surface)}};
 }
 
@@ -178,6 +180,7 @@ Trajectory trajectoryFrom(const json& j) {
   for (const auto& x : j.at("hydrostatic_m"))
     tr.hydrostatic.push_back(x.is_null() ? std::numeric_limits<double>::quiet_NaN() : x.get<double>());
   tr.hi0 = j.at("hi0").is_null() ? Vec3::Constant(-std::numeric_limits<double>::infinity()) : vec(j.at("hi0"));
+  tr.dynamic0Count = j.at("dynamic0_count").get<std::size_t>();
   tr.surface = surfaceFrom(j.at("surface"));
   return tr;
 }
@@ -488,6 +491,10 @@ std::string normText(bool analytic, const SceneDesc* scene, const std::string& r
         case Expectation::Kind::kSphere:
           s += "expect sphere: RMS over the last frame's surface vertices of |v - C| - R, C = (" + fmt("%g", e.point.x()) +
                ", " + fmt("%g", e.point.y()) + ", " + fmt("%g", e.point.z()) + "), R = " + fmt("%g", e.value) + " (m)";
+          break;
+        case Expectation::Kind::kViscousSpread:
+          s += "expect viscous_spread: RMS over the frames of the second half of the run of r(t) - Huppert 1982's "
+               "r_N = 0.894 (rho g V^3 t / (3 mu))^(1/8), r = the front's x + h/2 - the column's initial centre (m)";
           break;
       }
     }

@@ -80,6 +80,7 @@ struct Trajectory {
   double spacing = 0.0;                   // m: the particle spacing (voxel size)
   std::vector<double> front;              // m, per frame: the largest x of any dynamic particle (centre)
   Vec3 lo0 = Vec3::Zero(), hi0 = Vec3::Zero();  // m: the dynamic particles' centres' extent at t = 0
+  std::size_t dynamic0Count = 0;          // dynamic particles at t = 0 (their volume: count x spacing^3)
   std::vector<double> hydrostatic;        // m, per frame, when the scene expects it: hydrostaticError
   // The last frame's surfaces (every body's, in world coordinates, as frames mesh them), when the
   // run meshes (a meshing knob, expect sphere); empty otherwise.
@@ -138,6 +139,13 @@ double damBreakError(const Trajectory& tr, const Expectation& e, const Vec3& gra
 double lubeRunout(double aspect);
 // expect runout: |(front_last + h/2 - (x0_min - h/2) - L0) - L0 lubeRunout(H0 / L0)| (m).
 double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravity, const std::string& scenePath);
+// Huppert 1982 (J. Fluid Mech. 121, 43-58): the front of an axisymmetric viscous gravity current
+// of constant volume V (m^3) on a rigid no-slip floor, r_N = 0.894 (rho g V^3 t / (3 mu))^(1/8) (m).
+double huppertFront(double rho, double mu, double g, double volume, double t);
+// expect viscous_spread: RMS over the frames with t >= half the last frame's time of
+// (front + h/2 - (x0_min + x0_max) / 2) - huppertFront(rho, mu, g, count0 h^3, t), with the
+// scene's one fluid material's density and viscosity (m).
+double viscousSpreadError(const Trajectory& tr, const Expectation& e, const SceneDesc& scene);
 // expect hydrostatic: the last frame's hydrostaticError. Throws InputError naming the record
 // when no particle has a pressure (no fluid, or solver pbd) or gravity is zero.
 double hydrostaticRunError(const Trajectory& tr, const Expectation& e, const SceneDesc& scene);

@@ -219,6 +219,40 @@ double runoutError(const Trajectory& tr, const Expectation& e, const Vec3& gravi
   return std::abs(runout - l0 * lubeRunout(h0 / l0));
 }
 
+double huppertFront(double rho, double mu, double g, double volume, double t) {
+  return 0.894 * std::pow(rho * g * volume * volume * volume * t / (3.0 * mu), 1.0 / 8.0);
+}
+
+double viscousSpreadError(const Trajectory& tr, const Expectation& e, const SceneDesc& scene) {
+  const double g = downwardGravity(scene.gravity, e, scene.path), h = tr.spacing;
+  if (!hasParticles(tr)) throw InputError(scene.path, e.line, "kind", "expect viscous_spread: no dynamic particle");
+  const Material* fluid = nullptr;
+  for (const Material& m : scene.materials)
+    if (m.kind == MaterialKind::kFluid) {
+      if (fluid)
+        throw InputError(scene.path, e.line, "kind",
+                         "expect viscous_spread needs one fluid material (it reads its density and viscosity); the scene "
+                         "has '" + fluid->name + "' and '" + m.name + "'");
+      fluid = &m;
+    }
+  if (!fluid || !(fluid->fluid.viscosity > 0.0))
+    throw InputError(scene.path, e.line, "kind", "expect viscous_spread needs a fluid material with viscosity > 0");
+  const double cx = 0.5 * (tr.lo0.x() + tr.hi0.x()), volume = double(tr.dynamic0Count) * h * h * h;
+  const double half = tr.t.empty() ? 0.0 : 0.5 * tr.t.back();
+  double sum = 0.0;
+  int n = 0;
+  for (std::size_t f = 0; f < tr.t.size() && f < tr.front.size(); ++f) {
+    if (!(tr.t[f] > 0.0) || tr.t[f] < half) continue;
+    const double r = tr.front[f] + 0.5 * h - cx;
+    const double want = huppertFront(fluid->density, fluid->fluid.viscosity, g, volume, tr.t[f]);
+    sum += (r - want) * (r - want);
+    ++n;
+  }
+  if (n < 2)
+    throw InputError(scene.path, e.line, "kind", "expect viscous_spread: the run has fewer than 2 frames in its second half");
+  return std::sqrt(sum / n);
+}
+
 double hydrostaticPressure(double d, double rho0, double g, double bulk, double gamma) {
   const double x = rho0 * g * d / bulk;
   if (std::abs(gamma - 1.0) < 1e-9) return bulk * std::expm1(x);
@@ -282,6 +316,7 @@ double analyticError(const Trajectory& tr, const SceneDesc& scene) {
       case Expectation::Kind::kHydrostatic: err = hydrostaticRunError(tr, e, scene); break;
       case Expectation::Kind::kPendulum: err = pendulumError(tr, e, scene.gravity, scene.path); break;
       case Expectation::Kind::kSphere: err = sphereError(tr, e, scene.path); break;
+      case Expectation::Kind::kViscousSpread: err = viscousSpreadError(tr, e, scene); break;
     }
     if (std::isnan(err)) return err;
     worst = std::max(worst, err);

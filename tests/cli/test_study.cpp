@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/physketch/study.h"
+#include "core/material_table.h"
 #include "core/error.h"
 
 namespace fs = std::filesystem;
@@ -582,6 +583,76 @@ TEST(StudyCli, ThePbdDamBreakStaysInTheGateAtManySubsteps) {
     EXPECT_LT(error, 0.022) << setting;
     fs::remove_all(out);
   }
+  fs::remove_all(dir);
+}
+
+// Huppert's front at a hand-computed point (rho g V^3 t / 3 mu = 1 gives 0.894 m), and the
+// viscous-spread norm: a front that follows Huppert's law over the second half of the run
+// reads 0, one 1 cm ahead of it (frames in the first half ignored, even far off) reads 0.01 m;
+// a scene with two fluid materials is refused, naming the line.
+TEST(StudyNorms, ViscousSpreadErrorFollowsHuppertsFront) {
+  EXPECT_NEAR(huppertFront(3.0, 10.0, 10.0, 1.0, 1.0), 0.894, 1e-12);
+  EXPECT_NEAR(huppertFront(3.0, 10.0, 10.0, 1.0, 256.0), 0.894 * 2.0, 1e-12);  // t^(1/8)
+  SceneDesc scene;
+  scene.path = "v.scene";
+  scene.gravity = Vec3(0, -9.81, 0);
+  Material honey = makeMaterial(MaterialKind::kFluid);
+  honey.name = "honey";
+  honey.density = 1400.0;
+  honey.fluid.viscosity = 50.0;
+  scene.materials = {honey};
+  Expectation e;
+  e.kind = Expectation::Kind::kViscousSpread;
+  e.line = 7;
+  Trajectory tr;
+  const double h = 0.01;
+  tr.spacing = h;
+  tr.lo0 = Vec3(-0.08 + 0.5 * h, 0.5 * h, -0.08 + 0.5 * h);  // a 16^3 cube centred on x = 0
+  tr.hi0 = Vec3(0.08 - 0.5 * h, 0.16 - 0.5 * h, 0.08 - 0.5 * h);
+  tr.dynamic0Count = 16 * 16 * 16;
+  const double V = 0.16 * 0.16 * 0.16;
+  for (int f = 0; f <= 20; ++f) {
+    tr.t.push_back(0.1 * f);
+    const double r = f ? huppertFront(1400.0, 50.0, 9.81, V, tr.t.back()) : 0.08;
+    tr.front.push_back(r - 0.5 * h + (f < 10 ? 0.05 : 0.0));  // the first half far off: not counted
+  }
+  EXPECT_NEAR(viscousSpreadError(tr, e, scene), 0.0, 1e-12);
+  for (std::size_t f = 10; f < tr.front.size(); ++f) tr.front[f] += 0.01;
+  EXPECT_NEAR(viscousSpreadError(tr, e, scene), 0.01, 1e-12);
+  scene.materials.push_back(honey);
+  scene.materials.back().name = "oil";
+  try {
+    viscousSpreadError(tr, e, scene);
+    ADD_FAILURE() << "two fluid materials accepted";
+  } catch (const InputError& err) {
+    EXPECT_EQ(err.line(), 7);
+    EXPECT_NE(std::string(err.what()).find("one fluid material"), std::string::npos) << err.what();
+  }
+}
+
+// Issue 8's viscous fluid against the substeps: scenes/study/pbd_viscous_pool.scene (a 16 cm
+// cube of 50 Pa s honey) against Huppert 1982's viscous gravity current over 1-2 s. PBF's
+// pressure acts outside the implicit viscous step, a first-order splitting error: measured
+// 0.0167 m at 2 substeps, 0.0046 at 4, 0.0021 at 8 (docs/accuracy.md). Asserted: 8 substeps
+// below half of 2 substeps' error and within 5 mm (2.5 % of the 0.2 m front). Deterministic.
+TEST(StudyCli, TheViscousPoolConvergesToHuppertWithSubsteps) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "too slow under AddressSanitizer; make test runs it (tests/pbd's Huppert test covers the code)";
+#endif
+  const fs::path dir = freshDir("pbd_viscous");
+  const fs::path out = dir / "out";
+  const Result r = runCli("study '" + scene("pbd_viscous_pool.scene") + "' --vary substeps=2,8 -q --out '" + out.string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Table rows = readCsv(out / "study.csv");
+  ASSERT_EQ(rows.size(), 2u);
+  std::vector<double> error;
+  for (const auto& row : rows) {
+    EXPECT_EQ(row.at("status"), "ok");
+    error.push_back(std::stod(row.at("error_m")));
+  }
+  std::printf("viscous pool against Huppert: 2 substeps %.4f m, 8 substeps %.4f m\n", error[0], error[1]);
+  EXPECT_LT(error[1], 0.5 * error[0]);
+  EXPECT_LT(error[1], 0.005);
   fs::remove_all(dir);
 }
 

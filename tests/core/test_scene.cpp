@@ -683,6 +683,8 @@ TEST(Scene, ExpectRecordsParse) {
   EXPECT_EQ(d.expectations[0].kind, Expectation::Kind::kDamBreak);
   EXPECT_DOUBLE_EQ(d.expectations[0].value, 0.1);
   EXPECT_EQ(d.expectations[1].kind, Expectation::Kind::kRunout);
+  EXPECT_EQ(parseScene(std::string(kGood) + "expect viscous_spread\n", "x.scene").expectations[0].kind,
+            Expectation::Kind::kViscousSpread);
 }
 
 TEST(Scene, EveryBadExpectNamesLineAndField) {
@@ -714,6 +716,8 @@ TEST(Scene, EveryBadExpectNamesLineAndField) {
   e = sceneError("expect dam_break 0.1 2\n");
   EXPECT_EQ(e.field(), "#3");
   e = sceneError("expect runout 1\n");
+  EXPECT_EQ(e.field(), "#2");
+  e = sceneError("expect viscous_spread 50\n");
   EXPECT_EQ(e.field(), "#2");
   e = sceneError("expect runout\nexpect runout\n");
   EXPECT_EQ(e.line(), 11);
