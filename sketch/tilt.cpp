@@ -5,7 +5,9 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -129,11 +131,57 @@ std::vector<std::string> brushIndex(const std::string& json, const std::string& 
   return out;
 }
 
+// Open Brush's "Layers": [{"Name", "Visible", "Transform": [[tx,ty,tz],[qx,qy,qz,qw],s]}, ...]
+// (all optional; absent: no layers). A scale of 0 means 1, as Open Brush reads it.
+std::vector<TiltLayer> layers(const std::string& json, const std::string& path) {
+  const nlohmann::json meta = nlohmann::json::parse(json);  // brushIndex has parsed it
+  std::vector<TiltLayer> out;
+  if (!meta.contains("Layers")) return out;
+  const auto& list = meta["Layers"];
+  if (!list.is_array()) bad(path, "metadata.json", "Layers is not an array");
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string at = "Layers[" + std::to_string(i) + "]";
+    const auto& l = list[i];
+    if (!l.is_object()) bad(path, "metadata.json", at + " is not an object");
+    TiltLayer layer;
+    if (l.contains("Name") && l["Name"].is_string()) layer.name = l["Name"].get<std::string>();
+    if (l.contains("Visible")) {
+      if (!l["Visible"].is_boolean()) bad(path, "metadata.json", at + ".Visible is not true or false");
+      layer.visible = l["Visible"].get<bool>();
+    }
+    if (l.contains("Transform") && !l["Transform"].is_null()) {
+      const auto& t = l["Transform"];
+      const auto numbers = [&](const nlohmann::json& a, std::size_t n) {
+        std::vector<double> v;
+        if (a.is_array() && a.size() == n)
+          for (const auto& x : a)
+            if (x.is_number() && std::isfinite(x.get<double>())) v.push_back(x.get<double>());
+        return v;
+      };
+      const std::vector<double> tr = t.is_array() && t.size() == 3 ? numbers(t[0], 3) : std::vector<double>{};
+      const std::vector<double> q = t.is_array() && t.size() == 3 ? numbers(t[1], 4) : std::vector<double>{};
+      const bool scaleOk = t.is_array() && t.size() == 3 && t[2].is_number() && std::isfinite(t[2].get<double>()) &&
+                           t[2].get<double>() >= 0.0;
+      const double qn = q.size() == 4 ? std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) : 0.0;
+      if (tr.size() != 3 || q.size() != 4 || !(qn > 1e-6) || !scaleOk)
+        bad(path, "metadata.json",
+            at + ".Transform is not [[tx, ty, tz], [qx, qy, qz, qw], scale] with finite numbers, a non-zero "
+                 "quaternion and a scale >= 0");
+      layer.translation = Vec3(tr[0], tr[1], tr[2]);
+      layer.rotation = Quat(q[3] / qn, q[0] / qn, q[1] / qn, q[2] / qn);  // Eigen: (w, x, y, z)
+      layer.scale = t[2].get<double>() > 0.0 ? t[2].get<double>() : 1.0;
+    }
+    out.push_back(layer);
+  }
+  return out;
+}
+
 }  // namespace
 
 TiltSketch parseTilt(const std::string& dataSketch, const std::string& metadataJson, const std::string& path) {
   TiltSketch sk;
   sk.brushes = brushIndex(metadataJson, path);
+  sk.layers = layers(metadataJson, path);
   Reader r(dataSketch, path);
   if (r.u32("the header") != kSketchSentinel)
     bad(path, "data.sketch", "bad sentinel: not Tilt Brush stroke data");
@@ -167,10 +215,12 @@ TiltSketch parseTilt(const std::string& dataSketch, const std::string& metadataJ
         std::snprintf(buf, sizeof buf, "%x", bit);
         return std::string(buf);
       }();
-      if (bit == 0x2) {
+      if (bit == 0x2) {  // Open Brush lets a stroke's scale go negative (mirrored); its width is |scale|
         const double scale = r.f32(ext + " (scale)");
-        if (scale < 0) bad(path, "data.sketch", ext + " (scale) is negative");
-        st.size *= scale;
+        st.negativeScale = scale < 0;
+        st.size *= std::fabs(scale);
+      } else if (bit == 0x10) {
+        st.layer = r.u32(ext + " (layer)");
       } else if (bit & 0xffffu) {
         r.u32(ext);
       } else {
@@ -196,8 +246,7 @@ TiltSketch parseTilt(const std::string& dataSketch, const std::string& metadataJ
         const std::uint32_t bit = m & (~m + 1);
         if (bit == 0x1) {
           pt.pressure = r.f32(pat + ", pressure");
-          if (pt.pressure < 0 || pt.pressure > 1)
-            bad(path, "data.sketch", pat + ": pressure " + std::to_string(pt.pressure) + " is outside [0, 1]");
+          if (pt.pressure < 0) bad(path, "data.sketch", pat + ": pressure " + std::to_string(pt.pressure) + " is negative");
         } else if (bit == 0x2) {
           pt.timestampMs = r.u32(pat + ", timestamp");
         } else {
@@ -232,6 +281,21 @@ std::unique_ptr<zip_t, void (*)(zip_t*)> openZip(const std::string& bytes, std::
 }  // namespace
 
 TiltSketch readTilt(const std::string& path) {
+  // Open Brush can also save a sketch as a folder named X.tilt holding the members as files
+  // (its developer option, and the sketches it embeds).
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    const auto member = [&](const char* name) {
+      const std::string file = (std::filesystem::path(path) / name).string();
+      std::ifstream in(file, std::ios::binary);
+      if (!in) bad(path, name, std::string("the folder has no readable ") + name + " (not a sketch saved as a folder)");
+      std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      if (bytes.size() > kMaxMember) bad(path, name, "member over 1 GiB");
+      return bytes;
+    };
+    const std::string meta = member("metadata.json");
+    return parseTilt(member("data.sketch"), meta, path);
+  }
   std::string bytes;
   const std::size_t head = readFile(path, bytes);
   // Tilt Brush and Open Brush count the zip's offsets from the end of the header (the zip

@@ -137,19 +137,54 @@ bool parseTiltJoin(const std::string& word, TiltJoin& out) {
   return false;
 }
 
-TiltImport importTilt(const TiltSketch& sk, const TiltImportOptions& o) {
+namespace {
+
+// The sketch with every stroke in the canvas frame: points and size through its layer's
+// transform (Open Brush), canvas = t + R (s p); strokes on a layer index the metadata does
+// not list stay as they are (Open Brush creates such a layer, untransformed).
+TiltSketch throughLayers(const TiltSketch& in, TiltImport& r) {
+  TiltSketch out = in;
+  for (TiltStroke& st : out.strokes) {
+    if (st.layer >= out.layers.size()) continue;
+    const TiltLayer& l = out.layers[st.layer];
+    if (l.translation.isZero(0.0) && l.rotation.coeffs() == Quat::Identity().coeffs() && l.scale == 1.0) continue;
+    ++r.layerMoved;
+    const Mat3 R = l.rotation.toRotationMatrix();
+    for (TiltPoint& pt : st.points) pt.position = l.translation + R * (l.scale * pt.position);
+    st.size *= l.scale;
+  }
+  return out;
+}
+
+}  // namespace
+
+TiltImport importTilt(const TiltSketch& input, const TiltImportOptions& o) {
   const std::string& src = o.source;
   if (!(o.workspaceSize > 0 && o.workspaceSize <= 1000)) throw InputError(src, 0, "--workspace", "size must be in (0, 1000] m");
   if (!(o.fit > 0 && o.fit <= 0.98)) throw InputError(src, 0, "--fit", "must be in (0, 0.98]");
   if (!(o.scale >= 0 && std::isfinite(o.scale))) throw InputError(src, 0, "--scale", "must be > 0");
   if (!(o.density > 0 && o.density <= 1e5)) throw InputError(src, 0, "--density", "must be in (0, 1e5] kg/m^3");
   TiltImport r;
+  const TiltSketch sk = throughLayers(input, r);
   r.strokesRead = static_cast<int>(sk.strokes.size());
   std::vector<int> used;
-  for (int i = 0; i < r.strokesRead; ++i)
-    if (!sk.strokes[static_cast<std::size_t>(i)].points.empty()) used.push_back(i);
-  r.skippedEmpty = r.strokesRead - static_cast<int>(used.size());
-  if (used.empty()) throw InputError(src, 0, "data.sketch", "the sketch has no stroke with points");
+  for (int i = 0; i < r.strokesRead; ++i) {
+    const TiltStroke& st = sk.strokes[static_cast<std::size_t>(i)];
+    if (st.points.empty()) {
+      ++r.skippedEmpty;
+    } else if (st.layer < sk.layers.size() && !sk.layers[st.layer].visible && !o.hiddenLayers) {
+      ++r.skippedHidden;
+    } else {
+      used.push_back(i);
+      r.negativeScale += st.negativeScale ? 1 : 0;
+      if (st.hasPressure)
+        for (const TiltPoint& pt : st.points) r.pressureAboveOne += pt.pressure > 1.0 ? 1 : 0;
+    }
+  }
+  if (used.empty())
+    throw InputError(src, 0, "data.sketch",
+                     r.skippedHidden ? "every stroke with points is on a hidden layer (--hidden-layers imports them)"
+                                     : "the sketch has no stroke with points");
 
   // Frame and units: Tilt Brush decimetres, left-handed -> metres, right-handed (z flipped).
   auto toMetres = [](const Vec3& p) -> Vec3 { return Vec3(p.x(), p.y(), -p.z()) * 0.1; };
@@ -200,7 +235,7 @@ TiltImport importTilt(const TiltSketch& sk, const TiltImportOptions& o) {
     double pmax = 0;
     for (std::size_t i = 0; i < n; ++i) {
       w.p[i] = r.scale * toMetres(st.points[i].position) + offset;
-      w.pressure[i] = st.hasPressure ? 0.2 + 0.8 * st.points[i].pressure : 1.0;
+      w.pressure[i] = st.hasPressure ? 0.2 + 0.8 * std::min(st.points[i].pressure, 1.0) : 1.0;
       pmax = std::max(pmax, w.pressure[i]);
     }
     // Thicken: every sample at least kThinFactor h wide, the wider ones as drawn.

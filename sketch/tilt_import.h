@@ -25,7 +25,12 @@
 //  - bodies (`join`): `touching` (the default) makes strokes whose voxels touch
 //    (26-neighbours) one body whatever their colour, `material` only when they share a
 //    material, `none` leaves one body per stroke;
-//  - a stroke without points is skipped (counted).
+//  - a stroke without points is skipped (counted);
+//  - Open Brush layers: a stroke's points and size are taken through its layer's transform
+//    (canvas = translation + rotation (scale p), size x scale) before all of the above;
+//    strokes on layers hidden in Open Brush are left out (counted) unless `hiddenLayers`;
+//  - a pressure above 1 (Open Brush's scripted strokes) counts as 1, the full width (counted);
+//    a negative `scale` extension (a mirrored stroke) gives the width of |scale| (counted).
 #pragma once
 
 #include <cstdint>
@@ -45,6 +50,7 @@ struct TiltImportOptions {
   double scale = 0.0;                   // > 0: metres per Tilt Brush metre instead of fitting
   TiltJoin join = TiltJoin::kTouching;
   bool thicken = true;
+  bool hiddenLayers = false;            // also strokes on layers hidden in Open Brush
   double density = 600.0;               // kg/m^3 of every material
   std::string strokesName = "sketch.strokes";  // what the scene's `strokes` record names
   std::string source;                   // the .tilt file, named in the header comments and errors
@@ -55,6 +61,10 @@ struct TiltImport {
   std::string scene;    // the scene's text
   double scale = 0.0;   // metres per Tilt Brush metre used
   int strokesRead = 0, strokesWritten = 0, skippedEmpty = 0;
+  int skippedHidden = 0;     // strokes on hidden layers left out
+  int layerMoved = 0;        // strokes taken through a layer transform that is not the identity
+  int pressureAboveOne = 0;  // points whose pressure above 1 counted as 1
+  int negativeScale = 0;     // strokes whose negative scale extension gave |scale|
   int thickened = 0;     // strokes widened to two particle spacings
   int delayed = 0;       // strokes moved later so that times never go back
   int pointsNudged = 0;  // points whose time did not increase

@@ -75,6 +75,7 @@ struct ImportTiltOptions {
   double scale = 0.0;            // > 0: instead of fitting
   std::string join = "touching";
   bool noThicken = false;
+  bool hiddenLayers = false;
   double density = 600.0;
   bool quiet = false;
 };

@@ -25,6 +25,7 @@ int importTilt(const ImportTiltOptions& opt) {
     o.fit = opt.fit;
     o.scale = opt.scale;
     o.thicken = !opt.noThicken;
+    o.hiddenLayers = opt.hiddenLayers;
     o.density = opt.density;
     if (!sketch::parseTiltJoin(opt.join, o.join))
       throw InputError(opt.input, 0, "--join", "'" + opt.join + "' is not one of touching, material, none");
@@ -43,6 +44,10 @@ int importTilt(const ImportTiltOptions& opt) {
     if (!opt.quiet) {
       std::printf("%s: %d strokes read, %d written", opt.input.c_str(), r.strokesRead, r.strokesWritten);
       if (r.skippedEmpty) std::printf(" (%d without points skipped)", r.skippedEmpty);
+      if (r.skippedHidden) std::printf(" (%d on hidden layers left out: --hidden-layers imports them)", r.skippedHidden);
+      if (r.layerMoved) std::printf("\n%d strokes placed through their Open Brush layer's transform", r.layerMoved);
+      if (r.pressureAboveOne) std::printf("\n%d points with a pressure above 1 drawn at full width", r.pressureAboveOne);
+      if (r.negativeScale) std::printf("\n%d strokes with a negative scale (mirrored) drawn at |scale|", r.negativeScale);
       std::printf("\nscale %.6g m per Tilt Brush metre (%s), %d materials, %d bodies (join %s), %lld particles\n",
                   r.scale, opt.scale > 0 ? "--scale" : "fitted", r.materials, r.bodies, sketch::toString(o.join),
                   static_cast<long long>(r.particles));

@@ -147,6 +147,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   tiltCmd->add_flag("--no-thicken", tilt.noThicken,
                     "Keep strokes thinner than two particle spacings as drawn (they become wire-thin chains)");
+  tiltCmd->add_flag("--hidden-layers", tilt.hiddenLayers,
+                    "Also import strokes on layers hidden in Open Brush (left out by default, as the artist hid them)");
   tiltCmd->add_option("--fit", tilt.fit, "The sketch's longest side as a fraction of the workspace edge, (0, 0.98]")
       ->capture_default_str();
   tiltCmd->add_option("--scale", tilt.scale, "Metres per Tilt Brush metre instead of fitting (1: real size)")

@@ -48,6 +48,7 @@ struct StrokeSpec {
   float r = 1, g = 1, b = 1, size = 1;
   std::uint32_t strokeMask = 0, pointMask = 0x3;
   float scale = 1;
+  std::uint32_t layer = 0;  // written with strokeMask 0x10 (Open Brush)
   std::vector<PointSpec> points;
 };
 
@@ -67,6 +68,7 @@ std::string dataSketch(const std::vector<StrokeSpec>& strokes) {
     o.u32(s.pointMask);
     if (s.strokeMask & 0x1) o.u32(7);  // flags
     if (s.strokeMask & 0x2) o.f32(s.scale);
+    if (s.strokeMask & 0x10) o.u32(s.layer);
     if (s.strokeMask & 0x10000) {  // an unknown, length-prefixed extension
       o.u32(5);
       o.b += "12345";
@@ -283,14 +285,69 @@ TEST(TiltReader, BadValuesNameTheStrokeAndPoint) {
   s[0].points[1].y = std::nanf("");
   EXPECT_NE(errorOf(s).find("stroke 1 of 2, point 2, position is not a finite number"), std::string::npos) << errorOf(s);
   s = handMade();
-  s[0].points[2].pressure = 1.5f;
-  EXPECT_NE(errorOf(s).find("point 3: pressure"), std::string::npos) << errorOf(s);
+  s[0].points[2].pressure = -0.5f;
+  EXPECT_NE(errorOf(s).find("point 3: pressure -0.5"), std::string::npos) << errorOf(s);
   s = handMade();
   s[1].size = -1;
   EXPECT_NE(errorOf(s).find("negative brush size"), std::string::npos) << errorOf(s);
   std::string bad = dataSketch(handMade());
   bad[0] = 0;
   EXPECT_NE(reason([&] { parseTilt(bad, kMeta, "s"); }).find("sentinel"), std::string::npos);
+}
+
+// What Open Brush writes beyond Tilt Brush (read from its SketchWriter and SketchMetadata):
+// a layer extension (0x10, u32) on every stroke, metadata.json "Layers" with name, visibility
+// and a transform [[t], [q], s] (s = 0 read as 1), pressures above 1 from scripted strokes
+// and negative stroke scales. Every value read back as written; a malformed transform is an
+// error naming the layer.
+TEST(TiltReader, ReadsOpenBrushLayersPressuresAndScales) {
+  const std::string meta =
+      R"({"BrushIndex": ["429ed64a-4e97-4466-84d3-145a861ef684", "4391385a-cf83-4396-9e33-31e4e4930b27"],
+          "ApplicationName": "Open Brush", "SchemaVersion": 2,
+          "Layers": [{"Name": "Main Canvas", "Visible": true},
+                     {"Name": "moved", "Visible": true, "Transform": [[1, 2, 3], [0, 0.7071068, 0, 0.7071068], 2]},
+                     {"Name": "hidden", "Visible": false, "Transform": [[0, 0, 0], [0, 0, 0, 1], 0]}]})";
+  std::vector<StrokeSpec> s = handMade();
+  s[0].strokeMask |= 0x10, s[0].layer = 1;
+  s[0].points[2].pressure = 1.5f;
+  s[1].strokeMask = 0x2 | 0x10, s[1].scale = -3.0f, s[1].layer = 2;
+  const TiltSketch sk = parseTilt(dataSketch(s), meta, "ob.tilt");
+  ASSERT_EQ(sk.layers.size(), 3u);
+  EXPECT_EQ(sk.layers[1].name, "moved");
+  EXPECT_TRUE(sk.layers[1].visible);
+  EXPECT_FALSE(sk.layers[2].visible);
+  EXPECT_EQ(sk.layers[1].translation, Vec3(1, 2, 3));
+  EXPECT_NEAR(sk.layers[1].rotation.w(), std::sqrt(0.5), 1e-6);
+  EXPECT_NEAR(sk.layers[1].rotation.y(), std::sqrt(0.5), 1e-6);
+  EXPECT_EQ(sk.layers[1].scale, 2.0);
+  EXPECT_EQ(sk.layers[2].scale, 1.0);  // 0 means 1
+  EXPECT_EQ(sk.strokes[0].layer, 1u);
+  EXPECT_EQ(sk.strokes[1].layer, 2u);
+  EXPECT_FLOAT_EQ(sk.strokes[0].points[2].pressure, 1.5f);
+  EXPECT_TRUE(sk.strokes[1].negativeScale);
+  EXPECT_FLOAT_EQ(sk.strokes[1].size, 3.0f);  // 1 x |-3|
+  EXPECT_FALSE(sk.strokes[0].negativeScale);
+  std::string badMeta = meta;
+  badMeta.replace(badMeta.find("[0, 0.7071068, 0, 0.7071068]"), 28, "[0, 0, 0, 0]");
+  const std::string why = reason([&] { parseTilt(dataSketch(s), badMeta, "ob.tilt"); });
+  EXPECT_NE(why.find("Layers[1].Transform"), std::string::npos) << why;
+}
+
+// Open Brush's folder form: a folder X.tilt holding the members as files reads as the zip
+// form does; a folder without data.sketch is an error naming it.
+TEST(TiltReader, ReadsASketchSavedAsAFolder) {
+  const fs::path dir = fs::temp_directory_path() / ("physketch_tilt_" + std::to_string(::getpid()) + "_folder.tilt");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "metadata.json", std::ios::binary) << kMeta;
+  std::string why = reason([&] { readTilt(dir.string()); });
+  EXPECT_NE(why.find("data.sketch"), std::string::npos) << why;
+  std::ofstream(dir / "data.sketch", std::ios::binary) << dataSketch(handMade());
+  const TiltSketch sk = readTilt(dir.string());
+  fs::remove_all(dir);
+  ASSERT_EQ(sk.strokes.size(), 2u);
+  EXPECT_EQ(sk.strokes[0].points.size(), 3u);
+  EXPECT_FLOAT_EQ(sk.strokes[0].points[1].pressure, 0.75f);
 }
 
 // A real sketch made by Tilt Brush (tests/data/tilt/README.md): the expected values were read
@@ -351,6 +408,59 @@ TEST(TiltImport, FitsTheSketchOnTheWorkspaceFloorInOurFrame) {
   EXPECT_NEAR(b.samples.back().position.z() - b.samples.front().position.z(), -r.scale * 1.0, 2e-6);
   // Centred in z: the box from z = -1 dm - r to 0 + r (ours) sits about z = 3.
   EXPECT_NEAR(b.samples.back().position.z() - b.size / 2 + b.samples.front().position.z() + b.size / 2, 6.0, 2e-6);
+}
+
+// Open Brush layers on import: a stroke on a moved layer lands where Open Brush draws it,
+// canvas = t + R (s p) (a quarter turn about y, scale 2, a shift), computed here by hand and
+// then converted as any point (z flipped, decimetres to metres at scale 1, the shift that sets
+// the sketch on the floor taken from the untouched stroke); its width doubles. A stroke on a
+// hidden layer is left out and counted, and imported with hiddenLayers. A pressure above 1 is
+// the full width (counted); a negative scale gives the width of |scale| (counted).
+TEST(TiltImport, OpenBrushLayersPlaceStrokesAndHiddenOnesAreLeftOut) {
+  TiltSketch sk;
+  sk.brushes = {"x"};
+  TiltLayer moved;
+  moved.translation = Vec3(1, 0, 2);
+  moved.rotation = Quat(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()));
+  moved.scale = 2.0;
+  TiltLayer hidden;
+  hidden.visible = false;
+  sk.layers = {TiltLayer{}, moved, hidden};
+  sk.strokes = {line({0, 0, 0}, {2, 0, 0}, 0.5, {1, 1, 1}, 0), line({0, 0, 0}, {1, 0, 0}, 0.5, {1, 1, 1}, 500),
+                line({0, 3, 0}, {1, 3, 0}, 0.5, {1, 1, 1}, 900)};
+  sk.strokes[1].layer = 1;
+  sk.strokes[2].layer = 2;
+  sk.strokes[0].hasPressure = true;
+  for (TiltPoint& p : sk.strokes[0].points) p.pressure = 0.5;
+  sk.strokes[0].points[3].pressure = 1.7;
+  sk.strokes[0].negativeScale = true;
+  TiltImportOptions o;
+  o.scale = 1.0;
+  const TiltImport r = importTilt(sk, o);
+  EXPECT_EQ(r.skippedHidden, 1);
+  EXPECT_EQ(r.layerMoved, 1);
+  EXPECT_EQ(r.pressureAboveOne, 1);
+  EXPECT_EQ(r.negativeScale, 1);
+  const StrokeFile f = parsed(r);
+  ASSERT_EQ(f.operations.size(), 2u);
+  const auto& a = f.operations[0].stroke;
+  const auto& b = f.operations[1].stroke;
+  // The untouched stroke's first point (0, 0, 0) fixes the placement's shift.
+  const Vec3 shift = a.samples.front().position;
+  // Layer 1: R_y(90 deg) (2 (1, 0, 0)) + (1, 0, 2) = (1, 0, 0) in Tilt Brush's frame; ours:
+  // (x, y, -z) / 10 m.
+  const Vec3 canvas = moved.translation + moved.rotation.toRotationMatrix() * (2.0 * Vec3(1, 0, 0));
+  EXPECT_NEAR((canvas - Vec3(1, 0, 0)).norm(), 0.0, 1e-12);  // the hand value above
+  const Vec3 want = shift + 0.1 * Vec3(canvas.x(), canvas.y(), -canvas.z());
+  EXPECT_NEAR((b.samples.back().position - want).norm(), 0.0, 2e-6);
+  const Vec3 start = shift + 0.1 * Vec3(moved.translation.x(), 0, -moved.translation.z());
+  EXPECT_NEAR((b.samples.front().position - start).norm(), 0.0, 2e-6);
+  EXPECT_NEAR(b.size, 2.0 * a.size, 1e-6);  // the layer's scale widens it
+  // Pressure 0.5 writes 0.2 + 0.8 * 0.5 = 0.6; 1.7 counts as 1.
+  EXPECT_NEAR(a.samples[0].pressure, 0.6, 1e-4);
+  EXPECT_NEAR(a.samples[3].pressure, 1.0, 1e-4);
+  o.hiddenLayers = true;
+  EXPECT_EQ(parsed(importTilt(sk, o)).operations.size(), 3u);
 }
 
 TEST(TiltImport, AnExplicitScaleKeepsSizesOrRefusesWhatDoesNotFit) {
