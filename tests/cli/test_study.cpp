@@ -85,6 +85,21 @@ Table readCsv(const fs::path& p) {
   return rows;
 }
 
+// `physketch study scenes/study/NAME ARGS -q --out DIR/out`: the rows of its study.csv (empty,
+// with a failure recorded, when the run fails or does not give `count` rows, all "ok").
+Table studyRows(const std::string& name, const std::string& args, const fs::path& dir, std::size_t count) {
+  const fs::path out = dir / "out";
+  fs::remove_all(out);
+  const Result r = runCli("study '" + scene(name) + "' " + args + " -q --out '" + out.string() + "'", dir);
+  EXPECT_EQ(r.code, 0) << r.err;
+  if (r.code != 0) return {};
+  Table rows = readCsv(out / "study.csv");
+  EXPECT_EQ(rows.size(), count);
+  for (const auto& row : rows) EXPECT_EQ(row.at("status"), "ok");
+  if (rows.size() != count) return {};
+  return rows;
+}
+
 // The CSV without the columns that measure time (and the front, which follows from them).
 Table withoutTiming(Table t) {
   for (auto& row : t) {
@@ -545,14 +560,8 @@ TEST(StudyCli, TheSandColumnRunsOutWithinAQuarterOfLubesLaw) {
   GTEST_SKIP() << "too slow under AddressSanitizer (over 600 s); make test runs it";
 #endif
   const fs::path dir = freshDir("runout");
-  const fs::path out = dir / "out";
-  const Result r = runCli("study '" + scene("mpm_sand_runout.scene") + "' --vary grid_dx=2 -q --out '" +
-                              out.string() + "'",
-                          dir);
-  ASSERT_EQ(r.code, 0) << r.err;
-  const Table rows = readCsv(out / "study.csv");
+  const Table rows = studyRows("mpm_sand_runout.scene", "--vary grid_dx=2", dir, 1);
   ASSERT_EQ(rows.size(), 1u);
-  EXPECT_EQ(rows[0].at("status"), "ok");
   const double l0 = 15.0 / 151.0;  // the column's 15 particle spacings of 1/151 m (the workspace's grid)
   const double error = std::stod(rows[0].at("error_m"));
   std::printf("sand column: run-out off Lube's %.4f m by %.4f m (bound %.4f)\n", 1.2 * l0, error, 0.25 * 1.2 * l0);
@@ -572,16 +581,11 @@ TEST(StudyCli, ThePbdDamBreakStaysInTheGateAtManySubsteps) {
 #endif
   const fs::path dir = freshDir("pbd_dam");
   for (const char* setting : {"--vary substeps=1 --vary iterations=8", "--vary substeps=16 --vary iterations=2"}) {
-    const fs::path out = dir / "out";
-    const Result r = runCli("study '" + scene("pbd_dam_break.scene") + "' " + setting + " -q --out '" + out.string() + "'", dir);
-    ASSERT_EQ(r.code, 0) << r.err;
-    const Table rows = readCsv(out / "study.csv");
+    const Table rows = studyRows("pbd_dam_break.scene", setting, dir, 1);
     ASSERT_EQ(rows.size(), 1u);
-    EXPECT_EQ(rows[0].at("status"), "ok");
     const double error = std::stod(rows[0].at("error_m"));
     std::printf("pbd dam break, %s: front RMS %.4f m (gate 0.022)\n", setting, error);
     EXPECT_LT(error, 0.022) << setting;
-    fs::remove_all(out);
   }
   fs::remove_all(dir);
 }
@@ -640,16 +644,10 @@ TEST(StudyCli, TheViscousPoolConvergesToHuppertWithSubsteps) {
   GTEST_SKIP() << "too slow under AddressSanitizer; make test runs it (tests/pbd's Huppert test covers the code)";
 #endif
   const fs::path dir = freshDir("pbd_viscous");
-  const fs::path out = dir / "out";
-  const Result r = runCli("study '" + scene("pbd_viscous_pool.scene") + "' --vary substeps=2,8 -q --out '" + out.string() + "'", dir);
-  ASSERT_EQ(r.code, 0) << r.err;
-  const Table rows = readCsv(out / "study.csv");
+  const Table rows = studyRows("pbd_viscous_pool.scene", "--vary substeps=2,8", dir, 2);
   ASSERT_EQ(rows.size(), 2u);
   std::vector<double> error;
-  for (const auto& row : rows) {
-    EXPECT_EQ(row.at("status"), "ok");
-    error.push_back(std::stod(row.at("error_m")));
-  }
+  for (const auto& row : rows) error.push_back(std::stod(row.at("error_m")));
   std::printf("viscous pool against Huppert: 2 substeps %.4f m, 8 substeps %.4f m\n", error[0], error[1]);
   EXPECT_LT(error[1], 0.5 * error[0]);
   EXPECT_LT(error[1], 0.005);
