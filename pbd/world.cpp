@@ -646,10 +646,19 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
       if (!on) return "no fluid in the scene (or all of it fixed)";
       return n(c.fluid, "dynamic fluid bodies") + fluidSoundText();  // the compliance's sound speed (pbd/fluid.h)
     }
-    case PbdPass::kFluidVelocity:
-      return on ? "a fluid sets xsph_viscosity, vorticity, cohesion or a viscosity above 10x water's (implicit solve)"
-                : (c.fluid == 0 ? "no fluid in the scene"
-                                : "its fluids set no xsph_viscosity, vorticity or cohesion, and no viscosity above 10x water's");
+    case PbdPass::kFluidVelocity: {
+      if (!on)
+        return c.fluid == 0 ? "no fluid in the scene"
+                            : "its fluids set no xsph_viscosity, vorticity or cohesion, and no viscosity above 10x water's";
+      std::string why = "a fluid sets xsph_viscosity, vorticity, cohesion or a viscosity above 10x water's (implicit solve)";
+      const int it = fluid_ ? fluid_->lastViscosityIterations() : 0;
+      if (it >= FluidSolver::kViscosityMaxIterations)
+        why += "; the viscosity's CG stopped at its cap of " + std::to_string(it) +
+               " iterations last substep, short of its tolerance: more substeps make each solve easier";
+      else if (it > 0)
+        why += "; the viscosity's CG took " + std::to_string(it) + " iterations last substep";
+      return why;
+    }
     case PbdPass::kDistance:
       return on ? n(c.strands, "dynamic ropes or cloths (or attachments)") : "no rope or cloth moves";
     case PbdPass::kPlasticity:

@@ -866,6 +866,13 @@ std::vector<double> huppertRatios(double mu, int substeps) {
                 huppert, r / huppert);
     out.push_back(r / huppert);
   }
+  bool planned = false;  // the plan tells how hard the viscous solve was
+  for (const PlanEntry& pe : w.plan())
+    if (pe.name == "fluid_velocity") {
+      planned = true;
+      EXPECT_NE(pe.reason.find("the viscosity's CG took"), std::string::npos) << pe.reason;
+    }
+  EXPECT_TRUE(planned);
   return out;
 }
 
