@@ -609,8 +609,15 @@ void FluidSolver::viscosityPass(float h) {
     return s;
   };
   const auto fluid = [&](std::size_t i) { return rec_[i * kRecord + kFluid] != 0.0f; };
-  // out = (M + h K) in, on fluid rows.
+  // out = (M + h K) in, on fluid rows. The neighbours' values are read from an interleaved
+  // copy (x y z of a rank in one cache line, not three): the sweep's cost is those reads.
+  cgX_.resize(3 * n_);
   const auto apply = [&](std::vector<float>* in, std::vector<float>* out) {
+    forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i)
+        for (int c = 0; c < 3; ++c) cgX_[3 * i + std::size_t(c)] = in[c][i];
+    });
+    const float* x = cgX_.data();
     forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
         if (!fluid(i)) {
@@ -618,12 +625,13 @@ void FluidSolver::viscosityPass(float h) {
           continue;
         }
         const float m = rec_[i * kRecord + kMass] + viscExtra_[i];
-        float acc[3] = {m * in[0][i], m * in[1][i], m * in[2][i]};
-        for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {
-          const float w = viscK_[i * width + k];
-          if (w == 0.0f) continue;
-          const std::size_t j = std::size_t(lists_.index[i * width + k]);
-          for (int c = 0; c < 3; ++c) acc[c] += w * (in[c][i] - in[c][j]);
+        const float* xi = x + 3 * i;
+        float acc[3] = {m * xi[0], m * xi[1], m * xi[2]};
+        const float* w = &viscK_[i * width];
+        const std::int32_t* nb = &lists_.index[i * width];
+        for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {  // a solid's w is 0: it adds 0
+          const float* xj = x + 3 * std::size_t(nb[k]);
+          for (int c = 0; c < 3; ++c) acc[c] += w[k] * (xi[c] - xj[c]);
         }
         for (int c = 0; c < 3; ++c) out[c][i] = acc[c];
       }

@@ -269,7 +269,7 @@ class FluidSolver {
   bool xsphOn_ = false, vortOn_ = false, cohOn_ = false, viscOn_ = false;
   // The viscosity solve: mu by rank (empty when off), pair weights h K_ij by list slot, the
   // diagonal, CG's vectors (3 components each) and per-chunk partial sums.
-  std::vector<float> muR_, viscK_, viscDiag_, viscExtra_, viscRhs_[3], cgR_[3], cgZ_[3], cgP_[3], cgQ_[3];
+  std::vector<float> muR_, viscK_, viscDiag_, viscExtra_, viscRhs_[3], cgR_[3], cgZ_[3], cgP_[3], cgQ_[3], cgX_;
   std::vector<double> partial_;
   int viscIterations_ = 0;
   float substep_ = 0.0f, soundSpeed_ = 0.0f;
