@@ -218,7 +218,7 @@ void FluidSolver::loadParticleParams(const FluidInput& in) {
   // Viscosity: mu by rank when some fluid's mu / rho0 is above the negligible one.
   viscOn_ = false;
   for (std::size_t i = 0; i < n_ && !viscOn_; ++i)
-    viscOn_ = in.fluid[i] && (in.viscosity ? in.viscosity[i] : params_.viscosity) / in.restDensity[i] > kNegligibleViscosity;
+    viscOn_ = in.fluid[i] && viscosityMatters(in.viscosity ? in.viscosity[i] : params_.viscosity, in.restDensity[i]);
   muR_.clear();
   if (viscOn_) {
     muR_.assign(n_, 0.0f);
@@ -587,13 +587,9 @@ void FluidSolver::viscosityPass(float h) {
       }
       viscExtra_[i] = extra;
       for (int c = 0; c < 3; ++c) viscRhs_[c][i] = rhs[c];
-    }
-  });
-  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {  // the diagonal, for Jacobi
-    for (std::size_t i = b; i < e; ++i) {
-      float d = rec_[i * kRecord + kMass] + viscExtra_[i];
+      float d = ri[kMass] + extra;  // the diagonal, for Jacobi (the row's weights are still in cache)
       for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) d += viscK_[i * width + k];
-      viscDiag_[i] = rec_[i * kRecord + kFluid] != 0.0f ? d : 1.0f;
+      viscDiag_[i] = ri[kFluid] != 0.0f ? d : 1.0f;
     }
   });
   const std::size_t units = (n_ + kParticleChunk - 1) / kParticleChunk;

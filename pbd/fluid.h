@@ -141,6 +141,8 @@ class FluidSolver {
   // water's own viscosity damps a 5 cm wave by 1.6 % a second, far less than XSPH's smoothing
   // and the solver's own dissipation, and the solve costs a velocity pass per CG iteration.
   static constexpr float kNegligibleViscosity = 1e-5f;
+  // Whether a fluid of dynamic viscosity mu (Pa s) and rest density rho0 (kg/m^3) is solved.
+  static bool viscosityMatters(double mu, double rho0) { return mu / rho0 > double(kNegligibleViscosity); }
   // The viscosity solve's stopping rule: relative residual (in the Jacobi-weighted norm) and
   // the most CG iterations a substep runs.
   static constexpr float kViscosityTolerance = 1e-4f;

@@ -1190,7 +1190,7 @@ void PbdWorld::makeFluidSolver() {
                    !same(f.soundSpeed, first.soundSpeed) || !same(f.viscosity, first.viscosity);
     fluidSoundAuto_ |= std::isnan(f.soundSpeed);
     fluidVelocity_ |= f.xsphViscosity > 0.0 || f.vorticity > 0.0 || f.cohesion > 0.0 ||
-                      f.viscosity / materials_[m].density > double(FluidSolver::kNegligibleViscosity);
+                      FluidSolver::viscosityMatters(f.viscosity, materials_[m].density);
   }
   // The auto sound speed (it starts at 0 and rises, and keeps rising after a new body), or
   // the single material's.
