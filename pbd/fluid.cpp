@@ -4,6 +4,8 @@
 #include <cmath>
 #include <string>
 
+#include <Eigen/Dense>
+
 #include "core/error.h"
 #include "core/parallel.h"
 #include "core/profile.h"
@@ -105,7 +107,13 @@ void FluidSolver::buildWallTable() {
           b += nu * cp * q * q * q;
           db += nu * cp * 3.0 * q * q * (-2.0 * z);  // dz/dy = 1
           const double r2 = h * h - q, rr = std::sqrt(r2);  // distance to the ghost sample
-          v += nu * cs * (h - rr) * (h - rr) * rr / (r2 + 0.01 * h * h) * laplaceScale_;
+          // No-slip at the plane (Morris et al. 1997): the ghost at depth z - y takes the
+          // velocity -(z - y) / y u_i that continues a shear profile through zero at the wall,
+          // so its weight counts 1 + (z - y) / y times on the diagonal (y at least r / 2: a
+          // particle pressed into the wall is not pinned by an unbounded weight). With the
+          // ghosts at rest instead, the profile reached zero half a spacing below the plane.
+          const double morris = 1.0 + (z - y) / std::max(y, 0.5 * r);
+          v += nu * cs * (h - rr) * (h - rr) * rr / (r2 + 0.01 * h * h) * laplaceScale_ * morris;
         }
     }
     wallB_[s] = float(b), wallDB_[s] = float(db), wallV_[s] = float(v);
@@ -453,7 +461,7 @@ bool FluidSolver::useSimd() const {
 // Alg. 1 line 22 over the blocked lists: one loop for XSPH (Eq. 17, SPH-normalised) and the
 // vorticity omega (Eq. 15), both from the same velocities (Jacobi), then one for the
 // confinement (Eq. 16), then cohesion. Solids take no part and keep their velocities.
-void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
+void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h, const ViscousSolids* solids) {
   viscIterations_ = 0;
   if (!n_ || !(xsphOn_ || vortOn_ || cohOn_ || viscOn_)) return;
   require(std::isfinite(h) && h > 0.0f, "velocityPasses: substep h must be positive");
@@ -495,10 +503,11 @@ void FluidSolver::velocityPasses(float* vx, float* vy, float* vz, float h) {
       });
   }
   if (cohOn_) cohesionPass(v_[0].data(), v_[1].data(), v_[2].data(), h);
-  if (viscOn_) viscosityPass(h);
+  if (viscOn_) viscosityPass(h, solids);
+  const bool freeSolids = viscOn_ && solids;  // their velocities were solved too
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t r = b; r < e; ++r)
-      if (rec_[r * kRecord + kFluid] != 0.0f) {
+      if (rec_[r * kRecord + kFluid] != 0.0f || (freeSolids && roleR_[r] == ViscousSolids::kFree)) {
         const std::size_t id = std::size_t(order[r]);
         vx[id] = v_[0][r], vy[id] = v_[1][r], vz[id] = v_[2][r];
       }
@@ -533,48 +542,72 @@ void FluidSolver::cohesionPass(float* vx, float* vy, float* vz, float h) const {
   for (std::size_t i = 0; i < n_; ++i) vx[i] += h * a[3 * i], vy[i] += h * a[3 * i + 1], vz[i] += h * a[3 * i + 2];
 }
 
-// The implicit viscosity step (velocityPasses, pbd/fluid.h) on v_ by rank: Jacobi-
-// preconditioned CG on (M + h K) v' = M v + h K_b v_b (solids and walls), the three
-// components one vector of 3n unknowns
-// (one matrix, shared step sizes). Solids' rows are empty (their entries stay 0 in r, p, q).
-// Dot products sum fixed chunks into partial_ and the partials in chunk order: the same bits
-// for any thread count.
-void FluidSolver::viscosityPass(float h) {
+// The implicit viscosity step (velocityPasses, pbd/fluid.h) on v_ by rank: preconditioned
+// CG on (M + h K) v' = M v + h K_b v_b (fixed solids and walls), the three components one
+// vector of 3n unknowns (one matrix, shared step sizes), plus six per coupled rigid body
+// (ViscousSolids). Fixed solids' and bodies' points' rows are empty (their entries stay 0
+// in r, p, q; a point's velocity is its body's, written into the sweep's input). Dot
+// products sum fixed chunks into partial_ and the partials in chunk order, then the bodies
+// in body order; bodies' points are summed into their bodies serially in rank order: the
+// same bits for any thread count.
+void FluidSolver::viscosityPass(float h, const ViscousSolids* solids) {
   const float kh = params_.kernelRadius, kh2 = kh * kh, eta2 = 0.01f * kh2;
   const float cs = 45.0f / (kPi * std::pow(kh, 6.0f));
   const std::size_t width = std::size_t(lists_.width);
-  viscK_.resize(n_ * width), viscDiag_.resize(n_), viscExtra_.resize(n_);
+  const std::size_t nb = solids ? solids->bodies : 0;
+  viscK_.resize(n_ * width), viscDiag_.resize(n_), viscExtra_.resize(n_), viscMass_.resize(n_), roleR_.resize(n_);
   for (int k = 0; k < 3; ++k)
     cgR_[k].resize(n_), cgZ_[k].resize(n_), cgP_[k].resize(n_), cgQ_[k].resize(n_), viscRhs_[k].resize(n_);
+  const std::int32_t* order = grid_.order().data();
+  forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const float* ri = &rec_[i * kRecord];
+      std::int32_t role = ViscousSolids::kFixed;
+      if (ri[kFluid] != 0.0f) {
+        role = kRoleFluid;
+      } else if (solids && ri[kW] > 0.0f) {
+        role = solids->role[order[i]];
+        require(role == ViscousSolids::kFixed || role == ViscousSolids::kFree || (role >= 0 && std::size_t(role) < nb),
+                "velocityPasses: a solid's role must be kFixed, kFree or a body index below ViscousSolids::bodies");
+      }
+      roleR_[i] = role;
+      viscMass_[i] = role == kRoleFluid ? ri[kMass] : role == ViscousSolids::kFree ? 1.0f / ri[kW] : 0.0f;
+    }
+  });
   const float invStep = float(wallV_.size() - 1) / kh;
-  // h K_ij = h 2 V_i V_j mu_ij |gradW_ij| r / (r^2 + 0.01 h^2), |gradW| = cs (h - r)^2, between
-  // fluid particles (viscK_); a solid neighbour j and the walls' ghost samples are fixed
-  // velocities (no-slip, one way: they are not pushed back): their weights go to the
+  // h K_ij = h 2 nu_i nu_j mu_ij |gradW_ij| r / (r^2 + 0.01 h^2), |gradW| = cs (h - r)^2,
+  // between a fluid particle and a fluid or coupled solid neighbour (viscK_; a solid's mu is
+  // its fluid neighbour's, so both rows hold the same bits); a fixed solid neighbour and the
+  // walls' ghost samples are fixed velocities (no-slip, one way): their weights go to the
   // diagonal (viscExtra_) and, times v_j, to the right-hand side (walls: v = 0).
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const float* ri = &rec_[i * kRecord];
+      const std::int32_t role = roleR_[i];
+      const bool isFluid = role == kRoleFluid;
       float extra = 0.0f, rhs[3] = {0.0f, 0.0f, 0.0f};
       for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {
         const std::size_t j = std::size_t(lists_.index[i * width + k]);
         const float* rj = &rec_[j * kRecord];
+        const bool jFluid = rj[kFluid] != 0.0f;
         float w = 0.0f;
-        if (ri[kFluid] != 0.0f) {
+        if (isFluid || (role != ViscousSolids::kFixed && jFluid)) {
           const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
           const float r2 = (dx * dx + dy * dy) + dz * dz, r = std::sqrt(r2);
           if (r < kh) {
-            const float t = kh - r, mu = rj[kFluid] != 0.0f ? 0.5f * (muR_[i] + muR_[j]) : muR_[i];
+            const float t = kh - r;
+            const float mu = isFluid && jFluid ? 0.5f * (muR_[i] + muR_[j]) : isFluid ? muR_[i] : muR_[j];
             w = h * 2.0f * (ri[kNu] * rj[kNu]) * mu * cs * (t * t) * r / (r2 + eta2) * laplaceScale_;
           }
         }
-        if (rj[kFluid] == 0.0f) {
+        if (!jFluid && roleR_[j] == ViscousSolids::kFixed) {
           extra += w;
           for (int c = 0; c < 3; ++c) rhs[c] += w * v_[c][j];
           w = 0.0f;
         }
         viscK_[i * width + k] = w;
       }
-      if (ri[kFluid] != 0.0f) {
+      if (isFluid) {
         const float scale = h * 2.0f * ri[kNu] * muR_[i];
         for (int axis = 0; axis < 3; ++axis)
           for (const float y : {ri[axis] - params_.wallLo[axis], params_.wallHi[axis] - ri[axis]}) {
@@ -587,14 +620,61 @@ void FluidSolver::viscosityPass(float h) {
       }
       viscExtra_[i] = extra;
       for (int c = 0; c < 3; ++c) viscRhs_[c][i] = rhs[c];
-      float d = ri[kMass] + extra;  // the diagonal, for Jacobi (the row's weights are still in cache)
+      // Fluid and free rows: their diagonal, for Jacobi (the row's weights are still in
+      // cache); a body's point: its row sum (for the body's block).
+      float d = viscMass_[i] + extra;
       for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) d += viscK_[i * width + k];
-      viscDiag_[i] = ri[kFluid] != 0.0f ? d : 1.0f;
+      viscDiag_[i] = role == ViscousSolids::kFixed ? 1.0f : d;
     }
   });
+  // The bodies' points that touch the fluid, in rank order, and the bodies' 6x6 blocks:
+  //   [ (M + S) I   -C        ]   S = sum_s W_s, C = sum_s W_s [r_s]x,
+  //   [ C           I_b + Q   ]   Q = sum_s W_s (|r_s|^2 I - r_s r_s^T), W_s = h sum_j K_sj
+  pointRanks_.clear();
+  using Vec3d = Eigen::Vector3d;
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  std::vector<Mat6> block(nb);
+  const auto centre = [&](std::size_t body) -> Vec3d { return Vec3d(solids->centre + 3 * body); };
+  const auto arm = [&](std::size_t i) -> Vec3d {
+    return Vec3d(rec_[i * kRecord + kX], rec_[i * kRecord + kY], rec_[i * kRecord + kZ]) - centre(std::size_t(roleR_[i]));
+  };
+  for (std::size_t body = 0; body < nb; ++body) {
+    block[body].setZero();
+    block[body].topLeftCorner<3, 3>() = solids->mass[body] * Eigen::Matrix3d::Identity();
+    block[body].bottomRightCorner<3, 3>() = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(solids->inertia + 9 * body);
+  }
+  for (std::size_t i = 0; i < n_; ++i) {
+    if (roleR_[i] < 0 || !(viscDiag_[i] > 0.0f)) continue;
+    pointRanks_.push_back(std::int32_t(i));
+    const double W = viscDiag_[i];
+    const Vec3d r = arm(i);
+    Eigen::Matrix3d cross;
+    cross << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
+    Mat6& B = block[std::size_t(roleR_[i])];
+    B.topLeftCorner<3, 3>() += W * Eigen::Matrix3d::Identity();
+    B.topRightCorner<3, 3>() -= W * cross;
+    B.bottomLeftCorner<3, 3>() += W * cross;
+    B.bottomRightCorner<3, 3>() += W * (r.squaredNorm() * Eigen::Matrix3d::Identity() - r * r.transpose());
+  }
+  bodyPrec_.assign(36 * nb, 0.0);
+  for (std::size_t body = 0; body < nb; ++body)
+    Eigen::Map<Mat6>(bodyPrec_.data() + 36 * body) = block[body].inverse();
+  bodyX_.assign(6 * nb, 0.0), bodyR_.assign(6 * nb, 0.0), bodyZ_.assign(6 * nb, 0.0);
+  bodyP_.assign(6 * nb, 0.0), bodyQ_.assign(6 * nb, 0.0);
+  for (std::size_t body = 0; body < nb; ++body)
+    for (int c = 0; c < 3; ++c) bodyX_[6 * body + c] = solids->v[3 * body + c], bodyX_[6 * body + 3 + c] = solids->w[3 * body + c];
+  const auto bodyMomentum = [&](const double* x, std::size_t body, double* mom) {  // (M v, I w)
+    const double* I = solids->inertia + 9 * body;
+    for (int r = 0; r < 3; ++r) {
+      mom[r] = solids->mass[body] * x[r];
+      mom[3 + r] = (I[3 * r] * x[3] + I[3 * r + 1] * x[4]) + I[3 * r + 2] * x[5];
+    }
+  };
+
   const std::size_t units = (n_ + kParticleChunk - 1) / kParticleChunk;
   partial_.resize(units);
-  const auto sum = [&](auto&& term) {  // sum over ranks of term(i), in fixed chunk order
+  const auto sum = [&](auto&& term, const std::vector<double>& bu, const std::vector<double>& bv) {
+    // sum over ranks of term(i), in fixed chunk order, then the bodies' bu . bv
     forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
       double s = 0.0;
       for (std::size_t i = b; i < e; ++i) s += term(i);
@@ -602,89 +682,135 @@ void FluidSolver::viscosityPass(float h) {
     });
     double s = 0.0;
     for (double x : partial_) s += x;
+    for (std::size_t k = 0; k < bu.size(); ++k) s += bu[k] * bv[k];
     return s;
   };
-  const auto fluid = [&](std::size_t i) { return rec_[i * kRecord + kFluid] != 0.0f; };
-  // out = (M + h K) in, on fluid rows. The neighbours' values are read from an interleaved
-  // copy (x y z of a rank in one cache line, not three): the sweep's cost is those reads.
+  const auto active = [&](std::size_t i) { return roleR_[i] == kRoleFluid || roleR_[i] == ViscousSolids::kFree; };
+  const auto precondition = [&] {  // z = P^-1 r for the bodies
+    for (std::size_t body = 0; body < nb; ++body)
+      Eigen::Map<Eigen::Matrix<double, 6, 1>>(bodyZ_.data() + 6 * body) =
+          Eigen::Map<const Mat6>(bodyPrec_.data() + 36 * body) * Eigen::Map<const Eigen::Matrix<double, 6, 1>>(bodyR_.data() + 6 * body);
+  };
+  // out = A in on the active rows and the bodies. The neighbours' values are read from an
+  // interleaved copy (x y z of a rank in one cache line, not three): the sweep's cost is
+  // those reads. A body's point reads its body's velocity there.
   cgX_.resize(3 * n_);
-  const auto apply = [&](std::vector<float>* in, std::vector<float>* out) {
+  const auto apply = [&](std::vector<float>* in, const std::vector<double>& bodyIn, std::vector<float>* out,
+                         std::vector<double>& bodyOut) {
     forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i)
-        for (int c = 0; c < 3; ++c) cgX_[3 * i + std::size_t(c)] = in[c][i];
+      for (std::size_t i = b; i < e; ++i) {
+        if (roleR_[i] >= 0) {
+          const std::size_t body = std::size_t(roleR_[i]);
+          const Vec3d u = Vec3d(&bodyIn[6 * body]) + Vec3d(&bodyIn[6 * body + 3]).cross(arm(i));
+          for (int c = 0; c < 3; ++c) cgX_[3 * i + std::size_t(c)] = float(u[c]);
+        } else {
+          for (int c = 0; c < 3; ++c) cgX_[3 * i + std::size_t(c)] = in[c][i];
+        }
+      }
     });
     const float* x = cgX_.data();
     forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
-        if (!fluid(i)) {
+        if (roleR_[i] == ViscousSolids::kFixed) {
           for (int c = 0; c < 3; ++c) out[c][i] = 0.0f;
           continue;
         }
-        const float m = rec_[i * kRecord + kMass] + viscExtra_[i];
+        const float m = viscMass_[i] + viscExtra_[i];
         const float* xi = x + 3 * i;
         float acc[3] = {m * xi[0], m * xi[1], m * xi[2]};
         const float* w = &viscK_[i * width];
-        const std::int32_t* nb = &lists_.index[i * width];
-        for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {  // a solid's w is 0: it adds 0
-          const float* xj = x + 3 * std::size_t(nb[k]);
+        const std::int32_t* nbr = &lists_.index[i * width];
+        for (std::size_t k = 0; k < std::size_t(lists_.count[i]); ++k) {  // a fixed solid's w is 0: it adds 0
+          const float* xj = x + 3 * std::size_t(nbr[k]);
           for (int c = 0; c < 3; ++c) acc[c] += w[k] * (xi[c] - xj[c]);
         }
         for (int c = 0; c < 3; ++c) out[c][i] = acc[c];
       }
     });
+    for (std::size_t body = 0; body < nb; ++body) bodyMomentum(&bodyIn[6 * body], body, &bodyOut[6 * body]);
+    // F and T, in rank order; the points' rows are then cleared (the other points of a body
+    // have no fluid neighbour and no mass: their rows are 0 already).
+    for (const std::int32_t s : pointRanks_) {
+      const auto i = std::size_t(s);
+      const Vec3d f(out[0][i], out[1][i], out[2][i]), t = arm(i).cross(f);
+      double* o = &bodyOut[6 * std::size_t(roleR_[i])];
+      for (int c = 0; c < 3; ++c) o[c] += f[c], o[3 + c] += t[c], out[c][i] = 0.0f;
+    }
   };
-  // r = M v - A v (x0 = v), z = r / diag, p = z.
-  apply(v_, cgQ_);
+  // r = b - A x0 (x0 = v), z = P^-1 r, p = z.
+  apply(v_, bodyX_, cgQ_, bodyQ_);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i)
       for (int c = 0; c < 3; ++c) {
-        const float m = fluid(i) ? rec_[i * kRecord + kMass] : 0.0f;
-        cgR_[c][i] = fluid(i) ? (m * v_[c][i] + viscRhs_[c][i]) - cgQ_[c][i] : 0.0f;
-        cgP_[c][i] = cgZ_[c][i] = cgR_[c][i] / viscDiag_[i];
+        const bool on = active(i);
+        cgR_[c][i] = on ? (viscMass_[i] * v_[c][i] + viscRhs_[c][i]) - cgQ_[c][i] : 0.0f;
+        cgP_[c][i] = cgZ_[c][i] = on ? cgR_[c][i] / viscDiag_[i] : 0.0f;
       }
   });
-  // The scale: |M v| in the same weighted norm (b^T D^-1 b), or the mass times 1 m/s if the
-  // fluid is at rest.
-  const double bnorm = sum([&](std::size_t i) {
-    if (!fluid(i)) return 0.0;
-    const double m = rec_[i * kRecord + kMass];
-    double s = 0.0;
-    for (int c = 0; c < 3; ++c) s += (m * v_[c][i]) * (m * v_[c][i]);
-    return std::max(s, m * m) / viscDiag_[i];
-  });
+  for (std::size_t body = 0; body < nb; ++body) {
+    double mom[6];
+    bodyMomentum(&bodyX_[6 * body], body, mom);
+    for (int c = 0; c < 6; ++c) bodyR_[6 * body + std::size_t(c)] = mom[c] - bodyQ_[6 * body + std::size_t(c)];
+  }
+  precondition();
+  bodyP_ = bodyZ_;
+  // The scale: |M v| in the same weighted norm (b^T D^-1 b), each particle's at least its
+  // mass times kViscosityFloorSpeed; the bodies' linear momenta likewise. (A floor of 1 m/s
+  // left slow flows undamped: a plate sliding at 5 cm/s on honey changes by less than 1e-4
+  // m/s a substep, under that tolerance, and the solve stopped running at all.)
+  const double floor2 = double(kViscosityFloorSpeed) * kViscosityFloorSpeed;
+  std::vector<double> bodyScale(nb, 0.0);
+  for (std::size_t body = 0; body < nb; ++body) {
+    const double M = solids->mass[body], v2 = Vec3d(solids->v + 3 * body).squaredNorm();
+    bodyScale[body] = std::max(M * M * v2, M * M * floor2) / block[body](0, 0);
+  }
+  const std::vector<double> ones(nb, 1.0);
+  const double bnorm = sum(
+      [&](std::size_t i) {
+        if (!active(i)) return 0.0;
+        const double m = viscMass_[i];
+        double s = 0.0;
+        for (int c = 0; c < 3; ++c) s += (m * v_[c][i]) * (m * v_[c][i]);
+        return std::max(s, m * m * floor2) / viscDiag_[i];
+      },
+      bodyScale, ones);
   const double tol2 = double(kViscosityTolerance) * kViscosityTolerance * bnorm;
-  double rz = sum([&](std::size_t i) {
-    return double(cgR_[0][i]) * cgZ_[0][i] + double(cgR_[1][i]) * cgZ_[1][i] + double(cgR_[2][i]) * cgZ_[2][i];
-  });
+  const auto dot = [&](std::vector<float>* a, std::vector<float>* b, const std::vector<double>& ba, const std::vector<double>& bb) {
+    return sum([&](std::size_t i) { return double(a[0][i]) * b[0][i] + double(a[1][i]) * b[1][i] + double(a[2][i]) * b[2][i]; },
+               ba, bb);
+  };
+  double rz = dot(cgR_, cgZ_, bodyR_, bodyZ_);
   int it = 0;
   while (it < kViscosityMaxIterations && rz > tol2) {
-    apply(cgP_, cgQ_);
-    const double pq = sum([&](std::size_t i) {
-      return double(cgP_[0][i]) * cgQ_[0][i] + double(cgP_[1][i]) * cgQ_[1][i] + double(cgP_[2][i]) * cgQ_[2][i];
-    });
+    apply(cgP_, bodyP_, cgQ_, bodyQ_);
+    const double pq = dot(cgP_, cgQ_, bodyP_, bodyQ_);
     if (!(pq > 0.0)) break;
     const float alpha = float(rz / pq);
     forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i)
+      for (std::size_t i = b; i < e; ++i) {
+        if (!active(i)) continue;
         for (int c = 0; c < 3; ++c) {
-          if (!fluid(i)) continue;
           v_[c][i] += alpha * cgP_[c][i];
           cgR_[c][i] -= alpha * cgQ_[c][i];
           cgZ_[c][i] = cgR_[c][i] / viscDiag_[i];
         }
+      }
     });
-    const double rzNew = sum([&](std::size_t i) {
-      return double(cgR_[0][i]) * cgZ_[0][i] + double(cgR_[1][i]) * cgZ_[1][i] + double(cgR_[2][i]) * cgZ_[2][i];
-    });
+    for (std::size_t k = 0; k < 6 * nb; ++k) bodyX_[k] += double(alpha) * bodyP_[k], bodyR_[k] -= double(alpha) * bodyQ_[k];
+    precondition();
+    const double rzNew = dot(cgR_, cgZ_, bodyR_, bodyZ_);
     const float beta = float(rzNew / rz);
     rz = rzNew;
     forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i)
         for (int c = 0; c < 3; ++c) cgP_[c][i] = cgZ_[c][i] + beta * cgP_[c][i];
     });
+    for (std::size_t k = 0; k < 6 * nb; ++k) bodyP_[k] = bodyZ_[k] + double(beta) * bodyP_[k];
     ++it;
   }
   viscIterations_ = it;
+  for (std::size_t body = 0; body < nb; ++body)
+    for (int c = 0; c < 3; ++c) solids->v[3 * body + c] = bodyX_[6 * body + c], solids->w[3 * body + c] = bodyX_[6 * body + 3 + c];
 }
 
 // ---- density error -------------------------------------------------------------------

@@ -115,6 +115,27 @@ struct FluidInput {
   const float* soundSpeeds = nullptr;  // m/s, >= 0 (0: no compliance for that particle); needs substep > 0
 };
 
+// The solids a viscosity drags back (two-way coupling), for velocityPasses. Without it every
+// solid particle in range is a fixed velocity (one way: honey sticks to a stone, the stone
+// does not feel the honey). With it, each solid particle has a role, by id (FluidInput's
+// order; fluid particles' entries unread):
+//   kFixed   a fixed velocity (fixed or kinematic solids, bodies asleep);
+//   kFree    a particle of its own, of mass 1 / FluidInput::invMass (soft, rope, cloth);
+//   b >= 0   a point of rigid body b: its velocity is v_b + w_b x (p - c_b), and the body's
+//            six velocities are unknowns of the same solve (momentum is exchanged exactly).
+// Body b's mass (kg), world-frame inertia tensor about c_b (kg m^2, row-major), centre c_b (m),
+// and velocities v_b (m/s), w_b (rad/s), which the solve reads and overwrites.
+struct ViscousSolids {
+  static constexpr std::int32_t kFixed = -2, kFree = -1;
+  const std::int32_t* role = nullptr;
+  std::size_t bodies = 0;
+  const double* mass = nullptr;     // per body
+  const double* inertia = nullptr;  // 9 per body
+  const double* centre = nullptr;   // 3 per body
+  double* v = nullptr;              // 3 per body
+  double* w = nullptr;              // 3 per body
+};
+
 struct DensityError {
   float maxCompression = 0.0f;   // max over fluid particles of max(rho/rho0 - 1, 0)
   float meanCompression = 0.0f;  // mean of the same
@@ -147,6 +168,9 @@ class FluidSolver {
   // the most CG iterations a substep runs.
   static constexpr float kViscosityTolerance = 1e-4f;
   static constexpr int kViscosityMaxIterations = 200;
+  // The tolerance is relative to each particle's momentum m |v|, or m times this speed (m/s)
+  // where it is slower: a fluid at rest is not solved to round-off.
+  static constexpr float kViscosityFloorSpeed = 1e-3f;
 
   // Which pair kernel densityIteration runs; kAuto takes AVX2 where the CPU has it. All
   // give identical bits (tested).
@@ -205,9 +229,15 @@ class FluidSolver {
   // Jacobi-preconditioned CG to kViscosityTolerance: stable for any viscosity and substep,
   // where an explicit step of honey's would need substeps of microseconds. Solid particles
   // and the walls (their ghost lattice, as for the density) take part as fixed velocities
-  // (the walls' 0): honey sticks to the ground and to a moving spoon, one way (the solid is
-  // not dragged back; the fluid's momentum changes by what the walls and solids take).
-  void velocityPasses(float* vx, float* vy, float* vz, float h);
+  // (the walls' 0): honey sticks to the ground and to a moving spoon. Given `solids`, the
+  // dynamic solids are dragged back (ViscousSolids): a free solid particle's row is
+  // m_s v_s' + h sum_j K_sj (v_s' - v_j') = m_s v_s over its fluid neighbours j, and a rigid
+  // body's six rows are M v' + F = M v, I w' + T = I w with F, T the sums of its points'
+  // h K (u_s' - v_j') and r_s x of them, u_s' = v' + w' x r_s: the system stays symmetric
+  // positive definite (block-Jacobi on the bodies' 6x6 blocks), and the solve conserves
+  // the linear and angular momentum of fluid and solids together (walls and fixed solids
+  // aside). Free solids' velocities are written back too.
+  void velocityPasses(float* vx, float* vy, float* vz, float h, const ViscousSolids* solids = nullptr);
   // CG iterations the last viscosity solve took (0: none ran).
   int lastViscosityIterations() const { return viscIterations_; }
 
@@ -235,7 +265,7 @@ class FluidSolver {
   void loadParticleParams(const FluidInput& in);
   bool useSimd() const;
   void cohesionPass(float* vx, float* vy, float* vz, float h) const;
-  void viscosityPass(float h);
+  void viscosityPass(float h, const ViscousSolids* solids);
 
   FluidParams params_;
   Kernel kernel_ = Kernel::kAuto;
@@ -273,6 +303,14 @@ class FluidSolver {
   // diagonal, CG's vectors (3 components each) and per-chunk partial sums.
   std::vector<float> muR_, viscK_, viscDiag_, viscExtra_, viscRhs_[3], cgR_[3], cgZ_[3], cgP_[3], cgQ_[3], cgX_;
   std::vector<double> partial_;
+  // Two-way coupling (ViscousSolids), by rank: kRoleFluid, ViscousSolids::kFixed / kFree, or a
+  // body; the mass of a row's own unknown (0 for bodies' points and fixed solids); the ranks
+  // of bodies' points with a fluid neighbour, in rank order (their rows are summed into
+  // the bodies' in that order); the bodies' CG vectors (6 each: v, w) and 6x6 blocks' inverses.
+  static constexpr std::int32_t kRoleFluid = -3;
+  std::vector<std::int32_t> roleR_, pointRanks_;
+  std::vector<float> viscMass_;
+  std::vector<double> bodyX_, bodyR_, bodyZ_, bodyP_, bodyQ_, bodyPrec_;
   int viscIterations_ = 0;
   float substep_ = 0.0f, soundSpeed_ = 0.0f;
   int iterations_ = 0;

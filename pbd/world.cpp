@@ -35,7 +35,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
     {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; restitution off the ground, bodies and colliders; soft bodies bounce at their centre of mass"},
-    {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), when set"},
+    {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), implicit viscosity (dragging solids), when set"},
     {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched the ground or each other leave at e times their approach speed (Müller 2020 Eq. 34; a pair: the mean of their e)"},
     {"write_particles", Cadence::kPerStep, "particle positions and velocities from the body poses"},

@@ -38,7 +38,8 @@
 //                      and density (PBF: Jacobi lambda and dp; solids in range take their
 //                      share, rigid bodies as an impulse, so a light body floats)
 //     particle_update  v = (p - x) / h, x = p; ground restitution; soft bodies' restitution
-//     fluid_velocity   XSPH viscosity, vorticity confinement, cohesion (when set)
+//     fluid_velocity   XSPH viscosity, vorticity confinement, cohesion, the implicit
+//                      viscosity (which drags solids in the fluid too), when set
 //     plasticity       soft materials with plastic_creep > 0: cluster rest shapes creep
 //
 // Rigid bodies are integrated as bodies, in double precision: a particle-level

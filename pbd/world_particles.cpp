@@ -1339,21 +1339,66 @@ void PbdWorld::density() {
   }
 }
 
+// The fluids' velocity passes. Solids in range enter with their velocities now (a rigid
+// point's from its body's motion). With a viscosity the solve drags them back
+// (ViscousSolids): a dynamic rigid body awake is six unknowns (its mass and world-frame
+// inertia), a dynamic particle-level solid particle one of its own; fixed, carried and
+// sleeping ones stay fixed velocities.
 void PbdWorld::fluidVelocity(double h) {
   if (fluidCount_ == 0) return;
   const std::size_t n = fluidIds_.size();
   std::vector<float> vx(n), vy(n), vz(n);
+  std::vector<std::int32_t> role(n, ViscousSolids::kFixed);
+  std::vector<std::size_t> bodies;             // table index -> body
+  std::map<std::size_t, std::int32_t> index;   // body -> table index
   for (std::size_t k = 0; k < n; ++k) {
     const auto i = std::size_t(fluidIds_[k]);
-    const bool rigid = isRigid(std::size_t(parts_.group(i)));
-    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(parts_.x, parts_.y, parts_.z, i));
-    vx[k] = parts_.vx[i], vy[k] = parts_.vy[i], vz[k] = parts_.vz[i];
+    const auto b = std::size_t(parts_.group(i));
+    if (!isRigid(b)) {
+      put(fx_, fy_, fz_, k, at(parts_.x, parts_.y, parts_.z, i));
+      vx[k] = parts_.vx[i], vy[k] = parts_.vy[i], vz[k] = parts_.vz[i];
+      if (k >= fluidCount_ && fw_[k] > 0.0f) role[k] = ViscousSolids::kFree;
+      continue;
+    }
+    const Vec3 p = rigidPoint(i), v = motion_[b].v + motion_[b].w.cross(p - motion_[b].c);
+    put(fx_, fy_, fz_, k, p);
+    vx[k] = static_cast<float>(v.x()), vy[k] = static_cast<float>(v.y()), vz[k] = static_cast<float>(v.z());
+    if (!moving(b)) continue;
+    auto it = index.find(b);
+    if (it == index.end()) {
+      it = index.emplace(b, std::int32_t(bodies.size())).first;
+      bodies.push_back(b);
+    }
+    role[k] = it->second;
   }
+  const std::size_t nb = bodies.size();
+  std::vector<double> mass(nb), inertia(9 * nb), centre(3 * nb), bv(3 * nb), bw(3 * nb);
+  for (std::size_t t = 0; t < nb; ++t) {
+    const std::size_t b = bodies[t];
+    const Motion& mo = motion_[b];
+    const Mat3 R = mo.q.toRotationMatrix();
+    mass[t] = 1.0 / invMass_[b];
+    const Mat3 I = R * inertiaRest_[b] * R.transpose();
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) inertia[9 * t + std::size_t(3 * r + c)] = I(r, c);
+      centre[3 * t + std::size_t(r)] = mo.c[r], bv[3 * t + std::size_t(r)] = mo.v[r], bw[3 * t + std::size_t(r)] = mo.w[r];
+    }
+  }
+  ViscousSolids solids;
+  solids.role = role.data(), solids.bodies = nb;
+  solids.mass = mass.data(), solids.inertia = inertia.data(), solids.centre = centre.data();
+  solids.v = bv.data(), solids.w = bw.data();
   fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
-  fluid_->velocityPasses(vx.data(), vy.data(), vz.data(), static_cast<float>(h));
-  for (std::size_t k = 0; k < fluidCount_; ++k) {
+  fluid_->velocityPasses(vx.data(), vy.data(), vz.data(), static_cast<float>(h), &solids);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (k >= fluidCount_ && role[k] != ViscousSolids::kFree) continue;
     const auto i = std::size_t(fluidIds_[k]);
     parts_.vx[i] = vx[k], parts_.vy[i] = vy[k], parts_.vz[i] = vz[k];
+  }
+  for (std::size_t t = 0; t < nb; ++t) {
+    Motion& mo = motion_[bodies[t]];
+    mo.v = Vec3(bv[3 * t], bv[3 * t + 1], bv[3 * t + 2]);
+    mo.w = Vec3(bw[3 * t], bw[3 * t + 1], bw[3 * t + 2]);
   }
 }
 
