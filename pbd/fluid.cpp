@@ -302,21 +302,27 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
                   const std::vector<std::int32_t>& bk, float* dx, float* dy, float* dz, std::size_t n);
 }  // namespace
 
-// A solid particle's boundary volume nu_b = s / sum_k W_bk over the boundary samples k in
-// range, itself included (Akinci et al. 2012, Eq. 4): the solid particles and the walls' ghost
-// layers (the ground under a sketched wall is boundary too: without it the wall's bottom row
-// counted too few samples and took 1.26 times the volume, so a lattice of fluid in the corner
-// where the wall meets the ground was 14 % over-dense and a resting tank shot corner particles
-// up at 0.19 m/s). A dense wall counts as much as a full fluid neighbourhood, a sparse one
-// proportionally more per particle (which still leaves a lattice beside a wall's surface
-// over-dense, by up to 7.5 % at a tank's inner vertical edge: Akinci's model, not tuned here).
+// A solid particle's boundary volume nu_b = s / sum_k W_bk over the samples k in range, itself
+// included (Akinci et al. 2012, Eq. 4, a number density): the solid particles, the walls'
+// ghost layers (the ground under a sketched wall is boundary too: without it the wall's bottom
+// row counted too few samples and took 1.26 times the volume, so a lattice of fluid in the
+// corner where the wall meets the ground was 14 % over-dense and a resting tank shot corner
+// particles up at 0.19 m/s) and the fluid particles. Akinci counts boundary samples only,
+// which gives the face of a solid as thick as the kernel 1.26 times a lattice particle's
+// volume, as if the fluid side were missing solid: a lattice of fluid against it read 8.1 %
+// over-dense. Counted with the fluid in front of it the face reads a full neighbourhood and
+// takes a lattice particle's volume, so fluid resting on a solid is at rest density (a film
+// under a 2- to 5-layer plate: at most 2.0 % over, against 8.1 %; under a single layer, whose
+// back is empty, 8.1 % against 18.6 %).
+// A solid with nothing beside it keeps Akinci's larger volume, where the fluid is not.
 void FluidSolver::computeSolidVolumes() {
   const float h = params_.kernelRadius, h2 = h * h, cp = 315.0f / (64.0f * kPi * std::pow(h, 9.0f));
   const int width = lists_.width;
   const PairArgs walls =
       pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   // The wall term is sum nu_g W over ghost samples of volume nu_g = latticeScale d^3; as a sum
-  // of W / cp (this loop's units) it is that over nu_g cp.
+  // of W / cp (this loop's units) it is that over nu_g cp. Fluid neighbours count as samples
+  // (all fluids share the spacing: a number density).
   const float d = 2.0f * params_.particleRadius;
   const float perGhost = 1.0f / (latticeScale_ * d * d * d * cp);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
@@ -326,7 +332,6 @@ void FluidSolver::computeSolidVolumes() {
       float sum = h2 * h2 * h2;
       for (std::int32_t k = 0; k < lists_.count[i]; ++k) {
         const float* rj = &rec_[std::size_t(lists_.index[i * std::size_t(width) + std::size_t(k)]) * kRecord];
-        if (rj[kFluid] != 0.0f) continue;
         const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
         const float s = h2 - ((dx * dx + dy * dy) + dz * dz);
         if (s > 0.0f) sum += (s * s) * s;

@@ -27,7 +27,8 @@
 // apart at their interface):
 //     C_i = sum_j nu_j W(p_i - p_j, h) - 1          (j includes i; poly6 W)
 // and a solid particle in range contributes its boundary volume nu_b = s / sum_k W_bk over
-// its solid neighbours k and the walls' ghost samples (Akinci et al. 2012, Eq. 4; s =
+// its solid and fluid neighbours k and the walls' ghost samples (Akinci et al. 2012, Eq. 4,
+// with the fluid counted: computeSolidVolumes; s =
 // FluidParams::solidScale). The
 // constraint is unilateral (only C_i > 0 is corrected: free surfaces are not pulled in).
 // With inverse masses w the Jacobi step is (Macklin et al. 2014 §7.1)

@@ -53,9 +53,8 @@ Reference bruteForce(const FluidParams& p, const FluidInput& in, double latticeS
       m[i] = 1.0 / in.invMass[i];
       continue;
     }
-    double sum = 0;  // Akinci 2012 Eq. 4 over solid neighbours, itself included
-    for (std::size_t j = 0; j < n; ++j)
-      if (!in.fluid[j]) sum += W(dist2(i, j));
+    double sum = 0;  // Akinci 2012 Eq. 4's number density, over every neighbour (solid and fluid), itself included
+    for (std::size_t j = 0; j < n; ++j) sum += W(dist2(i, j));
     nu[i] = p.solidScale / sum;
   }
   Reference out;
@@ -540,12 +539,12 @@ TEST(FluidViscosity, SolidsAndTheFluidExchangeMomentum) {
 // Morris et al. 1997) to the centres of the plate's first layer, where its boundary
 // particles carry its velocity (half a spacing inside its voxels' faces: d = 10.5 spacings).
 // Tolerance 4 %: the Laplacian's own error on the lattice is 2.5 % (the shear wave above);
-// measured 1.8 % (rate 0.4754 against 0.4671 1/s); with d to the voxels' faces (10
+// measured 1.0 % (rate 0.4719 against 0.4671 1/s); with d to the voxels' faces (10
 // spacings) the oracle would read 7 % more, and with the ground's ghosts at rest (before
 // Morris's rule) the rate was 6 % lower. Also: the film's profile at the end is the mode's
-// sine, sin(beta y) / sin(beta d), within 0.02 of the plate's speed in every layer (measured
-// 0.015 in the top layers: the plate's boundary volumes, larger than a lattice particle's,
-// pull its no-slip a little into the film; the ground's layer reads 0.058 against 0.059).
+// sine, sin(beta y) / sin(beta d), within 0.01 of the plate's speed in every layer (measured
+// 0.005; 0.015 with Akinci's boundary volumes, whose plate face was 1.26 lattice volumes and
+// pulled the no-slip into the film; the ground's layer reads 0.0575 against 0.0569).
 // One way, the plate kept its speed: fails.
 TEST(FluidViscosity, APlateOnAFilmSlowsAtStokesRate) {
   FluidParams p = smallParams();
@@ -604,7 +603,7 @@ TEST(FluidViscosity, APlateOnAFilmSlowsAtStokesRate) {
       const bool middle = x[i] > 0.3f * side * s && x[i] < 0.7f * side * s && z[i] > 0.3f * side * s && z[i] < 0.7f * side * s;
       if (fl[i] && middle && std::lround((y[i] - 0.5f * s) / s) == b) sum += v[i], count += 1.0;
     }
-    EXPECT_NEAR(sum / count / V.back(), std::sin(lo * (0.5 + b) / (film + 0.5)) / std::sin(lo), 0.02) << "layer " << b << ": " << sum / count / V.back() << " against " << std::sin(lo * (0.5 + b) / (film + 0.5)) / std::sin(lo);
+    EXPECT_NEAR(sum / count / V.back(), std::sin(lo * (0.5 + b) / (film + 0.5)) / std::sin(lo), 0.01) << "layer " << b << ": " << sum / count / V.back() << " against " << std::sin(lo * (0.5 + b) / (film + 0.5)) / std::sin(lo);
   }
 }
 
@@ -1012,3 +1011,39 @@ TEST(FluidDeterminism, DamBreakOneAndTwoThreadsBitIdentical) {
 
 }  // namespace
 }  // namespace physketch::pbd
+namespace physketch::pbd {
+TEST(TmpBoundary, Density) {
+  FluidParams p = smallParams();
+  p.wallLo[1] = 0.0f;
+  const float s = 2.0f * p.particleRadius;
+  for (int plate : {1, 2, 3, 5}) {
+    std::vector<float> x, y, z, w, r;
+    std::vector<std::uint8_t> fl;
+    const int side = 16, film = 8;
+    for (int a = 0; a < side; ++a)
+      for (int b = 0; b < film + plate; ++b)
+        for (int k = 0; k < side; ++k) {
+          const bool solid = b >= film;
+          x.push_back(s * float(a)), y.push_back(0.5f * s + s * float(b)), z.push_back(s * float(k));
+          fl.push_back(solid ? 0 : 1), r.push_back(1000.0f), w.push_back(1.0f / (1000.0f * s * s * s));
+        }
+    FluidInput in;
+    in.count = x.size(), in.x = x.data(), in.y = y.data(), in.z = z.data();
+    in.invMass = w.data(), in.fluid = fl.data(), in.restDensity = r.data();
+    FluidSolver solver(p);
+    solver.begin(in);
+    std::vector<float> nu(x.size());
+    solver.volumes(nu.data());
+    std::printf("plate %d:", plate);
+    for (int b = film - 1; b < film + plate; ++b) {
+      double sum = 0, cnt = 0;
+      for (std::size_t i = 0; i < x.size(); ++i)
+        if (std::lround((y[i] - 0.5f * s) / s) == b && x[i] > 5 * s && x[i] < 11 * s && z[i] > 5 * s && z[i] < 11 * s)
+          sum += nu[i] / (s * s * s), cnt += 1;
+      std::printf(" L%d nu/V %.3f |", b, sum / cnt);
+    }
+    DensityError e = solver.densityError();
+    std::printf(" maxComp %.4f meanComp %.5f\n", e.maxCompression, e.meanCompression);
+  }
+}
+}
