@@ -236,8 +236,9 @@ class FluidSolver {
   // body's six rows are M v' + F = M v, I w' + T = I w with F, T the sums of its points'
   // h K (u_s' - v_j') and r_s x of them, u_s' = v' + w' x r_s: the system stays symmetric
   // positive definite (block-Jacobi on the bodies' 6x6 blocks), and the solve conserves
-  // the linear and angular momentum of fluid and solids together (walls and fixed solids
-  // aside). Free solids' velocities are written back too.
+  // the linear momentum of fluid and solids together, walls and fixed solids aside (not the
+  // angular: Brookshaw's pair forces lie along v_j - v_i, not along the pair). Free solids'
+  // velocities are written back too.
   void velocityPasses(float* vx, float* vy, float* vz, float h, const ViscousSolids* solids = nullptr);
   // CG iterations the last viscosity solve took (0: none ran).
   int lastViscosityIterations() const { return viscIterations_; }
