@@ -657,6 +657,9 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
                " iterations last substep, short of its tolerance: more substeps make each solve easier";
       else if (it > 0)
         why += "; the viscosity's CG took " + std::to_string(it) + " iterations last substep";
+      if (it > 0 && (viscousBodies_ > 0 || viscousLoose_ > 0))
+        why += ", dragging back " + std::to_string(viscousBodies_) + (viscousBodies_ == 1 ? " rigid body" : " rigid bodies") +
+               " and " + std::to_string(viscousLoose_) + (viscousLoose_ == 1 ? " soft, rope or cloth particle" : " soft, rope or cloth particles");
       return why;
     }
     case PbdPass::kDistance:

@@ -492,6 +492,8 @@ class PbdWorld final : public Solver {
   // Some fluid material sets xsph_viscosity, vorticity, cohesion or a viscosity above
   // FluidSolver::kNegligibleViscosity.
   bool fluidVelocity_ = false;
+  // What the last viscous solve dragged back: dynamic rigid bodies, loose solid particles.
+  std::size_t viscousBodies_ = 0, viscousLoose_ = 0;
   float fluidSoundOf(const Material& m) const;
   std::string fluidSoundText() const;
   std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;

@@ -1372,6 +1372,8 @@ void PbdWorld::fluidVelocity(double h) {
     role[k] = it->second;
   }
   const std::size_t nb = bodies.size();
+  viscousBodies_ = nb;
+  viscousLoose_ = std::size_t(std::count(role.begin(), role.end(), ViscousSolids::kFree));
   std::vector<double> mass(nb), inertia(9 * nb), centre(3 * nb), bv(3 * nb), bw(3 * nb);
   for (std::size_t t = 0; t < nb; ++t) {
     const std::size_t b = bodies[t];

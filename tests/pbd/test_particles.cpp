@@ -942,6 +942,17 @@ TEST(Fluid, AStoneInHoneyHandsItsMomentumToTheHoney) {
     double M = 0.0, m = 0.0;
     P0 = momentum(solid.first, solid.count, M) + momentum(honey.first, honey.count, m);
     for (int s = 0; s < 30; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+    if (mu > 1.0) {  // the plan says what the viscosity drags
+      bool planned = false;
+      for (const PlanEntry& pe : w.plan()) {
+        if (pe.name != "fluid_velocity") continue;
+        planned = true;
+        const char* want = kind == MaterialKind::kRigid ? "dragging back 1 rigid body and 0 soft, rope or cloth particles"
+                                                        : "dragging back 0 rigid bodies and 64 soft, rope or cloth particles";
+        EXPECT_NE(pe.reason.find(want), std::string::npos) << pe.reason;
+      }
+      EXPECT_TRUE(planned);
+    }
     const double Ps = momentum(solid.first, solid.count, M);
     total = Ps + momentum(honey.first, honey.count, m);
     common = P0 / (M + m);
