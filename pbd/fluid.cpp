@@ -648,7 +648,7 @@ void FluidSolver::viscosityPass(float h, const ViscousSolids* solids) {
     block[body].topLeftCorner<3, 3>() = solids->mass[body] * Eigen::Matrix3d::Identity();
     block[body].bottomRightCorner<3, 3>() = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(solids->inertia + 9 * body);
   }
-  for (std::size_t i = 0; i < n_; ++i) {
+  for (std::size_t i = 0; nb > 0 && i < n_; ++i) {  // a serial pass: only where there are bodies
     if (roleR_[i] < 0 || !(viscDiag_[i] > 0.0f)) continue;
     pointRanks_.push_back(std::int32_t(i));
     const double W = viscDiag_[i];
