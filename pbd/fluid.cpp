@@ -93,6 +93,7 @@ void FluidSolver::buildWallTable() {
   const double nu = double(latticeScale_) * d * d * d;
   const int reach = int(std::ceil(h / d));
   const double cs = 45.0 / (3.14159265358979323846 * std::pow(h, 6));
+  std::vector<float>&wallB_ = walls_[kB], &wallDB_ = walls_[kDB];
   wallB_.assign(kWallSamples, 0.0f), wallDB_.assign(kWallSamples, 0.0f), wallV_.assign(kWallSamples, 0.0f);
   for (int s = 0; s < kWallSamples; ++s) {
     const double y = h * double(s) / double(kWallSamples - 1);
@@ -118,6 +119,61 @@ void FluidSolver::buildWallTable() {
     }
     wallB_[s] = float(b), wallDB_[s] = float(db), wallV_[s] = float(v);
   }
+  buildCornerTables();
+}
+
+// Where two walls meet, each wall's term counts the ghosts beyond both planes (the quarter
+// space behind the edge), so a fluid particle in the edge counted them twice and read over-
+// dense (a lattice filling a 6 x 5 x 7 box: up to C = +10.9 % in its corners, 1.3 % on average;
+// a film filling a box's floor rose off it at 4.5 cm/s in zero gravity). Inclusion-
+// exclusion: the union of the ghost half-spaces is sum B - sum Q + O, with Q the ghosts in the
+// quarter space behind two planes and O those in the octant behind three, each on the lattice
+// continued from the particle's distances to the planes (ghost layers at y + r + k d behind
+// every plane, the lattice's spacing d along the edge): exact for a particle on the lattice,
+// smooth for any other. Only the interpolation's error remains (tested against explicit ghosts).
+void FluidSolver::buildCornerTables() {
+  const double d = 2.0 * params_.particleRadius, h = params_.kernelRadius, r = params_.particleRadius;
+  const double cp = 315.0 / (64.0 * 3.14159265358979323846 * std::pow(h, 9));
+  const double nu = double(latticeScale_) * d * d * d;
+  const int reach = int(std::ceil(h / d));
+  // sum over ghosts at normal distances z[k] = y[k] + r + m_k d (m_k >= 0) behind `axes` planes,
+  // and the lattice (spacing d, aligned with the particle) along the other axes: the term and
+  // its derivative by y[0].
+  const auto sum = [&](const double* y, int axes, double& term, double& d0) {
+    term = 0, d0 = 0;
+    int m[3] = {0, 0, 0};
+    for (m[0] = 0; m[0] <= reach; ++m[0])
+      for (m[1] = 0; m[1] <= reach; ++m[1])
+        for (m[2] = axes == 3 ? 0 : -reach; m[2] <= reach; ++m[2]) {
+          double z[3], q = h * h;
+          for (int k = 0; k < 3; ++k) {
+            z[k] = k < axes ? y[k] + r + double(m[k]) * d : double(m[k]) * d;
+            q -= z[k] * z[k];
+          }
+          if (q <= 0) continue;
+          term += nu * cp * q * q * q;
+          d0 += nu * cp * 3.0 * q * q * (-2.0 * z[0]);
+        }
+  };
+  const int E = kEdgeSamples, C = kCornerSamples;
+  walls_[kQ].assign(std::size_t(E) * E, 0.0f), walls_[kDQ].assign(std::size_t(E) * E, 0.0f);
+  for (int i = 0; i < E; ++i)
+    for (int j = 0; j < E; ++j) {
+      const double y[3] = {h * i / (E - 1), h * j / (E - 1), 0.0};
+      double term, d0;
+      sum(y, 2, term, d0);
+      walls_[kQ][std::size_t(i) * E + j] = float(term), walls_[kDQ][std::size_t(i) * E + j] = float(d0);
+    }
+  walls_[kO].assign(std::size_t(C) * C * C, 0.0f), walls_[kDO].assign(std::size_t(C) * C * C, 0.0f);
+  for (int i = 0; i < C; ++i)
+    for (int j = 0; j < C; ++j)
+      for (int k = 0; k < C; ++k) {
+        const double y[3] = {h * i / (C - 1), h * j / (C - 1), h * k / (C - 1)};
+        double term, d0;
+        sum(y, 3, term, d0);
+        const std::size_t at = (std::size_t(i) * C + j) * C + k;
+        walls_[kO][at] = float(term), walls_[kDO][at] = float(d0);
+      }
 }
 
 void FluidSolver::setKernel(Kernel k) {
@@ -297,7 +353,7 @@ void FluidSolver::buildBlockedLists() {
 }
 
 namespace {
-PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const std::vector<float>& wallDB, float* rec,
+PairArgs pairArgs(const FluidParams& p, const std::vector<float>* walls, float* rec,
                   const std::vector<std::int32_t>& bidx, const std::vector<std::int32_t>& boff,
                   const std::vector<std::int32_t>& bk, float* dx, float* dy, float* dz, std::size_t n);
 }  // namespace
@@ -319,7 +375,7 @@ void FluidSolver::computeSolidVolumes() {
   const float h = params_.kernelRadius, h2 = h * h, cp = 315.0f / (64.0f * kPi * std::pow(h, 9.0f));
   const int width = lists_.width;
   const PairArgs walls =
-      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+      pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   // The wall term is sum nu_g W over ghost samples of volume nu_g = latticeScale d^3; as a sum
   // of W / cp (this loop's units) it is that over nu_g cp. Fluid neighbours count as samples
   // (all fluids share the spacing: a number density).
@@ -344,7 +400,8 @@ void FluidSolver::computeSolidVolumes() {
 
 namespace {
 
-PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const std::vector<float>& wallDB, float* rec,
+// walls: the tables B, dB, Q, dQ, O, dO of buildWallTable.
+PairArgs pairArgs(const FluidParams& p, const std::vector<float>* walls, float* rec,
                   const std::vector<std::int32_t>& bidx,
                   const std::vector<std::int32_t>& boff, const std::vector<std::int32_t>& bk, float* dx, float* dy,
                   float* dz, std::size_t n) {
@@ -362,9 +419,15 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
   a.invWdq = 1.0f / ((sdq * sdq) * sdq);
   a.scorrK = p.scorrK * volume * a.h2 * 0.5f;
   a.scorrN = p.scorrN;
-  a.wallB = wallB.data(), a.wallDB = wallDB.data();
+  const std::vector<float>&wallB = walls[0], &wallQ = walls[2], &wallO = walls[4];
+  a.wallB = wallB.data(), a.wallDB = walls[1].data();
   a.wallSamples = int(wallB.size());
   a.wallInvStep = float(wallB.size() - 1) / h;
+  a.wallQ = wallQ.data(), a.wallDQ = walls[3].data(), a.wallO = wallO.data(), a.wallDO = walls[5].data();
+  a.edgeSamples = int(std::lround(std::sqrt(double(wallQ.size()))));
+  a.cornerSamples = int(std::lround(std::cbrt(double(wallO.size()))));
+  a.edgeInvStep = float(a.edgeSamples - 1) / h;
+  a.cornerInvStep = float(a.cornerSamples - 1) / h;
   for (int k = 0; k < 3; ++k) {
     a.wallLo[k] = p.wallLo[k] + p.particleRadius;
     a.wallHi[k] = p.wallHi[k] - p.particleRadius;
@@ -376,7 +439,7 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>& wallB, const s
 }  // namespace
 
 void FluidSolver::lambdaPass() {
-  PairArgs a = pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  PairArgs a = pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   a.comp = comp_.data();
   if (!epsR_.empty()) a.epsR = epsR_.data();
   a.alphaK = complianceScale(soundSpeed_, substep_);
@@ -395,7 +458,7 @@ float FluidSolver::autoSoundSpeed(float gravity, float height, float vmax) {
 
 void FluidSolver::correctionPass() {
   PairArgs a =
-      pairArgs(params_, wallB_, wallDB_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+      pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   if (substep_ > 0.0f && iterations_ > 0) {  // s_corr as a force below kScorrStep (FluidParams::scorrK)
     const float r = substep_ / kScorrStep;
     a.scorrK *= std::min(1.0f, (r * r) * (float(kScorrIterations) / float(iterations_)));
@@ -847,7 +910,7 @@ DensityError FluidSolver::densityError() const {
   };
   const std::size_t units = (n_ + kParticleChunk - 1) / kParticleChunk;
   std::vector<Part> parts(units);
-  const PairArgs walls = pairArgs(params_, wallB_, wallDB_, nullptr, bidx_, boff_, bk_, nullptr, nullptr, nullptr, n_);
+  const PairArgs walls = pairArgs(params_, walls_, nullptr, bidx_, boff_, bk_, nullptr, nullptr, nullptr, n_);
   forChunks(n_, kParticleChunk, [&](std::size_t b, std::size_t e) {
     Part& p = parts[b / kParticleChunk];
     for (std::size_t i = b; i < e; ++i) {
@@ -886,7 +949,7 @@ std::size_t FluidSolver::neighborBytes() const {
 }
 
 std::size_t FluidSolver::solverBytes() const {
-  return heldBytes(wallB_, wallDB_, rec_, dx_, dy_, dz_, comp_, lambdaSum_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
+  return heldBytes(walls_[kB], walls_[kDB], walls_[kQ], walls_[kDQ], walls_[kO], walls_[kDO], rec_, dx_, dy_, dz_, comp_, lambdaSum_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
                    omega_[1], omega_[2]);
 }
 

@@ -264,6 +264,7 @@ class FluidSolver {
   void buildBlockedLists();
   void computeSolidVolumes();
   void buildWallTable();
+  void buildCornerTables();
   void loadParticleParams(const FluidInput& in);
   bool useSimd() const;
   void cohesionPass(float* vx, float* vy, float* vz, float h) const;
@@ -281,9 +282,15 @@ class FluidSolver {
   float latticeScale_ = 1.0f;
   float laplaceScale_ = 1.0f;  // the viscosity's Laplacian, exact for quadratics on that lattice
   static constexpr int kWallSamples = 256;
-  std::vector<float> wallB_, wallDB_;  // the walls' density term, see buildWallTable()
+  // The walls' density term (buildWallTable): B(y) and dB/dy on kWallSamples samples; where
+  // walls meet, the ghosts two walls' terms both count, Q(y1, y2) and dQ/dy1 on
+  // kEdgeSamples^2 samples, and the ghosts all three count, O(y1, y2, y3) and dO/dy1 on
+  // kCornerSamples^3 (Q and O are symmetric in their arguments).
+  static constexpr int kEdgeSamples = 64, kCornerSamples = 24;
+  enum WallTable { kB, kDB, kQ, kDQ, kO, kDO, kWallTables };
+  std::vector<float> walls_[kWallTables];
   // The walls' share of the viscosity's Laplacian weight: sum over ghost samples g of
-  // nu_g |gradW| r / (r^2 + 0.01 h^2) (calibrated), by distance from the plane as wallB_.
+  // nu_g |gradW| r / (r^2 + 0.01 h^2) (calibrated), by distance from the plane as B.
   std::vector<float> wallV_;
   // Per particle, in rank (cell) order, one 32-byte record so that a neighbour's data is
   // one load (the SIMD kernel transposes 8 records into 8 lanes, no gathers):

@@ -25,7 +25,68 @@ WallTerm wallTerm(const PairArgs& a, const float* p) {
       const float db = a.wallDB[s] + f * (a.wallDB[s + 1] - a.wallDB[s]);
       t.g[k] += side ? -db : db;  // d/dp of B(y(p))
     }
+  const WallTerm e = edgeTerm(a, p);
+  t.c = t.c + e.c;
+  for (int k = 0; k < 3; ++k) t.g[k] = t.g[k] + e.g[k];
   return t;
+}
+
+namespace {
+
+// Bilinear and trilinear interpolation of row-major tables of n samples per axis at
+// fractional indices u (u >= 0).
+inline float lerp2(const float* t, int n, float u, float v) {
+  const int i = std::min(int(u), n - 2), j = std::min(int(v), n - 2);
+  const float f = u - float(i), g = v - float(j);
+  const float* r0 = t + (std::size_t(i) * std::size_t(n) + std::size_t(j));
+  const float* r1 = r0 + n;
+  const float a0 = r0[0] + g * (r0[1] - r0[0]), a1 = r1[0] + g * (r1[1] - r1[0]);
+  return a0 + f * (a1 - a0);
+}
+inline float lerp3(const float* t, int n, float u, float v, float w) {
+  const int i = std::min(int(u), n - 2);
+  const float f = u - float(i);
+  const std::size_t plane = std::size_t(n) * std::size_t(n);
+  const float a0 = lerp2(t + std::size_t(i) * plane, n, v, w), a1 = lerp2(t + std::size_t(i + 1) * plane, n, v, w);
+  return a0 + f * (a1 - a0);
+}
+
+}  // namespace
+
+WallTerm edgeTerm(const PairArgs& a, const float* p) {
+  WallTerm e;
+  // Per axis, the planes within h: distance y and the sign of dy/dp.
+  float y[3][2], sgn[3][2];
+  int count[3] = {0, 0, 0}, axes = 0;
+  for (int k = 0; k < 3; ++k) {
+    const float lo = p[k] - a.wallPlaneLo[k], hi = a.wallPlaneHi[k] - p[k];
+    if (lo < a.h) y[k][count[k]] = std::max(lo, 0.0f), sgn[k][count[k]++] = 1.0f;
+    if (hi < a.h) y[k][count[k]] = std::max(hi, 0.0f), sgn[k][count[k]++] = -1.0f;
+    axes += count[k] > 0;
+  }
+  if (axes < 2) return e;
+  const int E = a.edgeSamples;
+  for (int k0 = 0; k0 < 3; ++k0)
+    for (int k1 = k0 + 1; k1 < 3; ++k1)
+      for (int s0 = 0; s0 < count[k0]; ++s0)
+        for (int s1 = 0; s1 < count[k1]; ++s1) {  // ghosts behind both planes: counted twice
+          const float u0 = y[k0][s0] * a.edgeInvStep, u1 = y[k1][s1] * a.edgeInvStep;
+          e.c = e.c - lerp2(a.wallQ, E, u0, u1);
+          e.g[k0] = e.g[k0] - sgn[k0][s0] * lerp2(a.wallDQ, E, u0, u1);
+          e.g[k1] = e.g[k1] - sgn[k1][s1] * lerp2(a.wallDQ, E, u1, u0);
+        }
+  if (axes < 3) return e;
+  const int C = a.cornerSamples;
+  for (int s0 = 0; s0 < count[0]; ++s0)
+    for (int s1 = 0; s1 < count[1]; ++s1)
+      for (int s2 = 0; s2 < count[2]; ++s2) {  // behind all three: counted 3 times, taken off 3 times
+        const float u0 = y[0][s0] * a.cornerInvStep, u1 = y[1][s1] * a.cornerInvStep, u2 = y[2][s2] * a.cornerInvStep;
+        e.c = e.c + lerp3(a.wallO, C, u0, u1, u2);
+        e.g[0] = e.g[0] + sgn[0][s0] * lerp3(a.wallDO, C, u0, u1, u2);
+        e.g[1] = e.g[1] + sgn[1][s1] * lerp3(a.wallDO, C, u1, u0, u2);
+        e.g[2] = e.g[2] + sgn[2][s2] * lerp3(a.wallDO, C, u2, u0, u1);
+      }
+  return e;
 }
 
 namespace {
@@ -325,6 +386,27 @@ PHYSKETCH_AVX2 Wall8 wallTerm8(const PairArgs& a, const __m256 ri[8]) {
       if (side) db = _mm256_xor_ps(db, sign);
       t.g[k] = _mm256_add_ps(t.g[k], _mm256_and_ps(in, db));
     }
+  // Lanes within h of two or three walls: the scalar edgeTerm, lane by lane (rare; the same
+  // bits by construction). Other lanes add +0, as the scalar does (its sums are never -0).
+  const __m256 h2 = _mm256_set1_ps(a.h);
+  __m256i axes = _mm256_setzero_si256();
+  for (int k = 0; k < 3; ++k) {
+    const __m256 near = _mm256_or_ps(_mm256_cmp_ps(_mm256_sub_ps(ri[k], _mm256_set1_ps(a.wallPlaneLo[k])), h2, _CMP_LT_OQ),
+                                     _mm256_cmp_ps(_mm256_sub_ps(_mm256_set1_ps(a.wallPlaneHi[k]), ri[k]), h2, _CMP_LT_OQ));
+    axes = _mm256_sub_epi32(axes, _mm256_castps_si256(near));  // near lanes are all ones: -1
+  }
+  const __m256i two = _mm256_cmpgt_epi32(axes, _mm256_set1_epi32(1));
+  if (!_mm256_testz_si256(two, two)) {
+    alignas(32) float px[3][8], ec[8], eg[3][8];
+    for (int k = 0; k < 3; ++k) _mm256_store_ps(px[k], ri[k]);
+    for (int l = 0; l < 8; ++l) {
+      const float pl[3] = {px[0][l], px[1][l], px[2][l]};
+      const WallTerm e = edgeTerm(a, pl);
+      ec[l] = e.c, eg[0][l] = e.g[0], eg[1][l] = e.g[1], eg[2][l] = e.g[2];
+    }
+    t.c = _mm256_add_ps(t.c, _mm256_load_ps(ec));
+    for (int k = 0; k < 3; ++k) t.g[k] = _mm256_add_ps(t.g[k], _mm256_load_ps(eg[k]));
+  }
   return t;
 }
 

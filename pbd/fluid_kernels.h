@@ -49,6 +49,15 @@ struct PairArgs {
   const float* wallDB = nullptr;
   int wallSamples = 0;
   float wallInvStep = 0;
+  // Where two or three walls meet, the ghosts their terms count twice or three times
+  // (FluidSolver::buildWallTable): Q(y1, y2), dQ/dy1 on edgeSamples^2 samples and O(y1, y2,
+  // y3), dO/dy1 on cornerSamples^3, row-major, y = index / invStep; 0 beyond h.
+  const float* wallQ = nullptr;
+  const float* wallDQ = nullptr;
+  const float* wallO = nullptr;
+  const float* wallDO = nullptr;
+  int edgeSamples = 0, cornerSamples = 0;
+  float edgeInvStep = 0, cornerInvStep = 0;
 };
 
 // The velocity passes (Alg. 1 line 22) over the same blocked lists, on records of their own:
@@ -89,5 +98,8 @@ struct WallTerm {
   float c = 0, g[3] = {0, 0, 0};
 };
 WallTerm wallTerm(const PairArgs& a, const float* p);
+// The part of wallTerm for a particle within h of two or three walls (inclusion-exclusion
+// of their ghosts): added to the planes' sum; 0 elsewhere.
+WallTerm edgeTerm(const PairArgs& a, const float* p);
 
 }  // namespace physketch::pbd::detail

@@ -789,14 +789,139 @@ TEST(FluidRest, ColumnAtRestStaysStill) {
               worstSpeed, 100.0 * worstFill, FLUID_REST_STEPS, 100.0 * e.meanCompression);
 }
 
+// A lattice of fluid filling a closed box exactly is at rest density everywhere: the walls'
+// ghosts continue the lattice, so every particle, on a face, along an edge or in a corner,
+// sees the unbounded lattice the fluid's volume is calibrated on (C = 0 by definition,
+// latticeScale's brute-force sum). Each wall's term counts the ghosts behind its plane, so
+// where two walls meet the ghosts behind both were counted twice: before the edge and corner
+// terms (pbd/fluid.cpp, buildCornerTables) the box read up to +10.9 % (its corners) and 1.3 %
+// on average, now 1.4e-4 and 1e-5. Tolerance 1e-3: the interpolation of the 256-sample plane
+// table and the 64^2 and 24^3 edge and corner tables (the solid-on-the-ground test's bound).
+TEST(FluidWalls, ALatticeFillingABoxIsAtRestDensityInItsEdgesAndCorners) {
+  for (int dims : {0, 1}) {
+    FluidParams p = restParams(6, 7);
+    const int nx = 6, ny = dims ? 3 : 5, nz = 7;  // ny = 3: the floor's and the lid's ranges overlap
+    p.wallHi[1] = 0.02f * float(ny);
+    FluidSim s(p);
+    s.addBlock(0.01f, 0.01f, 0.01f, nx, ny, nz, 1000.0f);
+    FluidSolver solver(p);
+    FluidInput in;
+    in.count = s.size(), in.x = s.x.data(), in.y = s.y.data(), in.z = s.z.data();
+    in.invMass = s.w.data(), in.fluid = s.fluid.data(), in.restDensity = s.rho0.data();
+    solver.begin(in);
+    const DensityError e = solver.densityError();
+    std::printf("a full %d x %d x %d box: max compression %.2e, mean |C| %.2e\n", nx, ny, nz, e.maxCompression,
+                e.meanAbs);
+    EXPECT_LT(e.maxCompression, 1e-3f) << ny << " layers";
+    EXPECT_LT(e.meanAbs, 1e-3f) << ny << " layers";
+  }
+}
+
+// The edge and corner terms' gradients are those of their values: a lone particle in a corner
+// (within h of three walls, at least r from each so the walls' clamp stays out; ten times a
+// lattice particle.s mass, so its own term makes C > 0) takes Newton's step on its density,
+// dp = -C grad C / |grad C|^2 (no relaxation), with grad C taken here by central differences
+// of C = rho / rho0 - 1 as densityError() reads it at shifted positions. Tolerance: 2 degrees
+// between the directions and 2 % in the step's length (the tables' interpolation).
+TEST(FluidWalls, ACornerPushesAlongTheGradientOfItsDensity) {
+  FluidParams p = restParams(6, 6);
+  p.relaxation = 0.0f;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const float mass = 10.0f * 1000.0f * std::pow(2.0f * p.particleRadius, 3.0f);
+  int checked = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const float r = p.particleRadius;
+    // Half the trials where the three walls' octant term is not 0 (within 1.42 r of each).
+    const float spread = trial % 2 ? 2.0f : 0.35f;
+    const float at[3] = {(1.02f + spread * u(rng)) * r, (1.02f + spread * u(rng)) * r,
+                         0.12f - (1.02f + spread * u(rng)) * r};  // near x = 0, y = 0, z = 0.12
+    const auto compression = [&](const float* q) {
+      float x = q[0], y = q[1], z = q[2], w = 1.0f / mass, rho = 1000.0f;
+      std::uint8_t fluid = 1;
+      FluidInput in;
+      in.count = 1, in.x = &x, in.y = &y, in.z = &z, in.invMass = &w, in.fluid = &fluid, in.restDensity = &rho;
+      FluidSolver solver(p);
+      solver.begin(in);
+      return double(solver.densityError().meanAbs) * (solver.densityError().maxCompression > 0 ? 1 : -1);
+    };
+    if (compression(at) <= 0.0) continue;
+    double grad[3];
+    const float step = 1e-4f * r;
+    for (int k = 0; k < 3; ++k) {
+      float a[3] = {at[0], at[1], at[2]}, b[3] = {at[0], at[1], at[2]};
+      a[k] += step, b[k] -= step;
+      grad[k] = (compression(a) - compression(b)) / (2.0 * double(step));
+    }
+    float x = at[0], y = at[1], z = at[2], w = 1.0f / mass, rho = 1000.0f;
+    std::uint8_t fluid = 1;
+    FluidInput in;
+    in.count = 1, in.x = &x, in.y = &y, in.z = &z, in.invMass = &w, in.fluid = &fluid, in.restDensity = &rho;
+    FluidSolver solver(p);
+    solver.begin(in);
+    solver.densityIteration();
+    float dp[3];
+    solver.corrections(&dp[0], &dp[1], &dp[2]);
+    const double g2 = grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2];
+    const double d2 = double(dp[0]) * dp[0] + double(dp[1]) * dp[1] + double(dp[2]) * dp[2];
+    bool clamped = false;  // the walls' clamp cut the step short: not Newton's step
+    for (int k = 0; k < 3; ++k)
+      clamped |= at[k] + dp[k] <= p.wallLo[k] + 1.0001f * p.particleRadius ||
+                 at[k] + dp[k] >= p.wallHi[k] - 1.0001f * p.particleRadius;
+    if (clamped) continue;
+    const double cosine = -(grad[0] * dp[0] + grad[1] * dp[1] + grad[2] * dp[2]) / std::sqrt(g2 * d2);
+    EXPECT_GT(cosine, std::cos(2.0 * 3.14159265358979323846 / 180.0)) << "trial " << trial;
+    const double expected = compression(at) / std::sqrt(g2);
+    EXPECT_NEAR(std::sqrt(d2) / expected, 1.0, 0.02) << "trial " << trial;
+    ++checked;
+  }
+  EXPECT_GE(checked, 10);
+}
+
+// A fluid at rest in zero gravity stays at rest, walls or not: a 20 x 10 x 20 film filling the
+// floor of a box, its sides against the box's walls. Before the edge and corner terms
+// (FluidWalls above) its particles along the walls' edges read over-dense, and the floor's
+// push on them lifted the whole film off it at 4.5 cm/s (mean), 0.2 m/s at the edges. Oracle:
+// Newton's first law. s_corr is off here: its artificial pressure, a repulsion at the rest
+// spacing that no tension balances, still lifts a film off the floor in zero gravity (docs/
+// accuracy.md, Pending); this test isolates the walls. Bounds: 1 mm/s (45x below the drift;
+// measured 0.8 mm/s, the packing's own settling) and the top within a tenth of a spacing.
+TEST(FluidWalls, AFilmInABoxInZeroGravityStaysAtRest) {
+  const int nx = 20, ny = 10, nz = 20;
+  FluidParams p = restParams(nx, nz);
+  p.scorrK = 0.0f;
+  FluidSim s(p);
+  s.gravity = 0.0f;
+  s.substeps = 4;
+  s.addBlock(0.01f, 0.01f, 0.01f, nx, ny, nz, 1000.0f);
+  float top0 = 0.0f;
+  for (float y : s.y) top0 = std::max(top0, y);
+  float worstSpeed = 0.0f;
+  for (int step = 0; step < 120; ++step) {
+    s.step();
+    worstSpeed = std::max(worstSpeed, maxSpeed(s));
+  }
+  double meanVy = 0.0;
+  float top = 0.0f;
+  for (std::size_t i = 0; i < s.size(); ++i) meanVy += s.vy[i], top = std::max(top, s.y[i]);
+  meanVy /= double(s.size());
+  std::printf("zero-g film in a box: max speed %.6f m/s over 2 s, mean vy %.6f m/s, top moved %.5f m\n", worstSpeed,
+              meanVy, top - top0);
+  EXPECT_LT(worstSpeed, 1e-3f);
+  EXPECT_LT(std::fabs(top - top0), 0.1f * 0.02f);
+}
+
 // The XPBD compliance makes the fluid's stiffness a bulk modulus K = rho0 c^2 (pbd/fluid.h):
 // a column at rest is then compressed as a fluid of that sound speed, C(y) = g (H - y) / c^2
 // at depth H - y (rho g depth / K), a mean of g H / (2 c^2) over the column, for any substeps
 // and iterations. c = 8 m/s on a 0.32 m column (16 layers, r = 1 cm): 2.5 % mean, far above
 // the 0.3-0.5 % that 8 Jacobi iterations leave without compliance, and as a closed form the
-// oracle. Tolerance 15 %: the kernel's free-surface deficit (the top layer reads C < 0 and
-// counts 0) and the lattice's discreteness. Without the compliance the two settings read
-// 0.26 % and 0.07 %: iterations, not a modulus, set the stiffness.
+// oracle, H the fill height (the highest particle overstated it by up to half a spacing).
+// Tolerance 15 %: the two read 12 % and 10 % low (7 % in a 12 x 12 column: the walls' share;
+// before the edge terms, whose over-density added to the mean, 5-7 %), with the kernel's
+// free-surface deficit (the top layer reads C < 0 and counts 0) and the packing's disorder.
+// Without the compliance the two settings read 0.26 % and 0.07 %: iterations, not a
+// modulus, set the stiffness.
 TEST(FluidRest, CompressionIsTheBulkModulusForAnySubsteps) {
   const int nx = 6, ny = 16, nz = 6;
   const float c = 8.0f;
@@ -807,9 +932,7 @@ TEST(FluidRest, CompressionIsTheBulkModulusForAnySubsteps) {
     s.substeps = substeps, s.iterations = iterations, s.soundSpeed = c;
     s.addBlock(0.01f, 0.01f, 0.01f, nx, ny, nz, 1000.0f);
     for (int step = 0; step < 240; ++step) s.step();
-    float top = 0.0f;
-    for (float y : s.y) top = std::max(top, y);
-    const double height = double(top) + 0.01;  // the column's height now (m), to its surface
+    const double height = fillHeight(s, nx, nz);  // the column's height now (m), to its surface
     const double expected = 9.81 * height / (2.0 * double(c) * double(c));
     const DensityError e = s.solver().densityError();
     std::printf("%d substeps x %d iterations: mean compression %.3f %% against g H / (2 c^2) = %.3f %%\n", substeps,
