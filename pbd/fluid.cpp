@@ -78,6 +78,21 @@ FluidSolver::FluidSolver(const FluidParams& p) : params_(p) {
         if (r > 0.0 && r < h) second += nu * cs * (h - r) * (h - r) * r / (r2 + 0.01 * h * h) * (d * i) * (d * i);
       }
   laplaceScale_ = float(1.0 / second);
+  // s_corr's balance (scorrBeta_ in fluid.h): beta with sum_j (q_j^n - beta q_j) |gradW_j| r_j
+  // = 0 over the lattice's neighbours j, q = W / W(dq), |gradW| r = cs (h - r)^2.
+  {
+    const double sdq = h * h - std::pow(double(p.scorrDq) * h, 2), wdq = sdq * sdq * sdq;
+    double push = 0.0, pull = 0.0;
+    for (int i = -reach; i <= reach; ++i)
+      for (int j = -reach; j <= reach; ++j)
+        for (int k = -reach; k <= reach; ++k) {
+          const double r2 = d * d * double(i * i + j * j + k * k), r = std::sqrt(r2);
+          if (!(r > 0.0 && r < h)) continue;
+          const double q = std::pow(h * h - r2, 3) / wdq, virial = (h - r) * (h - r);
+          push += std::pow(q, p.scorrN) * virial, pull += q * virial;
+        }
+    scorrBeta_ = float(push / pull);
+  }
   buildWallTable();
 }
 
@@ -459,6 +474,7 @@ float FluidSolver::autoSoundSpeed(float gravity, float height, float vmax) {
 void FluidSolver::correctionPass() {
   PairArgs a =
       pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  a.scorrBeta = scorrBeta_;
   if (substep_ > 0.0f && iterations_ > 0) {  // s_corr as a force below kScorrStep (FluidParams::scorrK)
     const float r = substep_ / kScorrStep;
     a.scorrK *= std::min(1.0f, (r * r) * (float(kScorrIterations) / float(iterations_)));

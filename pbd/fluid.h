@@ -67,6 +67,13 @@ struct FluidParams {
   // applies k min(1, (h / kScorrStep)^2 kScorrIterations / I): a force (h^2 per substep,
   // shared by the iterations) wherever h is below kScorrStep, the paper's displacement
   // (bounded, stable at one substep) above it.
+  // Balanced: each pair's term is k ((W / W(dq))^n - beta W / W(dq)), beta fixed so that its
+  // virial over the rest lattice is 0 (a short-range push, a longer-range pull: 21 % of the
+  // paper's push at one spacing, 80 % of its stiffness there). The paper's term alone is a
+  // positive pressure at rest that nothing balances in a unilateral constraint without
+  // gravity: a zero-gravity sphere of water blew apart like a gas (0.24 m across -> 0.74 m in
+  // 2 s) and a film rose off the floor; a dam break's front ran further ahead (docs/accuracy.md,
+  // "s_corr's balance").
   float scorrK = 0.01f;
   int scorrN = 4;                // 1..8
   float scorrDq = 0.3f;
@@ -280,6 +287,9 @@ class FluidSolver {
   // tests place fluid particles) is exactly at rest, C = 0, so a sketched volume keeps its
   // size (SPH's sum of V W over a lattice is 1 only in the continuum limit).
   float latticeScale_ = 1.0f;
+  // s_corr's balance: the pair's artificial pressure is k (q^n - beta q), q = W / W(dq), beta
+  // such that its virial over the lattice is 0 (FluidParams::scorrK).
+  float scorrBeta_ = 0.0f;
   float laplaceScale_ = 1.0f;  // the viscosity's Laplacian, exact for quadratics on that lattice
   static constexpr int kWallSamples = 256;
   // The walls' density term (buildWallTable): B(y) and dB/dy on kWallSamples samples; where

@@ -210,12 +210,13 @@ void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
       for (std::int32_t k = 0; k < a.bk[b]; ++k) {
         const float* rj = a.rec + std::size_t(ids[k * kLanes + l]) * kRecord;
         const Pair p = pairTerms(a, ri[kX], ri[kY], ri[kZ], rj);
-        // s_corr (Eq. 13) between fluid particles: (W / W(dq))^n, mass-symmetric.
+        // s_corr (Eq. 13) between fluid particles, balanced: (W / W(dq))^n - beta W / W(dq),
+        // mass-symmetric.
         const float q = p.w * a.invWdq;
         float qn = q;
         for (int m = 1; m < a.scorrN; ++m) qn = qn * q;
         const float sm = (ri[kMass] + rj[kMass]) * (ri[kFluid] * rj[kFluid]);
-        const float coef = (ri[kLambda] * rj[kNu] + rj[kLambda] * ri[kNu]) - (a.scorrK * qn) * sm;
+        const float coef = (ri[kLambda] * rj[kNu] + rj[kLambda] * ri[kNu]) - (a.scorrK * (qn - a.scorrBeta * q)) * sm;
         const float cg = coef * p.g;
         acc.x = acc.x + cg * p.dx;
         acc.y = acc.y + cg * p.dy;
@@ -567,7 +568,7 @@ __attribute__((target("avx2"))) void lambdaBlocksAvx2(const PairArgs& a, std::si
 
 __attribute__((target("avx2"))) void correctionBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1) {
   const Consts8 c = consts8(a);
-  const __m256 invWdq = _mm256_set1_ps(a.invWdq), scorrK = _mm256_set1_ps(a.scorrK);
+  const __m256 invWdq = _mm256_set1_ps(a.invWdq), scorrK = _mm256_set1_ps(a.scorrK), beta = _mm256_set1_ps(a.scorrBeta);
   std::int32_t self[8];
   for (std::size_t b = b0; b < b1; ++b) {
     for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
@@ -585,7 +586,7 @@ __attribute__((target("avx2"))) void correctionBlocksAvx2(const PairArgs& a, std
       const __m256 sm = _mm256_mul_ps(_mm256_add_ps(ri[kMass], rj[kMass]), _mm256_mul_ps(ri[kFluid], rj[kFluid]));
       const __m256 coef = _mm256_sub_ps(
           _mm256_add_ps(_mm256_mul_ps(ri[kLambda], rj[kNu]), _mm256_mul_ps(rj[kLambda], ri[kNu])),
-          _mm256_mul_ps(_mm256_mul_ps(scorrK, qn), sm));
+          _mm256_mul_ps(_mm256_mul_ps(scorrK, _mm256_sub_ps(qn, _mm256_mul_ps(beta, q))), sm));
       const __m256 cg = _mm256_mul_ps(coef, p.g);
       ax = _mm256_add_ps(ax, _mm256_mul_ps(cg, p.dx));
       ay = _mm256_add_ps(ay, _mm256_mul_ps(cg, p.dy));

@@ -39,6 +39,7 @@ struct PairArgs {
   float invWdq = 0;                    // 1 / (h^2 - (dq h)^2)^3: W / W(dq) without cp
   float scorrK = 0;                    // k V h^2 / 2 (kg-free: times m_i + m_j), times the force scale
   int scorrN = 4;
+  float scorrBeta = 0;                 // s_corr's balance (FluidSolver::scorrBeta_): k (q^n - beta q), q = W / W(dq)
   float wallLo[3] = {0, 0, 0};         // box for fluid centres (walls already moved in by r)
   float wallHi[3] = {0, 0, 0};
   float wallPlaneLo[3] = {0, 0, 0};    // the walls themselves (m)
