@@ -146,6 +146,9 @@ void FluidSolver::buildWallTable() {
 // continued from the particle's distances to the planes (ghost layers at y + r + k d behind
 // every plane, the lattice's spacing d along the edge): exact for a particle on the lattice,
 // smooth for any other. Only the interpolation's error remains (tested against explicit ghosts).
+// The same sums give s_corr's push from the ghosts (S, QS, OS; detail::wallScorr): the
+// balanced s_corr is pressure-free inside the fluid, but without the walls as partners the
+// fluid beside them pressed itself into them (a zero-gravity film in a box rose at 3.9 cm/s).
 void FluidSolver::buildCornerTables() {
   const double d = 2.0 * params_.particleRadius, h = params_.kernelRadius, r = params_.particleRadius;
   const double cp = 315.0 / (64.0 * 3.14159265358979323846 * std::pow(h, 9));
@@ -154,11 +157,19 @@ void FluidSolver::buildCornerTables() {
   // sum over ghosts at normal distances z[k] = y[k] + r + m_k d (m_k >= 0) behind `axes` planes,
   // and the lattice (spacing d, aligned with the particle) along the other axes: the term and
   // its derivative by y[0].
-  const auto sum = [&](const double* y, int axes, double& term, double& d0) {
-    term = 0, d0 = 0;
+  // s_corr's pair term (FluidParams::scorrK, balanced by scorrBeta_) without its constants:
+  // (q^n - beta q) g(r) z0, q = W / W(dq), g = (h - r)^2 / r, z0 the ghost's distance along the
+  // first axis.
+  const double sdq = h * h - std::pow(double(params_.scorrDq) * h, 2), wdq = sdq * sdq * sdq;
+  const auto scorr = [&](double w, double dist, double z0) {
+    const double q = w / wdq;
+    return (std::pow(q, params_.scorrN) - double(scorrBeta_) * q) * (h - dist) * (h - dist) / dist * z0;
+  };
+  const auto sum = [&](const double* y, int axes, double& term, double& d0, double& push) {
+    term = 0, d0 = 0, push = 0;
     int m[3] = {0, 0, 0};
     for (m[0] = 0; m[0] <= reach; ++m[0])
-      for (m[1] = 0; m[1] <= reach; ++m[1])
+      for (m[1] = axes >= 2 ? 0 : -reach; m[1] <= reach; ++m[1])
         for (m[2] = axes == 3 ? 0 : -reach; m[2] <= reach; ++m[2]) {
           double z[3], q = h * h;
           for (int k = 0; k < 3; ++k) {
@@ -168,26 +179,38 @@ void FluidSolver::buildCornerTables() {
           if (q <= 0) continue;
           term += nu * cp * q * q * q;
           d0 += nu * cp * 3.0 * q * q * (-2.0 * z[0]);
+          push += scorr(q * q * q, std::sqrt(h * h - q), z[0]);
         }
   };
   const int E = kEdgeSamples, C = kCornerSamples;
+  const int S = kWallSamples;
+  walls_[kS].assign(std::size_t(S), 0.0f);
+  for (int i = 0; i < S; ++i) {
+    const double y[3] = {h * i / (S - 1), 0.0, 0.0};
+    double term, d0, push;
+    sum(y, 1, term, d0, push);
+    walls_[kS][std::size_t(i)] = float(push);
+  }
   walls_[kQ].assign(std::size_t(E) * E, 0.0f), walls_[kDQ].assign(std::size_t(E) * E, 0.0f);
+  walls_[kQS].assign(std::size_t(E) * E, 0.0f);
   for (int i = 0; i < E; ++i)
     for (int j = 0; j < E; ++j) {
       const double y[3] = {h * i / (E - 1), h * j / (E - 1), 0.0};
-      double term, d0;
-      sum(y, 2, term, d0);
-      walls_[kQ][std::size_t(i) * E + j] = float(term), walls_[kDQ][std::size_t(i) * E + j] = float(d0);
+      double term, d0, push;
+      sum(y, 2, term, d0, push);
+      const std::size_t at = std::size_t(i) * E + j;
+      walls_[kQ][at] = float(term), walls_[kDQ][at] = float(d0), walls_[kQS][at] = float(push);
     }
   walls_[kO].assign(std::size_t(C) * C * C, 0.0f), walls_[kDO].assign(std::size_t(C) * C * C, 0.0f);
+  walls_[kOS].assign(std::size_t(C) * C * C, 0.0f);
   for (int i = 0; i < C; ++i)
     for (int j = 0; j < C; ++j)
       for (int k = 0; k < C; ++k) {
         const double y[3] = {h * i / (C - 1), h * j / (C - 1), h * k / (C - 1)};
-        double term, d0;
-        sum(y, 3, term, d0);
+        double term, d0, push;
+        sum(y, 3, term, d0, push);
         const std::size_t at = (std::size_t(i) * C + j) * C + k;
-        walls_[kO][at] = float(term), walls_[kDO][at] = float(d0);
+        walls_[kO][at] = float(term), walls_[kDO][at] = float(d0), walls_[kOS][at] = float(push);
       }
 }
 
@@ -352,12 +375,13 @@ void FluidSolver::buildBlockedLists() {
   bidx_.resize(std::size_t(boff_[blocks]) * kLanes);
   forChunks(blocks, kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     for (std::size_t b = b0; b < b1; ++b) {
-      std::int32_t* out = &bidx_[std::size_t(boff_[b]) * kLanes];
+      // data() + offset: with no neighbour anywhere (a lone particle) bidx_ is empty.
+      std::int32_t* out = bidx_.data() + std::size_t(boff_[b]) * kLanes;
       const std::int32_t* row[kLanes];
       std::int32_t cnt[kLanes];
       for (int l = 0; l < kLanes; ++l) {
         const std::size_t i = std::min(b * kLanes + std::size_t(l), n_ - 1);  // lanes past n: no slots
-        row[l] = &lists_.index[i * std::size_t(width)];
+        row[l] = lists_.index.data() + i * std::size_t(width);
         cnt[l] = b * kLanes + std::size_t(l) < n_ ? lists_.count[i] : 0;
       }
       // Slot by slot, so the writes stream (lane by lane they were 8 strided streams).
@@ -439,6 +463,7 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>* walls, float* 
   a.wallSamples = int(wallB.size());
   a.wallInvStep = float(wallB.size() - 1) / h;
   a.wallQ = wallQ.data(), a.wallDQ = walls[3].data(), a.wallO = wallO.data(), a.wallDO = walls[5].data();
+  a.wallS = walls[6].data(), a.wallQS = walls[7].data(), a.wallOS = walls[8].data();
   a.edgeSamples = int(std::lround(std::sqrt(double(wallQ.size()))));
   a.cornerSamples = int(std::lround(std::cbrt(double(wallO.size()))));
   a.edgeInvStep = float(a.edgeSamples - 1) / h;
@@ -965,7 +990,8 @@ std::size_t FluidSolver::neighborBytes() const {
 }
 
 std::size_t FluidSolver::solverBytes() const {
-  return heldBytes(walls_[kB], walls_[kDB], walls_[kQ], walls_[kDQ], walls_[kO], walls_[kDO], rec_, dx_, dy_, dz_, comp_, lambdaSum_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
+  return heldBytes(walls_[kB], walls_[kDB], walls_[kQ], walls_[kDQ], walls_[kO], walls_[kDO], walls_[kS],
+                   walls_[kQS], walls_[kOS], rec_, dx_, dy_, dz_, comp_, lambdaSum_, bidx_, boff_, bk_, vrec_, v_[0], v_[1], v_[2], omega_[0],
                    omega_[1], omega_[2]);
 }
 

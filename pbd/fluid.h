@@ -73,7 +73,7 @@ struct FluidParams {
   // positive pressure at rest that nothing balances in a unilateral constraint without
   // gravity: a zero-gravity sphere of water blew apart like a gas (0.24 m across -> 0.74 m in
   // 2 s) and a film rose off the floor; a dam break's front ran further ahead (docs/accuracy.md,
-  // "s_corr's balance").
+  // "s_corr's balance"). The walls' ghosts take part in it as fluid particles would.
   float scorrK = 0.01f;
   int scorrN = 4;                // 1..8
   float scorrDq = 0.3f;
@@ -297,7 +297,10 @@ class FluidSolver {
   // kEdgeSamples^2 samples, and the ghosts all three count, O(y1, y2, y3) and dO/dy1 on
   // kCornerSamples^3 (Q and O are symmetric in their arguments).
   static constexpr int kEdgeSamples = 64, kCornerSamples = 24;
-  enum WallTable { kB, kDB, kQ, kDQ, kO, kDO, kWallTables };
+  // The same for s_corr's push from the ghosts (the pairs' term, normal to the plane, summed
+  // over a plane's, an edge's and a corner's ghosts): S(y), QS(y1, y2) and OS(y1, y2, y3),
+  // each the component along the first argument's axis.
+  enum WallTable { kB, kDB, kQ, kDQ, kO, kDO, kS, kQS, kOS, kWallTables };
   std::vector<float> walls_[kWallTables];
   // The walls' share of the viscosity's Laplacian weight: sum over ghost samples g of
   // nu_g |gradW| r / (r^2 + 0.01 h^2) (calibrated), by distance from the plane as B.

@@ -89,6 +89,48 @@ WallTerm edgeTerm(const PairArgs& a, const float* p) {
   return e;
 }
 
+void wallScorr(const PairArgs& a, const float* p, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  if (!(a.scorrK > 0.0f)) return;
+  float y[3][2], sgn[3][2], sum[3] = {0.0f, 0.0f, 0.0f};
+  int count[3] = {0, 0, 0}, axes = 0;
+  for (int k = 0; k < 3; ++k) {
+    const float lo = p[k] - a.wallPlaneLo[k], hi = a.wallPlaneHi[k] - p[k];
+    if (lo < a.h) y[k][count[k]] = std::max(lo, 0.0f), sgn[k][count[k]++] = 1.0f;
+    if (hi < a.h) y[k][count[k]] = std::max(hi, 0.0f), sgn[k][count[k]++] = -1.0f;
+    axes += count[k] > 0;
+  }
+  if (axes == 0) return;
+  for (int k = 0; k < 3; ++k)
+    for (int s = 0; s < count[k]; ++s) {  // each plane's ghosts push along its normal
+      const float u = y[k][s] * a.wallInvStep;
+      const int i = std::min(int(u), a.wallSamples - 2);
+      const float f = u - float(i);
+      sum[k] = sum[k] + sgn[k][s] * (a.wallS[i] + f * (a.wallS[i + 1] - a.wallS[i]));
+    }
+  const int E = a.edgeSamples, C = a.cornerSamples;
+  for (int k0 = 0; axes >= 2 && k0 < 3; ++k0)
+    for (int k1 = k0 + 1; k1 < 3; ++k1)
+      for (int s0 = 0; s0 < count[k0]; ++s0)
+        for (int s1 = 0; s1 < count[k1]; ++s1) {  // ghosts behind both planes: counted twice
+          const float u0 = y[k0][s0] * a.edgeInvStep, u1 = y[k1][s1] * a.edgeInvStep;
+          sum[k0] = sum[k0] - sgn[k0][s0] * lerp2(a.wallQS, E, u0, u1);
+          sum[k1] = sum[k1] - sgn[k1][s1] * lerp2(a.wallQS, E, u1, u0);
+        }
+  for (int s0 = 0; axes == 3 && s0 < count[0]; ++s0)
+    for (int s1 = 0; s1 < count[1]; ++s1)
+      for (int s2 = 0; s2 < count[2]; ++s2) {  // behind all three
+        const float u0 = y[0][s0] * a.cornerInvStep, u1 = y[1][s1] * a.cornerInvStep, u2 = y[2][s2] * a.cornerInvStep;
+        sum[0] = sum[0] + sgn[0][s0] * lerp3(a.wallOS, C, u0, u1, u2);
+        sum[1] = sum[1] + sgn[1][s1] * lerp3(a.wallOS, C, u1, u0, u2);
+        sum[2] = sum[2] + sgn[2][s2] * lerp3(a.wallOS, C, u2, u0, u1);
+      }
+  // dp_i = -cs w_i sum_g coef g d with coef = -scorrK (q^n - beta q) (m_i + m_g), m_g = m_i,
+  // w_i m_i = 1: 2 cs scorrK sum_g (q^n - beta q) g d.
+  const float factor = 2.0f * a.cs * a.scorrK;
+  for (int k = 0; k < 3; ++k) out[k] = factor * sum[k];
+}
+
 namespace {
 
 // Accumulators of one lane, finished per particle.
@@ -141,6 +183,11 @@ void finishCorrection(const PairArgs& a, std::size_t i, const CorrectionAcc& acc
     const WallTerm wall = wallTerm(a, ri);
     const float wl = ri[kW] * ri[kLambda];
     for (int k = 0; k < 3; ++k) d[k] = d[k] + wl * wall.g[k];
+  }
+  if (ri[kFluid] != 0.0f) {  // s_corr against the walls' ghosts (0 beyond h of every wall)
+    float sw[3];
+    wallScorr(a, ri, sw);
+    for (int k = 0; k < 3; ++k) d[k] = d[k] + sw[k];
   }
   if (ri[kFluid] != 0.0f)
     for (int k = 0; k < 3; ++k) {  // walls: the corrected centre stays r inside the box
@@ -473,10 +520,32 @@ PHYSKETCH_AVX2 void finishCorrection8(const PairArgs& a, std::size_t b, const __
   if (anyWall) wall = wallTerm8(a, ri);
   const __m256 wl = _mm256_mul_ps(ri[kW], ri[kLambda]);
   const __m256 acc[3] = {ax, ay, az};
+  // s_corr against the walls' ghosts: the scalar wallScorr lane by lane where a fluid lane is
+  // within h of a wall (the same bits); every fluid lane adds it, 0 or not, as the scalar does.
+  alignas(32) float sw[3][8] = {};
+  const __m256 h = _mm256_set1_ps(a.h);
+  __m256 nearWall = zero;
+  for (int k = 0; k < 3; ++k)
+    nearWall = _mm256_or_ps(nearWall, _mm256_or_ps(_mm256_cmp_ps(_mm256_sub_ps(ri[k], _mm256_set1_ps(a.wallPlaneLo[k])), h, _CMP_LT_OQ),
+                                                   _mm256_cmp_ps(_mm256_sub_ps(_mm256_set1_ps(a.wallPlaneHi[k]), ri[k]), h, _CMP_LT_OQ)));
+  nearWall = _mm256_and_ps(nearWall, fluid);
+  if (a.scorrK > 0.0f && !_mm256_testz_ps(nearWall, nearWall)) {
+    alignas(32) float px[3][8];
+    for (int k = 0; k < 3; ++k) _mm256_store_ps(px[k], ri[k]);
+    const int lanes = _mm256_movemask_ps(nearWall);
+    for (int l = 0; l < 8; ++l) {
+      if (!(lanes >> l & 1)) continue;
+      const float pl[3] = {px[0][l], px[1][l], px[2][l]};
+      float o[3];
+      wallScorr(a, pl, o);
+      sw[0][l] = o[0], sw[1][l] = o[1], sw[2][l] = o[2];
+    }
+  }
   __m256 d[3];
   for (int k = 0; k < 3; ++k) {
     __m256 v = _mm256_mul_ps(s, acc[k]);
     if (anyWall) v = _mm256_blendv_ps(v, _mm256_add_ps(v, _mm256_mul_ps(wl, wall.g[k])), walled);
+    v = _mm256_blendv_ps(v, _mm256_add_ps(v, _mm256_load_ps(sw[k])), fluid);
     const __m256 p = _mm256_add_ps(ri[k], v);
     const __m256 c = _mm256_sub_ps(
         _mm256_min_ps(_mm256_set1_ps(a.wallHi[k]), _mm256_max_ps(_mm256_set1_ps(a.wallLo[k]), p)), ri[k]);

@@ -57,6 +57,11 @@ struct PairArgs {
   const float* wallDQ = nullptr;
   const float* wallO = nullptr;
   const float* wallDO = nullptr;
+  // s_corr's push from the ghosts, on the same samples (FluidSolver::buildWallTable): per
+  // plane S(y), edge QS(y1, y2) and corner OS(y1, y2, y3), the component along y1's axis.
+  const float* wallS = nullptr;
+  const float* wallQS = nullptr;
+  const float* wallOS = nullptr;
   int edgeSamples = 0, cornerSamples = 0;
   float edgeInvStep = 0, cornerInvStep = 0;
 };
@@ -102,5 +107,8 @@ WallTerm wallTerm(const PairArgs& a, const float* p);
 // The part of wallTerm for a particle within h of two or three walls (inclusion-exclusion
 // of their ghosts): added to the planes' sum; 0 elsewhere.
 WallTerm edgeTerm(const PairArgs& a, const float* p);
+// s_corr between a fluid particle at p and the walls' ghosts (each of the fluid particle's own
+// mass): its share of dp (m), added before the walls' clamp; 0 beyond h of every wall.
+void wallScorr(const PairArgs& a, const float* p, float out[3]);
 
 }  // namespace physketch::pbd::detail

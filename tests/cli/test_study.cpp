@@ -637,13 +637,13 @@ TEST(StudyNorms, ViscousSpreadErrorFollowsHuppertsFront) {
 // Issue 8's viscous fluid against the substeps: scenes/study/pbd_viscous_pool.scene (a 16 cm
 // cube of 50 Pa s honey) against Huppert 1982's viscous gravity current over 1-2 s. PBF's
 // pressure acts outside the implicit viscous step, a first-order splitting error that makes
-// the pool spread ahead: measured 0.0132 m at 2 substeps, 0.0017 at 4, 0.0113 at 8, 0.0144
+// the pool spread ahead: measured 0.0130 m at 2 substeps, 0.0026 at 4, 0.0104 at 8, 0.0146
 // at 16 (before s_corr was balanced, 2026-11-28: 0.0140, 0.0025, 0.0089, 0.0129; docs/
 // accuracy.md). What is left at 8 is not the substep: the front is read as the last
 // particle's centre plus h/2 (5 mm), and Huppert's is a late-time similarity solution that
 // the slumping cube reaches from ahead (tests/pbd's driver reads the front 3.3 % ahead at
 // 1 s with 8 and with 16 substeps alike); the balanced s_corr's pull, a weak surface
-// tension, adds 2-3 mm at 8 and 16. Asserted: 8 substeps within 1.5 cm (7.5 % of the 0.2 m
+// tension, adds 1.5-2 mm at 8 and 16. Asserted: 8 substeps within 1.5 cm (7.5 % of the 0.2 m
 // front; 1 cm before the balance) and below 2 substeps' error. Deterministic.
 TEST(StudyCli, TheViscousPoolConvergesToHuppertWithSubsteps) {
 #if defined(__SANITIZE_ADDRESS__)
