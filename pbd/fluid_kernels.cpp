@@ -51,19 +51,29 @@ inline float lerp3(const float* t, int n, float u, float v, float w) {
   return a0 + f * (a1 - a0);
 }
 
+// Per axis, the walls within h of p: distance y (at least 0) and the sign of dy/dp.
+struct NearWalls {
+  float y[3][2], sgn[3][2];
+  int count[3] = {0, 0, 0}, axes = 0;  // axes: how many axes have a wall within h
+  NearWalls(const PairArgs& a, const float* p) {
+    for (int k = 0; k < 3; ++k) {
+      const float lo = p[k] - a.wallPlaneLo[k], hi = a.wallPlaneHi[k] - p[k];
+      if (lo < a.h) y[k][count[k]] = std::max(lo, 0.0f), sgn[k][count[k]++] = 1.0f;
+      if (hi < a.h) y[k][count[k]] = std::max(hi, 0.0f), sgn[k][count[k]++] = -1.0f;
+      axes += count[k] > 0;
+    }
+  }
+};
+
 }  // namespace
 
 WallTerm edgeTerm(const PairArgs& a, const float* p) {
   WallTerm e;
-  // Per axis, the planes within h: distance y and the sign of dy/dp.
-  float y[3][2], sgn[3][2];
-  int count[3] = {0, 0, 0}, axes = 0;
-  for (int k = 0; k < 3; ++k) {
-    const float lo = p[k] - a.wallPlaneLo[k], hi = a.wallPlaneHi[k] - p[k];
-    if (lo < a.h) y[k][count[k]] = std::max(lo, 0.0f), sgn[k][count[k]++] = 1.0f;
-    if (hi < a.h) y[k][count[k]] = std::max(hi, 0.0f), sgn[k][count[k]++] = -1.0f;
-    axes += count[k] > 0;
-  }
+  const NearWalls near(a, p);
+  const auto& y = near.y;
+  const auto& sgn = near.sgn;
+  const auto& count = near.count;
+  const int axes = near.axes;
   if (axes < 2) return e;
   const int E = a.edgeSamples;
   for (int k0 = 0; k0 < 3; ++k0)
@@ -92,15 +102,13 @@ WallTerm edgeTerm(const PairArgs& a, const float* p) {
 void wallScorr(const PairArgs& a, const float* p, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   if (!(a.scorrK > 0.0f)) return;
-  float y[3][2], sgn[3][2], sum[3] = {0.0f, 0.0f, 0.0f};
-  int count[3] = {0, 0, 0}, axes = 0;
-  for (int k = 0; k < 3; ++k) {
-    const float lo = p[k] - a.wallPlaneLo[k], hi = a.wallPlaneHi[k] - p[k];
-    if (lo < a.h) y[k][count[k]] = std::max(lo, 0.0f), sgn[k][count[k]++] = 1.0f;
-    if (hi < a.h) y[k][count[k]] = std::max(hi, 0.0f), sgn[k][count[k]++] = -1.0f;
-    axes += count[k] > 0;
-  }
+  const NearWalls near(a, p);
+  const auto& y = near.y;
+  const auto& sgn = near.sgn;
+  const auto& count = near.count;
+  const int axes = near.axes;
   if (axes == 0) return;
+  float sum[3] = {0.0f, 0.0f, 0.0f};
   for (int k = 0; k < 3; ++k)
     for (int s = 0; s < count[k]; ++s) {  // each plane's ghosts push along its normal
       const float u = y[k][s] * a.wallInvStep;
