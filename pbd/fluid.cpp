@@ -108,8 +108,8 @@ void FluidSolver::buildWallTable() {
   const double nu = double(latticeScale_) * d * d * d;
   const int reach = int(std::ceil(h / d));
   const double cs = 45.0 / (3.14159265358979323846 * std::pow(h, 6));
-  std::vector<float>&wallB_ = walls_[kB], &wallDB_ = walls_[kDB];
-  wallB_.assign(kWallSamples, 0.0f), wallDB_.assign(kWallSamples, 0.0f), wallV_.assign(kWallSamples, 0.0f);
+  std::vector<float>&tableB = walls_[kB], &tableDB = walls_[kDB];
+  tableB.assign(kWallSamples, 0.0f), tableDB.assign(kWallSamples, 0.0f), wallV_.assign(kWallSamples, 0.0f);
   for (int s = 0; s < kWallSamples; ++s) {
     const double y = h * double(s) / double(kWallSamples - 1);
     double b = 0, db = 0, v = 0;
@@ -132,7 +132,7 @@ void FluidSolver::buildWallTable() {
           v += nu * cs * (h - rr) * (h - rr) * rr / (r2 + 0.01 * h * h) * laplaceScale_ * morris;
         }
     }
-    wallB_[s] = float(b), wallDB_[s] = float(db), wallV_[s] = float(v);
+    tableB[s] = float(b), tableDB[s] = float(db), wallV_[s] = float(v);
   }
   buildCornerTables();
 }
