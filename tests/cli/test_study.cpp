@@ -972,9 +972,13 @@ TEST(StudyBudget, FromStudyChoosesAStudyRowAndMeasuresTheRunsError) {
 }
 
 // run --budget under solver mpm picks the Courant number C of 'substeps auto': the candidates are
-// C = 1, 1/2, 1/4, ... (halving until one is over the budget), their solver time per frame
-// grows as C falls (each halving about doubles the substeps), the choice is the calibrated one,
-// and the reference is finer than every candidate.
+// C = 1, 1/2, 1/4, ... (halving until one is over the budget), the choice is the calibrated one,
+// and the reference is finer than every candidate. The candidates' errors are measured, not
+// timed: halving C halves the substep, and the scheme is first order in it (symplectic Euler,
+// as the free-fall study below shows), so error(C = 1/2) / error(C = 1) is 1/2; the reference's
+// own error (its C at most 1/8 of the finest candidate's) and the landing's switch from free
+// fall to contact move it by a few per cent (0.49-0.52 seen), so 0.4-0.6. (Their times are not
+// compared: a unit test does not time; under load a doubled substep count read as 1.3x once.)
 TEST(StudyBudget, MpmBudgetPicksTheCourantNumber) {
   const fs::path dir = freshDir("budgetmpm");
   std::ofstream(dir / "s.strokes") << "physketch-strokes 1\nprimitive box stone 0  0 0.4 0  0.06 0.06 0.06 body=box\nplay 0\n";
@@ -1008,7 +1012,8 @@ TEST(StudyBudget, MpmBudgetPicksTheCourantNumber) {
   ASSERT_GE(table.size(), 2u);
   EXPECT_EQ(table[0].setting[0].first, "cfl=1");
   EXPECT_EQ(table[1].setting[0].first, "cfl=0.5");
-  EXPECT_GT(table[1].msPerFrame, 1.3 * table[0].msPerFrame);  // twice the substeps; timing noise allowed
+  ASSERT_GT(table[0].error, 0.0);
+  EXPECT_NEAR(table[1].error / table[0].error, 0.5, 0.1);
   bool fits = false;
   const std::ptrdiff_t k = chooseWithinBudget(table, budgetMs, fits);
   ASSERT_GE(k, 0);
