@@ -62,6 +62,9 @@ class Solver {
   // equation of state at the particle's J); NaN elsewhere (PBD's fluids hold density as a
   // constraint, not a pressure).
   virtual double pressure(std::int32_t /*i*/) const { return std::numeric_limits<double>::quiet_NaN(); }
+  // The radius (m) particle i touches others with and is drawn with where it differs from the
+  // voxel's half spacing (pbd: a rope's or cloth's, from its brush); NaN: the half spacing.
+  virtual double contactRadius(std::int32_t /*i*/) const { return std::numeric_limits<double>::quiet_NaN(); }
   // How the material around particle i is deformed from its rest shape (the deformation gradient
   // F), for looks that follow it (Gaussian splats: Sigma = F Sigma0 F^T). Identity where the
   // solver keeps none (pbd); solver mpm: F, and J^(1/3) I for fluids (which keep only J).

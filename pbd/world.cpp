@@ -123,6 +123,9 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   for (const BodyRange& br : bodies) {
     if (br.first < 0 || br.count < 1 || std::size_t(br.first) + std::size_t(br.count) > n)
       throw RuntimeError("PbdWorld: body " + std::to_string(members_.size()) + " has an invalid particle range");
+    const float thick = strandMassScale(br, spacing);
+    if (thick != 1.0f)
+      for (std::int32_t k = 0; k < br.count; ++k) parts_.mass[std::size_t(br.first + k)] *= thick;
     // A cloth cut before play keeps its lattice with holes (removed nodes): not members.
     std::vector<std::int32_t> ids;
     for (std::int32_t k = 0; k < br.count; ++k)
@@ -154,6 +157,7 @@ void PbdWorld::ensureParticleLevel() {
   px_ = parts_.x, py_ = parts_.y, pz_ = parts_.z;
   invMassP_.assign(n, 0.0f);
   pinned_.assign(n, 0);
+  contactSkip_.assign(n, -1);
   groundApproach_.assign(n, 0.0f);
   bounceNoted_.assign(n, 0);
   particleLevel_ = true;
@@ -276,6 +280,14 @@ double PbdWorld::bodyMass(int body) const {
   return im > 0.0 ? 1.0 / im : 0.0;
 }
 
+float strandMassScale(const BodyRange& range, double spacing) {
+  if (!(range.radius > 0.0f)) return 1.0f;
+  const double across = 2.0 * double(range.radius) / spacing;  // 1 for the default one-voxel brush
+  if (range.layout == BodyLayout::kChain) return float(across * across);
+  if (range.layout == BodyLayout::kLattice) return float(across);
+  return 1.0f;
+}
+
 Mat3 PbdWorld::bodyInertiaRest(int body) const { return inertiaRest_.at(std::size_t(body)); }
 
 int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kinematic) {
@@ -289,7 +301,8 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
       throw RuntimeError("PbdWorld::addBody: unknown material index");
     const std::int32_t id = parts_.push(p.x[i], p.y[i], p.z[i], p.stroke[i], p.material[i]);
     parts_.mass.back() =
-        static_cast<float>(materials_[static_cast<std::size_t>(p.material[i])].density * spacing * spacing * spacing);
+        static_cast<float>(materials_[static_cast<std::size_t>(p.material[i])].density * spacing * spacing * spacing) *
+        strandMassScale(shape, spacing);
     rx_.push_back(0.0f);
     ry_.push_back(0.0f);
     rz_.push_back(0.0f);
@@ -298,6 +311,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
       px_.push_back(p.x[i]), py_.push_back(p.y[i]), pz_.push_back(p.z[i]);
       invMassP_.push_back(0.0f);
       pinned_.push_back(0);
+      contactSkip_.push_back(-1);
       groundApproach_.push_back(0.0f);
       bounceNoted_.push_back(0);
     }
@@ -2119,7 +2133,7 @@ void PbdWorld::findColliders(int substep) {
     Vec3 p(px_[k], py_[k], pz_[k]);
     const Vec3 from(parts_.x[k], parts_.y[k], parts_.z[k]);
     if ((p - from).norm() > 0.5 * r) {
-      const SweepHit hit = colliders_->sweep(from, p, r);
+      const SweepHit hit = colliders_->sweep(from, p, radiusOf(k));
       if (hit.hit) {
         p = hit.centre;
         px_[k] = float(p.x()), py_[k] = float(p.y()), pz_[k] = float(p.z());
@@ -2129,7 +2143,8 @@ void PbdWorld::findColliders(int substep) {
     x.push_back(float(p.x())), y.push_back(float(p.y())), z.push_back(float(p.z()));
   }
   if (!ids.empty()) {
-    colliders_->contacts(x.data(), y.data(), z.data(), ids.size(), r, r, looseHits_);
+    // Every particle within reach of its own radius (looseColliderContact keeps those touching).
+    colliders_->contacts(x.data(), y.data(), z.data(), ids.size(), largestContactRadius(), r, looseHits_);
     for (MeshContact& c : looseHits_) c.particle = ids[std::size_t(c.particle)];
   }
   // Rigid bodies.

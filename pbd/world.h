@@ -115,6 +115,12 @@ enum class PbdPass : int {
 };
 extern const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)];
 
+// A rope's or cloth's particle mass over a voxel particle's (density x spacing^3): a rope as
+// thick as its brush (radius R, BodyRange::radius) is (2R / spacing)^2 voxel chains, a cloth
+// 2R / spacing voxel sheets; 1 for the default one-voxel brush (R = spacing / 2) and for every
+// other layout. So a rope drawn thick is as much heavier as it looks.
+float strandMassScale(const BodyRange& range, double spacing);
+
 class PbdWorld final : public Solver {
  public:
   // particles: positions at rest (velocities ignored; bodies start with their BodyInit);
@@ -128,6 +134,7 @@ class PbdWorld final : public Solver {
   std::vector<PlanEntry> planAll() const override;
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
+  double contactRadius(std::int32_t i) const override { return radiusOf(std::size_t(i)); }
   void setValidate(bool on) override { validate_ = on; }
   void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
   const GuardLog& guardLog() const override { return guardLog_; }
@@ -250,6 +257,15 @@ class PbdWorld final : public Solver {
 
   // Particle-level kinds (pbd/world_particles.cpp).
   bool isRigid(std::size_t body) const { return kind_[body] == MaterialKind::kRigid; }
+  // A particle's contact radius (m; contactRadius): a rope's or cloth's from its brush
+  // (strandRadius_), every other particle's the voxel's half spacing. Pairs touch at the sum of their radii; the
+  // ground and mesh colliders hold a particle's centre at its radius.
+  double radiusOf(std::size_t i) const {
+    const float s = strandRadius_[std::size_t(parts_.group(i))];
+    return s > 0.0f ? double(s) : params_.particleRadius;
+  }
+  // The largest contact radius of a live particle-level body (at least the half spacing).
+  double largestContactRadius() const;
   // Whether any rigid body (fixed, carried or dynamic) has restitution > 0. A rigid pair bounces
   // at the mean of its two restitutions, so then every dynamic rigid body may bounce (the
   // restitution pass): one of e = 0 off a body of e > 0, and one of e > 0 off anything.
@@ -361,6 +377,10 @@ class PbdWorld final : public Solver {
   std::vector<float> px_, py_, pz_;  // per particle: predicted position this substep (particle-level kinds)
   std::vector<float> invMassP_;      // per particle: 1/kg for a dynamic particle-level particle, else 0
   std::vector<std::uint8_t> pinned_; // per particle: held where it was drawn (a rope end or cloth on a fixed body)
+  // Per particle: the body it does not touch (-1: none): a rope's particles within its contact
+  // distance of an end tied to a body (pinned, attached or linked) overlap that body where they
+  // are tied, and pushing them out of it would fight the tie (a thick rope kinked).
+  std::vector<std::int32_t> contactSkip_;
   std::vector<std::int32_t> loose_;  // alive particles of particle-level bodies (ascending), rebuilt by refresh
   // Soft bodies: clusters of radius R, centres at least dC apart (Phys-Sketch Fig. 3).
   struct SoftClusters {

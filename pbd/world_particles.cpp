@@ -321,6 +321,15 @@ void PbdWorld::attachStrandEnds(std::size_t b) {
     if (best < 0) continue;
     const std::int32_t i = id[k], j = id[std::size_t(best)];
     const auto o = std::size_t(parts_.group(std::size_t(j)));
+    if (kind_[b] == MaterialKind::kRope) {
+      // The rope's particles within its contact distance of the tied end (rest positions)
+      // overlap the body it is tied to: they do not touch it.
+      const Vec3 end = at(parts_.x, parts_.y, parts_.z, std::size_t(i));
+      const double within = radiusOf(std::size_t(i)) + params_.particleRadius;
+      for (std::int32_t m : mem)
+        if ((at(parts_.x, parts_.y, parts_.z, std::size_t(m)) - end).norm() <= within)
+          contactSkip_[std::size_t(m)] = static_cast<std::int32_t>(o);
+    }
     if (mode_[o] == BodyMode::kFixed) {
       pinned_[std::size_t(i)] = 1;
     } else if (kind_[b] == MaterialKind::kRope && isRigid(o)) {
@@ -622,11 +631,19 @@ Vec3 PbdWorld::rigidPoint(std::size_t i) const {
 // for fluids, of the same one) closer than one spacing plus a margin at the predicted
 // positions. Rigid bodies contribute the particles within reach of the particle-level
 // material's bounding box. Pairs are listed by i, then by j's rank: a fixed order.
+double PbdWorld::largestContactRadius() const {
+  double largest = params_.particleRadius;
+  for (std::size_t b = 0; b < members_.size(); ++b)
+    if (mode_[b] != BodyMode::kEmpty && !members_[b].empty()) largest = std::max(largest, double(strandRadius_[b]));
+  return largest;
+}
+
 void PbdWorld::findNeighbors() {
   ParticlePairContacts& pairs = contacts_.particlePair;
   pairs.clear();
-  const double r = params_.particleRadius;
-  const float radius = static_cast<float>(3.0 * r);  // touching (2 r) plus half a spacing of travel
+  const double r = params_.particleRadius, largest = largestContactRadius();
+  // Touching (the two largest radii: 2 r without thick strands) plus half a spacing of travel.
+  const float radius = static_cast<float>(2.0 * largest + r);
   std::vector<float> x, y, z;
   std::vector<std::int32_t> id;
   // Only pairs of different bodies are contacts, so a particle far from every other body's
@@ -703,6 +720,9 @@ void PbdWorld::findNeighbors() {
         const std::uint32_t phj = parts_.phase[std::size_t(other)];
         const bool sameBody = phase::group(phi) == phase::group(phj);
         if (sameBody) return;  // a body's own particles: clusters, links or density hold them
+        // A rope's end where it is tied (contactSkip_).
+        if (contactSkip_[std::size_t(i)] == phase::group(phj) || (looseJ && contactSkip_[std::size_t(other)] == phase::group(phi)))
+          return;
         // Fluid against fluid is the density constraint's, not a contact.
         if (phase::has(phi, phase::kFluid) && phase::has(phj, phase::kFluid)) return;
         if (invMassP_[std::size_t(i)] == 0.0f && (!looseJ || invMassP_[std::size_t(other)] == 0.0f)) return;
@@ -723,11 +743,11 @@ void PbdWorld::findNeighbors() {
 // removes (static) or reduces (dynamic) their relative tangential motion of this substep.
 void PbdWorld::particleContact() {
   const ParticlePairContacts& pairs = contacts_.particlePair;
-  const double touch = 2.0 * params_.particleRadius;
   for (std::size_t c = 0; c < pairs.size(); ++c) {
     const auto i = std::size_t(pairs.i[c]), j = std::size_t(pairs.j[c]);
     const auto bj = std::size_t(parts_.group(j));
     const bool rigidJ = isRigid(bj);
+    const double touch = radiusOf(i) + radiusOf(j);  // 2 r but where a thick strand is
     const Vec3 pi = at(px_, py_, pz_, i);
     const Vec3 pj = rigidJ ? rigidPoint(j) : at(px_, py_, pz_, j);
     const Vec3 d = pi - pj;
@@ -822,11 +842,12 @@ void PbdWorld::particleContact() {
     }
   }
   looseColliderContact();
-  // The ground (and its friction) for every dynamic particle-level particle.
-  const double floorY = params_.groundY + params_.particleRadius;
+  // The ground (and its friction) for every dynamic particle-level particle, its centre held
+  // at its contact radius above the plane.
   forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
     for (std::size_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(loose_[k]);
+      const double floorY = params_.groundY + radiusOf(i);
       if (invMassP_[i] == 0.0f || !(py_[i] < floorY)) continue;
       const double pen = floorY - py_[i];
       if (groundApproach_[i] == 0.0f) groundApproach_[i] = std::min(parts_.vy[i], -1e-30f);
@@ -1421,11 +1442,11 @@ namespace physketch::pbd {
 // the contact plane to a radius from it, then Coulomb friction against the surface's motion.
 void PbdWorld::looseColliderContact() {
   if (looseHits_.empty()) return;
-  const double r = params_.particleRadius, h = params_.dt / params_.substeps;
+  const double h = params_.dt / params_.substeps;
   for (const MeshContact& c : looseHits_) {
     const auto i = std::size_t(c.particle);
     Vec3 p = at(px_, py_, pz_, i);
-    const double pen = r - (p - c.point).dot(c.normal);
+    const double pen = radiusOf(i) - (p - c.point).dot(c.normal);
     if (pen <= 0.0) continue;
     p += pen * c.normal;
     const Material& m = materials_[std::size_t(parts_.material[i])];

@@ -29,15 +29,18 @@ std::vector<Vec3> positionsOf(const ParticleArrays& p, const std::vector<std::in
   return pos;
 }
 
-// A rope is one particle across: a tube of the particle's radius (h/2) along each run of
-// consecutive ids (neighbours on the chain; a cut leaves a gap in the ids).
-render::TriangleMesh ropeTube(const std::vector<std::int32_t>& ids, const std::vector<Vec3>& pos, double spacing) {
+// A rope is one particle across: a tube of its particles' contact radius (the brush's half
+// size; h/2 where the solver has none) along each run of consecutive ids (neighbours on the
+// chain; a cut leaves a gap in the ids).
+render::TriangleMesh ropeTube(const Solver& solver, const std::vector<std::int32_t>& ids, const std::vector<Vec3>& pos,
+                              double spacing) {
   std::vector<std::vector<Vec3>> chains(1);
   for (std::size_t k = 0; k < ids.size(); ++k) {
     if (k > 0 && ids[k] != ids[k - 1] + 1) chains.emplace_back();
     chains.back().push_back(pos[k]);
   }
-  return render::tubeMesh(chains, 0.5 * spacing);
+  const double radius = ids.empty() ? 0.0 : solver.contactRadius(ids.front());
+  return render::tubeMesh(chains, std::isfinite(radius) ? radius : 0.5 * spacing);
 }
 
 // What particles `ids` occupy now (m^3): spacing^3 times the sum of their volume ratios det F
@@ -165,7 +168,7 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       render::SmoothingReport report;
       const std::vector<Vec3> pos = positionsOf(p, ids);
       if (kind == MaterialKind::kRope) {
-        mesh = ropeTube(ids, pos, mapping_.voxelSize());
+        mesh = ropeTube(solver, ids, pos, mapping_.voxelSize());
       } else {
         // A cloth is a sheet one particle thick: held to its particles' volume it would thin
         // into holes; its cells' surface is kept as it is.
@@ -426,7 +429,7 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
         fo.voxelFraction = surfaces.fluidVoxelFraction;
         g.mesh = render::meshFluid(positionsOf(p, ids), mapping.voxelSize(), fo);
       } else if (mat.kind == MaterialKind::kRope) {
-        g.mesh = ropeTube(ids, positionsOf(p, ids), mapping.voxelSize());  // the frames' tube
+        g.mesh = ropeTube(solver, ids, positionsOf(p, ids), mapping.voxelSize());  // the frames' tube
       } else if (surfaces.solidGrid && mat.kind != MaterialKind::kCloth) {
         g.mesh = gridMassMesh(solver, ids, mapping.voxelSize(), particleVolume(solver, ids, mapping.voxelSize()));  // as the frames
       } else {

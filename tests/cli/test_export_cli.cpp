@@ -157,6 +157,38 @@ TEST(CliExport, MeshParticlesAndVdbPerFrame) {
   fs::remove_all(dir);
 }
 
+// A rope is drawn as thick as its brush (docs/formats.md: size/2 is its contact and render
+// radius). A straight rope of brush size 0.04 m in zero gravity, exported at frame 0: every
+// vertex of its tube lies 0.02 m from the rope's line (the end caps' centres on it), where the
+// voxel's half spacing (0.0033 m here) was drawn before. Tolerance 1e-5 m: float32 positions.
+TEST(CliExport, ARopeTubeIsAsThickAsItsBrush) {
+  const fs::path dir = freshDir("rope");
+  writeText(dir / "r.strokes", "physketch-strokes 1\nstroke create sphere 0.04 cord\nsample 0  -0.2 0.3 0\n"
+                               "sample 1  0.2 0.3 0\nplay 1\n");
+  writeText(dir / "r.scene", "physketch-scene 1\nstrokes r.strokes\nworkspace 0 0.5 0 1.0\ngravity 0 0 0\n"
+                             "material cord rope density=500\nduration 0.05\noutput report\n");
+  const fs::path out = dir / "out";
+  const Result r = runCli("run '" + (dir / "r.scene").string() + "' -q --frames 1 --export mesh --out '" + out.string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto v = objVertices(out / "meshes" / "frame_0000" / "0000_stroke_0.obj");
+  ASSERT_GT(v.size(), 100u);
+  int onAxis = 0, onSurface = 0;
+  double worst = 0.0;
+  for (const auto& x : v) {
+    const double d = std::hypot(x[1] - 0.3, x[2]);
+    if (d < 1e-5) {
+      ++onAxis;
+    } else {
+      ++onSurface;
+      worst = std::max(worst, std::abs(d - 0.02));
+    }
+  }
+  EXPECT_LE(onAxis, 2);  // the caps' centres
+  EXPECT_GT(onSurface, 100);
+  EXPECT_LT(worst, 1e-5);
+  fs::remove_all(dir);
+}
+
 // --solid-surface grid: MPM solids meshed from the grid's mass (PhyVR §4.1). The oracle for the
 // volume is the particles' (count x h^3 at rest; the search meets it to 0.2 %, report.json says
 // how far each mesh was: within 0.5 % allows the float sums); the exported mesh's vertices lie

@@ -542,6 +542,129 @@ TEST(Rope, TwoRopesSeparateAtETimesTheirApproachSpeed) {
   EXPECT_LT((momentum(w) - m0).norm(), 2e-3 * scale);
 }
 
+// A rope's contact radius is its brush's half size (BodyRange::radius; docs/formats.md), not
+// the voxel's. Straight 20-particle ropes of radius R = 2 spacings (R / r = 4) fall 5 cm and
+// settle, each on something else: the ground, a fixed slab (a rope right above a row of its
+// particles), a mesh collider floor (a square of two triangles at y = 0.2), and another rope
+// of radius R lying on the ground across it. They rest where geometry puts a sphere of radius
+// R: centres R above the ground and above the mesh floor, R + r above the slab's top particle
+// centres, 2R above the other rope's. Tolerance 0.5 mm (a tenth of the r they would rest at were the
+// radius ignored, 3 r lower): PBD leaves a resting particle in a contact exactly at its
+// distance after the substep's projection, so what remains is the last substep's gravity sag
+// (g h^2 = 4 um at 8 substeps of 1/60 s) and the dimples between the particles below (the rope
+// sits right above them, and friction holds it there). (The rope below is thick too: under a
+// rope 16 times heavier a thin one gave way by 1.8 mm at 4 iterations, the mass ratio's slow
+// Gauss-Seidel convergence, not the radius.)
+TEST(Rope, AThickRopeTouchesAtItsBrushRadius) {
+  const double R = 2.0 * kSpacing;
+  enum class On { kGround, kSlab, kMesh, kRope };
+  for (On under : {On::kGround, On::kSlab, On::kMesh, On::kRope}) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("thick", MaterialKind::kRope), makeKind("slab", MaterialKind::kRigid),
+                                  makeKind("thin", MaterialKind::kRope)};
+    // The level the rope's centres should come to rest at, the oracle.
+    const double rest = under == On::kGround ? R
+                        : under == On::kSlab ? 0.1 + 3 * kSpacing + kRadius + R
+                        : under == On::kMesh ? 0.2 + R
+                                                : 3.0 * R;
+    BodyRange thick = addChain(p, Vec3(0.3, rest + 0.05, 0.5), Vec3(1, 0, 0), 20, 0);
+    thick.radius = float(R);
+    std::vector<BodyRange> bodies{thick};
+    if (under == On::kSlab) {
+      bodies.push_back(addBox(p, Vec3(0.25, 0.1, 0.4), 30, 4, 21, 1, 1));
+      bodies[1].init.fixed = true;
+    } else if (under == On::kRope) {
+      // Across the falling one's middle, on the ground: its particle at x = 0.4 is right below.
+      bodies.push_back(addChain(p, Vec3(0.4, R, 0.4), Vec3(0, 0, 1), 21, 2));
+      bodies[1].stroke = 2;
+      bodies[1].radius = float(R);
+    }
+    PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
+    if (under == On::kMesh) {
+      TriangleSoup soup;
+      soup.vertices = {Vec3(0.1, 0.2, 0.3), Vec3(0.8, 0.2, 0.3), Vec3(0.8, 0.2, 0.7), Vec3(0.1, 0.2, 0.7)};
+      soup.triangles = {{0, 2, 1}, {0, 3, 2}};
+      MeshCollider c;
+      c.name = "floor";
+      w.setColliders(ColliderSet({c}, {soup}));
+    }
+    for (int s = 0; s < 60; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+    const ParticleArrays& q = w.particles();
+    double lowest = 1e30, highest = -1e30;
+    for (std::int32_t i : w.bodyParticles(0)) {
+      if (under == On::kRope && std::abs(q.x[std::size_t(i)] - 0.4) > 0.5 * kSpacing) continue;  // the crossing
+      lowest = std::min(lowest, double(q.y[std::size_t(i)]));
+      highest = std::max(highest, double(q.y[std::size_t(i)]));
+    }
+    std::printf("thick rope on %d: centres at %.5f-%.5f m, geometry %.5f m\n", int(under), lowest, highest, rest);
+    EXPECT_NEAR(lowest, rest, 5e-4) << int(under);
+    if (under != On::kRope) {
+      EXPECT_NEAR(highest, rest, 5e-4) << int(under);  // lying flat
+    }
+  }
+}
+
+// A thick rope is tied where it was drawn touching: its first particle to a fixed beam (pinned),
+// its last to a ball (attached). Its particles near the ties overlap the beam and the ball (the
+// rope is thicker than the gap it was drawn across) and must not be pushed out of them, or the
+// ties and the contacts fight: a rope of radius 2 spacings hanging a ball from a beam was
+// pushed 19 mm sideways (its ends out of the beam and the ball). Statics is the oracle: a rope under
+// tension hangs straight down from its pin (every particle within 0.5 mm of the vertical
+// through it, a twentieth of the rope's 4-spacing thickness) and as long as drawn (end to end
+// within 1 %: it is inextensible, stretch compliance 0).
+TEST(Rope, AThickRopeHangsStraightFromWhereItIsTied) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("beam", MaterialKind::kRigid), makeKind("rope", MaterialKind::kRope, 100.0),
+                                makeKind("bob", MaterialKind::kRigid)};
+  const double R = 2.0 * kSpacing;
+  BodyRange beam = addBox(p, Vec3(-0.02, 1.0, -0.02), 5, 1, 5, 0, 0);
+  beam.init.fixed = true;
+  const Vec3 pivot(0.0, 1.0 - kSpacing, 0.0);  // one spacing below the beam's middle particle
+  const int n = 30;
+  BodyRange rope = addChain(p, pivot, Vec3(0, -1, 0), n, 1);
+  rope.radius = float(R);
+  const int bobCells = 3;
+  const Vec3 bobCentre = pivot - ((n - 1) * kSpacing + kSpacing + bobCells * kSpacing) * Vec3::UnitY();
+  BodyRange bob = addBall(p, bobCentre, bobCells, 3, 2);
+  PbdWorld w(p, {beam, rope, bob}, mats, params(8, 4));
+  for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  const ParticleArrays& q = w.particles();
+  const auto& ids = w.bodyParticles(1);
+  double sideways = 0.0;
+  for (std::int32_t i : ids)
+    sideways = std::max(sideways, std::hypot(q.x[std::size_t(i)] - pivot.x(), q.z[std::size_t(i)] - pivot.z()));
+  const auto pos = [&](std::int32_t i) { return Vec3(q.x[std::size_t(i)], q.y[std::size_t(i)], q.z[std::size_t(i)]); };
+  const double length = (pos(ids.back()) - pos(ids.front())).norm(), drawn = (n - 1) * kSpacing;
+  std::printf("thick hanging rope: %.5f m sideways at most, end to end %.5f m of %.5f\n", sideways, length, drawn);
+  EXPECT_LT(sideways, 5e-4);
+  EXPECT_NEAR(length / drawn, 1.0, 0.01);
+}
+
+// A rope drawn thick is as much heavier as its cross-section (strandMassScale: (2R / spacing)^2
+// voxel chains). Zero gravity: a rope of radius R = one spacing (4 voxel chains' mass) moving up
+// at 0.5 m/s meets a thin one (radius r, one chain) moving down at 0.5 m/s along their whole
+// length, e = 0.8 and no friction. Newton's law of restitution with momentum kept (closed form,
+// m_A = 4 m_B): v_A' = (4 (0.5) - 0.5 - 0.8 (1.0)) / 5 = 0.14 m/s, v_B' = v_A' + 0.8 = 0.94 m/s;
+// tolerance 3 % of the approach speed, as in the equal ropes' test. Ropes of equal mass would
+// leave at -0.4 and +0.4 m/s.
+TEST(Rope, AThickRopeIsAsHeavyAsItsCrossSection) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("thick", MaterialKind::kRope), makeKind("thin", MaterialKind::kRope)};
+  for (Material& m : mats) m.staticFriction = m.dynamicFriction = 0.0, m.restitution = 0.8;
+  BodyRange a = addChain(p, Vec3(0.0, 0.5, 0.0), Vec3(1, 0, 0), 20, 0);
+  BodyRange b = addChain(p, Vec3(0.0, 0.55, 0.0), Vec3(1, 0, 0), 20, 1);
+  a.stroke = 0, b.stroke = 1;
+  a.radius = float(kSpacing);
+  a.init.velocity = Vec3(0.0, 0.5, 0.0);
+  b.init.velocity = Vec3(0.0, -0.5, 0.0);
+  PbdWorld w(p, {a, b}, mats, params(8, 4, Vec3::Zero()));
+  EXPECT_FLOAT_EQ(w.particles().mass[0], float(4.0 * kParticleMass));
+  for (int s = 0; s < 10; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  std::printf("thick and thin rope: %.4f and %.4f m/s (closed form 0.14 and 0.94)\n", w.velocity(0).y(), w.velocity(1).y());
+  EXPECT_NEAR(w.velocity(0).y(), 0.14, 0.03);
+  EXPECT_NEAR(w.velocity(1).y(), 0.94, 0.03);
+}
+
 // A bounce is kept per particle, once per substep, from its first contact worth one. A rope A
 // of e = 0.8 (16 particles) lies along a bar C of e = 0 (8 x 2 x 2 particles, centred on it;
 // A's ends are 4 spacings past the bar, beyond the reach at which a rope's ends attach to a
