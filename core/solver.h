@@ -65,6 +65,12 @@ class Solver {
   // The radius (m) particle i touches others with and is drawn with where it differs from the
   // voxel's half spacing (pbd: a rope's or cloth's, from its brush); NaN: the half spacing.
   virtual double contactRadius(std::int32_t /*i*/) const { return std::numeric_limits<double>::quiet_NaN(); }
+  // Where body `body` is a cloth lattice: its first particle's id and its rows x cols (node
+  // (r, c) is particle first + r * cols + c; a removed node is not in bodyParticles). False for
+  // every other body and solver.
+  virtual bool lattice(int /*body*/, std::int32_t& /*first*/, std::int32_t& /*rows*/, std::int32_t& /*cols*/) const {
+    return false;
+  }
   // How the material around particle i is deformed from its rest shape (the deformation gradient
   // F), for looks that follow it (Gaussian splats: Sigma = F Sigma0 F^T). Identity where the
   // solver keeps none (pbd); solver mpm: F, and J^(1/3) I for fluids (which keep only J).

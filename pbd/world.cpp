@@ -178,6 +178,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   members_.push_back(std::move(members));
   kind_.push_back(kind);
   strandRadius_.push_back(0.0f);
+  lattice_.push_back({0, 0, 0});
   motion_.push_back(motion);
   restCentre_.push_back(restCentre);
   invMass_.push_back(0.0);
@@ -278,6 +279,13 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
 double PbdWorld::bodyMass(int body) const {
   const double im = invMass_.at(std::size_t(body));
   return im > 0.0 ? 1.0 / im : 0.0;
+}
+
+bool PbdWorld::lattice(int body, std::int32_t& first, std::int32_t& rows, std::int32_t& cols) const {
+  const auto b = std::size_t(body);
+  if (b >= lattice_.size() || lattice_[b][1] < 1 || mode_[b] == BodyMode::kEmpty) return false;
+  first = lattice_[b][0], rows = lattice_[b][1], cols = lattice_[b][2];
+  return true;
 }
 
 float strandMassScale(const BodyRange& range, double spacing) {

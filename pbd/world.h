@@ -50,6 +50,7 @@
 // body particles) per iteration and a resting body sinks.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -135,6 +136,7 @@ class PbdWorld final : public Solver {
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   double contactRadius(std::int32_t i) const override { return radiusOf(std::size_t(i)); }
+  bool lattice(int body, std::int32_t& first, std::int32_t& rows, std::int32_t& cols) const override;
   void setValidate(bool on) override { validate_ = on; }
   void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
   const GuardLog& guardLog() const override { return guardLog_; }
@@ -374,6 +376,7 @@ class PbdWorld final : public Solver {
   // --- particle-level kinds -------------------------------------------------
   std::vector<MaterialKind> kind_;  // per body: what it runs as (solverModel(kind, pbd).runsAs)
   std::vector<float> strandRadius_;  // per body: a rope's or cloth's radius from the brush (m), else 0
+  std::vector<std::array<std::int32_t, 3>> lattice_;  // per body: a cloth's first id, rows, cols; else rows 0
   std::vector<float> px_, py_, pz_;  // per particle: predicted position this substep (particle-level kinds)
   std::vector<float> invMassP_;      // per particle: 1/kg for a dynamic particle-level particle, else 0
   std::vector<std::uint8_t> pinned_; // per particle: held where it was drawn (a rope end or cloth on a fixed body)

@@ -61,6 +61,7 @@ void PbdWorld::setupParticleBody(std::size_t b, const BodyRange& range) {
     case MaterialKind::kRope:
     case MaterialKind::kCloth:
       strandRadius_[b] = range.radius;
+      if (kind_[b] == MaterialKind::kCloth) lattice_[b] = {range.first, range.rows, range.cols};
       buildStrand(b, range);
       break;
     default: break;  // fluid: free particles; the density pass finds their neighbours

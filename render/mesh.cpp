@@ -85,6 +85,74 @@ TriangleMesh tubeMesh(const std::vector<std::vector<Vec3>>& chains, double radiu
   return mesh;
 }
 
+TriangleMesh sheetMesh(const std::vector<Vec3>& nodes, const std::vector<std::uint8_t>& alive, int rows, int cols,
+                       double halfThickness) {
+  if (!(halfThickness > 0.0) || !std::isfinite(halfThickness))
+    throw RuntimeError("sheetMesh: the half thickness must be finite and > 0 m");
+  if (rows < 1 || cols < 1 || nodes.size() != std::size_t(rows) * std::size_t(cols) || alive.size() != nodes.size())
+    throw RuntimeError("sheetMesh: " + std::to_string(nodes.size()) + " nodes and " + std::to_string(alive.size()) +
+                       " alive flags for a " + std::to_string(rows) + " x " + std::to_string(cols) + " lattice");
+  const auto at = [&](int r, int c) { return std::size_t(r) * std::size_t(cols) + std::size_t(c); };
+  for (std::size_t k = 0; k < nodes.size(); ++k)
+    if (alive[k] && !nodes[k].allFinite())
+      throw RuntimeError("sheetMesh: node " + std::to_string(k) + " is not finite");
+  // A cell (r, c) spans nodes (r, c), (r, c+1), (r+1, c+1), (r+1, c).
+  const auto live = [&](int r, int c) {
+    return r >= 0 && c >= 0 && r + 1 < rows && c + 1 < cols && alive[at(r, c)] && alive[at(r, c + 1)] &&
+           alive[at(r + 1, c + 1)] && alive[at(r + 1, c)];
+  };
+  std::vector<Vec3> normal(nodes.size(), Vec3::Zero());
+  for (int r = 0; r + 1 < rows; ++r)
+    for (int c = 0; c + 1 < cols; ++c) {
+      if (!live(r, c)) continue;
+      // Twice the cell's vector area (the diagonals' cross product), in the node order's sense.
+      const Vec3 n = (nodes[at(r + 1, c + 1)] - nodes[at(r, c)]).cross(nodes[at(r + 1, c)] - nodes[at(r, c + 1)]);
+      for (std::size_t k : {at(r, c), at(r, c + 1), at(r + 1, c + 1), at(r + 1, c)}) normal[k] += n;
+    }
+  TriangleMesh mesh;
+  // Two vertices per node, on its +normal and -normal side (a node without a normal gets
+  // none: it is in no live cell).
+  std::vector<std::uint32_t> top(nodes.size(), 0);
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    if (!(normal[k].norm() > 0.0)) continue;
+    const Vec3 n = normal[k].normalized();
+    top[k] = static_cast<std::uint32_t>(mesh.positions.size());
+    mesh.positions.push_back((nodes[k] + halfThickness * n).cast<float>());
+    mesh.normals.push_back(n.cast<float>());
+    mesh.positions.push_back((nodes[k] - halfThickness * n).cast<float>());
+    mesh.normals.push_back((-n).cast<float>());
+  }
+  const auto up = [&](std::size_t k) { return top[k]; };
+  const auto down = [&](std::size_t k) { return top[k] + 1; };
+  for (int r = 0; r + 1 < rows; ++r)
+    for (int c = 0; c + 1 < cols; ++c) {
+      if (!live(r, c)) continue;
+      const std::size_t a = at(r, c), b = at(r, c + 1), e = at(r + 1, c + 1), d = at(r + 1, c);
+      // Counter-clockwise seen from the +normal side: a, b, e, d.
+      mesh.indices.insert(mesh.indices.end(), {up(a), up(b), up(e), up(a), up(e), up(d)});
+      mesh.indices.insert(mesh.indices.end(), {down(a), down(e), down(b), down(a), down(d), down(e)});
+      // Walls on the edges no other live cell shares, in the same order (u to v), facing out:
+      // (v - u) x n, the right of the edge seen from the +normal side.
+      const std::size_t corner[4] = {a, b, e, d};
+      const bool shared[4] = {live(r - 1, c), live(r, c + 1), live(r + 1, c), live(r, c - 1)};
+      for (int side = 0; side < 4; ++side) {
+        if (shared[side]) continue;
+        const std::size_t u = corner[side], v = corner[(side + 1) % 4];
+        const Vec3 n = 0.5 * (normal[u].normalized() + normal[v].normalized());
+        const Vec3 out = (nodes[v] - nodes[u]).cross(n);
+        const Vec3f o = (out.norm() > 0.0 ? out.normalized() : Vec3(n.unitOrthogonal())).cast<float>();
+        const auto w = static_cast<std::uint32_t>(mesh.positions.size());
+        for (std::uint32_t src : {up(u), down(u), down(v), up(v)}) {
+          const Vec3f copy = mesh.positions[src];  // a copy: push_back may move the array
+          mesh.positions.push_back(copy);
+          mesh.normals.push_back(o);
+        }
+        mesh.indices.insert(mesh.indices.end(), {w, w + 1, w + 2, w, w + 2, w + 3});
+      }
+    }
+  return mesh;
+}
+
 namespace {
 // The sum of f(p0, p1, p2) over the mesh's triangles, in double, in index order.
 template <class F>

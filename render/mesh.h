@@ -35,6 +35,18 @@ double surfaceArea(const TriangleMesh& mesh);
 // non-finite point, a radius that is not > 0 or fewer than 3 sides.
 TriangleMesh tubeMesh(const std::vector<std::vector<Vec3>>& chains, double radius, int sides = 8);
 
+// A cloth lattice as a closed sheet of thickness 2 halfThickness (m): `nodes` holds rows x cols
+// points, row-major, `alive` (same size) 0 at a hole. Every cell whose four nodes are alive
+// gives two triangles on each side, the nodes moved by +-halfThickness along their normals (the
+// mean of the adjacent live cells' normals, weighted by area); every cell edge that no other
+// live cell shares gets a wall joining the two sides. So the sheet follows the lattice exactly:
+// no voxel steps and no holes where the cloth lies between lattice layers. A node of no live
+// cell draws nothing. Normals: the node's on each side, the wall's own on the walls. Throws
+// RuntimeError for sizes that do not match, a non-finite live node, or a halfThickness that is
+// not finite and > 0.
+TriangleMesh sheetMesh(const std::vector<Vec3>& nodes, const std::vector<std::uint8_t>& alive, int rows, int cols,
+                       double halfThickness);
+
 // Writes a mesh as Wavefront OBJ (positions, normals, faces). Throws RuntimeError.
 void writeObj(const std::string& path, const TriangleMesh& mesh);
 

@@ -43,6 +43,27 @@ render::TriangleMesh ropeTube(const Solver& solver, const std::vector<std::int32
   return render::tubeMesh(chains, std::isfinite(radius) ? radius : 0.5 * spacing);
 }
 
+// A cloth with its lattice known to the solver: a sheet along the lattice (render::sheetMesh),
+// as thick as its particles' contact radius (the disc's thickness; h/2 where the solver has
+// none). False, and `out` untouched, where the solver keeps no lattice for the body.
+bool clothSheet(const Solver& solver, int body, const std::vector<std::int32_t>& ids, const std::vector<Vec3>& pos,
+                double spacing, render::TriangleMesh& out) {
+  std::int32_t first = 0, rows = 0, cols = 0;
+  if (ids.empty() || !solver.lattice(body, first, rows, cols)) return false;
+  const std::size_t count = std::size_t(rows) * std::size_t(cols);
+  std::vector<Vec3> nodes(count, Vec3::Zero());
+  std::vector<std::uint8_t> alive(count, 0);
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    const std::int64_t at = std::int64_t(ids[k]) - first;
+    if (at < 0 || std::size_t(at) >= count) return false;  // not the lattice's particles
+    nodes[std::size_t(at)] = pos[k];
+    alive[std::size_t(at)] = 1;
+  }
+  const double radius = solver.contactRadius(ids.front());
+  out = render::sheetMesh(nodes, alive, rows, cols, std::isfinite(radius) ? radius : 0.5 * spacing);
+  return true;
+}
+
 // What particles `ids` occupy now (m^3): spacing^3 times the sum of their volume ratios det F
 // (1 where the solver keeps no F: pbd). The volume their surfaces are made to enclose.
 double particleVolume(const Solver& solver, const std::vector<std::int32_t>& ids, double spacing) {
@@ -169,9 +190,12 @@ void FrameWriter::meshBody(const Solver& solver, const std::vector<Vec3i>& restC
       const std::vector<Vec3> pos = positionsOf(p, ids);
       if (kind == MaterialKind::kRope) {
         mesh = ropeTube(solver, ids, pos, mapping_.voxelSize());
+      } else if (kind == MaterialKind::kCloth && clothSheet(solver, b, ids, pos, mapping_.voxelSize(), mesh)) {
+        // the lattice's own sheet
       } else {
-        // A cloth is a sheet one particle thick: held to its particles' volume it would thin
-        // into holes; its cells' surface is kept as it is.
+        // A cloth without a lattice from its solver is meshed from its cells, a sheet one
+        // particle thick: held to its particles' volume it would thin into holes, so its cells'
+        // surface is kept as it is.
         if (kind != MaterialKind::kCloth) opt.targetVolume = particleVolume(solver, ids, mapping_.voxelSize());
         mesh = render::meshParticles(pos, mapping_.voxelSize(), opt, &report);
         if (opt.targetVolume > 0.0) solid_.add((render::enclosedVolume(mesh) - opt.targetVolume) / opt.targetVolume);
@@ -430,6 +454,8 @@ void exportLevelSets(const SceneDesc& scene, const sketch::GridMapping& mapping,
         g.mesh = render::meshFluid(positionsOf(p, ids), mapping.voxelSize(), fo);
       } else if (mat.kind == MaterialKind::kRope) {
         g.mesh = ropeTube(solver, ids, positionsOf(p, ids), mapping.voxelSize());  // the frames' tube
+      } else if (mat.kind == MaterialKind::kCloth && clothSheet(solver, b, ids, positionsOf(p, ids), mapping.voxelSize(), g.mesh)) {
+        // the frames' sheet
       } else if (surfaces.solidGrid && mat.kind != MaterialKind::kCloth) {
         g.mesh = gridMassMesh(solver, ids, mapping.voxelSize(), particleVolume(solver, ids, mapping.voxelSize()));  // as the frames
       } else {

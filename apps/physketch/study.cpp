@@ -218,8 +218,9 @@ bool expectsSurface(const SceneDesc& scene) {
 }
 
 // A meshing knob that would change nothing in this scene is an error (as an MPM knob under
-// pbd): smoothing needs a surface meshed from cells (a deforming body: soft, cloth, an MPM
-// solid, ...), mesh_resolution a fluid's kernel surface.
+// pbd): smoothing needs a surface meshed from cells (a deforming body: soft, an MPM solid, ...;
+// a rope is a tube and a cloth a sheet along its lattice), mesh_resolution a fluid's kernel
+// surface.
 void checkMeshingKnobs(const Setting& setting, const SceneDesc& scene, const Solver& solver, const std::string& option) {
   bool cells = false, kernels = false;
   for (int b = 0; b < solver.bodyCount(); ++b)
@@ -227,12 +228,12 @@ void checkMeshingKnobs(const Setting& setting, const SceneDesc& scene, const Sol
       const Material& m = scene.materials[std::size_t(solver.particles().material[std::size_t(i)])];
       const render::SurfaceKind k = surfaceOf(m.kind, scene.solver);
       kernels |= k == render::SurfaceKind::kFluid;
-      cells |= k == render::SurfaceKind::kParticles && m.kind != MaterialKind::kRope;
+      cells |= k == render::SurfaceKind::kParticles && m.kind != MaterialKind::kRope && m.kind != MaterialKind::kCloth;
     }
   const std::string where = option + " '" + settingText(setting) + "'";
   for (const auto& [knob, v] : setting) {
     if (knob == "smoothing" && !cells)
-      throw InputError(where, 0, knob, "knob 'smoothing' smooths surfaces meshed from particles' cells (soft, cloth, "
+      throw InputError(where, 0, knob, "knob 'smoothing' smooths surfaces meshed from particles' cells (soft bodies, "
                                        "MPM solids); nothing in " + scene.path + " is meshed that way");
     if (knob == "mesh_resolution" && !kernels)
       throw InputError(where, 0, knob, "knob 'mesh_resolution' sets the voxels of fluid surfaces; " + scene.path +
