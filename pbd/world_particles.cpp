@@ -757,10 +757,33 @@ void PbdWorld::particleContact() {
     // Phys-Sketch §5.1): the density constraint keeps the fluid off the solid, the contact
     // only stops a particle that would pass between two solid particles.
     const bool fluidPair = phase::has(parts_.phase[i], phase::kFluid) != phase::has(parts_.phase[j], phase::kFluid);
-    const double pen = (fluidPair ? 0.75 * touch : touch) - dist;
-    if (pen <= 0.0 || dist == 0.0) continue;
-    const Vec3 n = d / dist;
+    const double reach = fluidPair ? 0.75 * touch : touch;
+    if (!(dist < reach)) continue;
     Motion* mj = rigidJ ? &motion_[bj] : nullptr;
+    const Vec3 startI = at(parts_.x, parts_.y, parts_.z, i);
+    const Vec3 startJ = rigidJ ? Vec3(mj->qPrev * Vec3(rx_[j], ry_[j], rz_[j]) + mj->cPrev) : at(parts_.x, parts_.y, parts_.z, j);
+    // The normal: where the pair first touched this substep, if it came into touch during it
+    // (i's path relative to j, from s at the start to d now, entering the sphere of radius
+    // reach at its first crossing), else the line of centres. A particle fast enough to be
+    // predicted past a solid particle's centre was pushed on through along the line of
+    // centres: water poured into a cup left through its floor, three particles thick.
+    Vec3 n;
+    double pen;
+    const Vec3 s = startI - startJ, path = d - s;
+    if (s.squaredNorm() >= reach * reach && path.squaredNorm() > 0.0) {
+      // |s + t path|^2 = reach^2: qa t^2 + 2 qb t + qc = 0, the smaller root.
+      const double qa = path.squaredNorm(), qb = s.dot(path), qc = s.squaredNorm() - reach * reach;
+      const double t = std::clamp((-qb - std::sqrt(std::max(qb * qb - qa * qc, 0.0))) / qa, 0.0, 1.0);
+      const Vec3 q = s + t * path;
+      if (!(q.norm() > 0.0)) continue;
+      n = q / q.norm();
+      pen = reach - d.dot(n);
+    } else {
+      if (dist == 0.0) continue;
+      n = d / dist;
+      pen = reach - dist;
+    }
+    if (!(pen > 0.0)) continue;
     RigidPose pose;
     if (rigidJ) pose = RigidPose{mj->c, mj->q, invMass_[bj], invInertiaRest_[bj]};
     const double wi = invMassP_[i];
@@ -815,8 +838,6 @@ void PbdWorld::particleContact() {
     Vec3 newI = pi + (wi * lambda) * n;
     Vec3 newJ = pj - (wj * lambda) * n;
     // Friction: relative tangential displacement over the substep.
-    const Vec3 startI = at(parts_.x, parts_.y, parts_.z, i);
-    const Vec3 startJ = rigidJ ? Vec3(mj->qPrev * Vec3(rx_[j], ry_[j], rz_[j]) + mj->cPrev) : at(parts_.x, parts_.y, parts_.z, j);
     Vec3 rel = (newI - startI) - (newJ - startJ);
     rel -= n.dot(rel) * n;
     const Material& mi = materials_[std::size_t(parts_.material[i])];
