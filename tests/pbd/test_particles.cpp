@@ -69,6 +69,16 @@ BodyRange addSheet(ParticleArrays& p, const Vec3& topLeft, int rows, int cols, s
   return b;
 }
 
+// A static mesh collider "floor": the rectangle [x0, x1] x [z0, z1] at height y, facing up.
+ColliderSet floorSquare(double x0, double x1, double z0, double z1, double y) {
+  TriangleSoup soup;
+  soup.vertices = {Vec3(x0, y, z0), Vec3(x1, y, z0), Vec3(x1, y, z1), Vec3(x0, y, z1)};
+  soup.triangles = {{0, 2, 1}, {0, 3, 2}};
+  MeshCollider c;
+  c.name = "floor";
+  return ColliderSet({c}, {soup});
+}
+
 std::vector<std::string> planNames(const PbdWorld& w) {
   std::vector<std::string> out;
   for (const PlanEntry& e : w.plan()) out.push_back(e.name);
@@ -332,12 +342,7 @@ double dropApex(const Material& falling, Under under, double slabE,
   }
   PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
   if (under == Under::kMesh) {
-    TriangleSoup s;
-    s.vertices = {Vec3(0.2, 0.2, 0.2), Vec3(0.8, 0.2, 0.2), Vec3(0.8, 0.2, 0.8), Vec3(0.2, 0.2, 0.8)};
-    s.triangles = {{0, 2, 1}, {0, 3, 2}};
-    MeshCollider c;
-    c.name = "floor";
-    w.setColliders(ColliderSet({c}, {s}));
+    w.setColliders(floorSquare(0.2, 0.8, 0.2, 0.8, 0.2));
   }
   return firstBounceApex(w, 0, w.pose(0).centre.y() - 0.2, /*rising=*/0.05);
 }
@@ -581,12 +586,7 @@ TEST(Rope, AThickRopeTouchesAtItsBrushRadius) {
     }
     PbdWorld w(p, bodies, mats, params(8, 4, Vec3(0, -9.81, 0)));
     if (under == On::kMesh) {
-      TriangleSoup soup;
-      soup.vertices = {Vec3(0.1, 0.2, 0.3), Vec3(0.8, 0.2, 0.3), Vec3(0.8, 0.2, 0.7), Vec3(0.1, 0.2, 0.7)};
-      soup.triangles = {{0, 2, 1}, {0, 3, 2}};
-      MeshCollider c;
-      c.name = "floor";
-      w.setColliders(ColliderSet({c}, {soup}));
+      w.setColliders(floorSquare(0.1, 0.8, 0.3, 0.7, 0.2));
     }
     for (int s = 0; s < 60; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
     const ParticleArrays& q = w.particles();
