@@ -67,6 +67,7 @@ ColliderSdf::ColliderSdf(const TriangleSoup& mesh, double scale, double voxel, d
   }
   impl_->outside = impl_->grid->background() - impl_->shift;
   const double grow = (kHalfWidth + 1.0) * voxel + 0.5 * thickness;
+  reach_ = grow;
   lo_ -= Vec3::Constant(grow);
   hi_ += Vec3::Constant(grow);
 }
@@ -88,13 +89,30 @@ bool ColliderSdf::sample(const Vec3& local, double& phi, Vec3& gradient) const {
   openvdb::FloatGrid::ConstAccessor acc = impl_->grid->getConstAccessor();
   double c[2][2][2];
   bool anyInBand = false;
-  for (int a = 0; a < 2; ++a)
-    for (int b = 0; b < 2; ++b)
-      for (int d = 0; d < 2; ++d) {
-        const openvdb::Coord ijk = base.offsetBy(a, b, d);
-        c[a][b][d] = double(acc.getValue(ijk) - impl_->shift);
-        anyInBand |= acc.isValueOn(ijk) || c[a][b][d] < 0.0;
-      }
+  using Leaf = openvdb::FloatGrid::TreeType::LeafNodeType;
+  constexpr int kLast = int(Leaf::DIM) - 1;
+  const Leaf* leaf = (base.x() & kLast) < kLast && (base.y() & kLast) < kLast && (base.z() & kLast) < kLast
+                         ? acc.probeConstLeaf(base)
+                         : nullptr;
+  if (leaf) {
+    // All eight corners in one leaf (most samples): read it directly, one tree walk in all.
+    const openvdb::Index first = Leaf::coordToOffset(base);
+    for (int a = 0; a < 2; ++a)
+      for (int b = 0; b < 2; ++b)
+        for (int d = 0; d < 2; ++d) {
+          const openvdb::Index n = first + openvdb::Index(a) * Leaf::DIM * Leaf::DIM + openvdb::Index(b) * Leaf::DIM + openvdb::Index(d);
+          c[a][b][d] = double(leaf->getValue(n) - impl_->shift);
+          anyInBand |= leaf->isValueOn(n) || c[a][b][d] < 0.0;
+        }
+  } else {
+    for (int a = 0; a < 2; ++a)
+      for (int b = 0; b < 2; ++b)
+        for (int d = 0; d < 2; ++d) {
+          const openvdb::Coord ijk = base.offsetBy(a, b, d);
+          c[a][b][d] = double(acc.getValue(ijk) - impl_->shift);
+          anyInBand |= acc.isValueOn(ijk) || c[a][b][d] < 0.0;
+        }
+  }
   if (!anyInBand) {
     phi = double(impl_->outside);
     gradient = Vec3::Zero();

@@ -29,6 +29,9 @@ class ColliderSdf {
   // itself; 0 for a closed mesh.
   double halfThickness() const;
   double area() const { return area_; }  // m^2, the scaled mesh's surface
+  // How far outside the surface (m) sample() can still answer true: boundsMax() - the mesh's
+  // largest coordinate.
+  double reach() const { return reach_; }
   std::size_t bytes() const;             // what the field holds (OpenVDB's memUsage)
   ~ColliderSdf();
   ColliderSdf(ColliderSdf&&) noexcept;
@@ -46,7 +49,7 @@ class ColliderSdf {
   struct Impl;
   std::unique_ptr<Impl> impl_;
   Vec3 lo_ = Vec3::Zero(), hi_ = Vec3::Zero();
-  double area_ = 0.0;
+  double area_ = 0.0, reach_ = 0.0;
 };
 
 }  // namespace physketch::mpm

@@ -191,22 +191,22 @@ void MpmWorld::p2g(float h) {
       const auto b = std::size_t(blocks[k]);
       for (std::int32_t o = blockStart_[b]; o < blockStart_[b + 1]; ++o) scatter(std::size_t(order_[std::size_t(o)]));
     });
-  // Fixed and carried bodies: the nodes of their particles' stencils move with them, in id
-  // order (a node two bodies hold takes the later one's velocity). A fixed body's nodes are
-  // sticky (1); a carried body's (a tool's, 2) are one-sided: they push and never pull, along
-  // the normal sum w (x_node - x_p) over the carried particles reaching the node (pointing
-  // away from the body; MPM's mass-gradient contact normal, Bardenhagen et al. 2000).
+  // Carried bodies (tools): the nodes of their particles' stencils move with them, in id order
+  // (a node two bodies hold takes the later one's velocity), one-sided: they push and never
+  // pull, along the normal sum w (x_node - x_p) over the carried particles reaching the node
+  // (pointing away from the body; MPM's mass-gradient contact normal, Bardenhagen et al. 2000).
+  // Fixed bodies are colliders (syncFixedColliders), not held nodes.
   for (std::size_t i = 0; i < parts_.size(); ++i) {
     if (phase::dynamic(parts_.phase[i]) || phase::has(parts_.phase[i], phase::kRemoved)) continue;
+    if (mode_[std::size_t(parts_.group(i))] != BodyMode::kKinematic) continue;
     if (hx_.empty()) {
       hx_.assign(grid_.size(), 0.0f);
       hy_.assign(grid_.size(), 0.0f);
       hz_.assign(grid_.size(), 0.0f);
       hn_.assign(3 * grid_.size(), 0.0f);
     }
-    const bool carried = mode_[std::size_t(parts_.group(i))] == BodyMode::kKinematic;
     const MatModel& mat = models_[std::size_t(parts_.material[i])];
-    const bool ownFriction = carried && mat.ownFriction;  // a tool with friction=mu: its mu decides
+    const bool ownFriction = mat.ownFriction;  // a tool with friction=mu: its mu decides
     if (ownFriction && hmus_.empty()) {
       hmus_.assign(grid_.size(), std::numeric_limits<float>::quiet_NaN());
       hmuk_.assign(grid_.size(), std::numeric_limits<float>::quiet_NaN());
@@ -216,19 +216,19 @@ void MpmWorld::p2g(float h) {
       for (int b = 0; b < 3; ++b)
         for (int c = 0; c < 3; ++c) {
           const std::size_t node = st.node(a, b, c);
-          if (held_[node] == 0 && !hmus_.empty()) hmus_[node] = hmuk_[node] = std::numeric_limits<float>::quiet_NaN();
+          if (held_[node] == 0) {
+            if (!hmus_.empty()) hmus_[node] = hmuk_[node] = std::numeric_limits<float>::quiet_NaN();
+            std::fill_n(hn_.begin() + std::ptrdiff_t(3 * node), 3, 0.0f);
+          }
           if (ownFriction) hmus_[node] = mat.mus, hmuk_[node] = mat.muk;
-          if (held_[node] == 0 && carried) std::fill_n(hn_.begin() + std::ptrdiff_t(3 * node), 3, 0.0f);
-          held_[node] = carried && held_[node] != 1 ? 2 : 1;
+          held_[node] = 1;
           hx_[node] = parts_.vx[i];
           hy_[node] = parts_.vy[i];
           hz_[node] = parts_.vz[i];
-          if (carried) {
-            const float wt = st.w[0][a] * st.w[1][b] * st.w[2][c];
-            hn_[3 * node] += wt * (float(a) - st.f[0]);
-            hn_[3 * node + 1] += wt * (float(b) - st.f[1]);
-            hn_[3 * node + 2] += wt * (float(c) - st.f[2]);
-          }
+          const float wt = st.w[0][a] * st.w[1][b] * st.w[2][c];
+          hn_[3 * node] += wt * (float(a) - st.f[0]);
+          hn_[3 * node + 1] += wt * (float(b) - st.f[1]);
+          hn_[3 * node + 2] += wt * (float(c) - st.f[2]);
         }
   }
 }
@@ -259,32 +259,26 @@ void MpmWorld::gridUpdate(float h) {
       }
       float v[3] = {gn.x / m + g[0], gn.y / m + g[1], gn.z / m + g[2]};
       if (held_[node] == 1) {
-        v[0] = hx_[node];
-        v[1] = hy_[node];
-        v[2] = hz_[node];
-      } else {
-        if (held_[node] == 2) {
-          // The tool's own friction where it names one, else the touched material's.
-          const bool own = !hmus_.empty() && !std::isnan(hmus_[node]);
-          const float mus = own ? hmus_[node] : mixedFriction_ ? gfs_[node] / m : uniformMus_;
-          const float muk = own ? hmuk_[node] : mixedFriction_ ? gfk_[node] / m : uniformMuk_;
-          pushOnly(v, hx_[node], hy_[node], hz_[node], &hn_[3 * node], mus, muk);
-        }
-        const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
-        if (!colliders_.empty()) {
-          const Vec3 x = origin_ + dx_ * Vec3(idx[0], idx[1], idx[2]);
-          collideNode(x, v, h, mixedFriction_ ? gfs_[node] / m : uniformMus_, mixedFriction_ ? gfk_[node] / m : uniformMuk_,
-                      side_.empty() ? nullptr : &side_[3 * node], m);
-        }
-        for (int a = 0; a < 3; ++a) {
-          const int lowest = a == 1 ? floorNode : wallLo_[a];
-          const bool low = idx[a] <= lowest, high = idx[a] >= wallHi_[a];
-          if (!low && !high) continue;
-          const float mus = mixedFriction_ ? gfs_[node] / m : uniformMus_;
-          const float muk = mixedFriction_ ? gfk_[node] / m : uniformMuk_;
-          if (low) applyWall(v, a, 1.0f, kind[2 * a], mus, muk);
-          else applyWall(v, a, -1.0f, kind[2 * a + 1], mus, muk);
-        }
+        // The tool's own friction where it names one, else the touched material's.
+        const bool own = !hmus_.empty() && !std::isnan(hmus_[node]);
+        const float mus = own ? hmus_[node] : mixedFriction_ ? gfs_[node] / m : uniformMus_;
+        const float muk = own ? hmuk_[node] : mixedFriction_ ? gfk_[node] / m : uniformMuk_;
+        pushOnly(v, hx_[node], hy_[node], hz_[node], &hn_[3 * node], mus, muk);
+      }
+      const int idx[3] = {bx + (l >> 4), by + ((l >> 2) & 3), bz + (l & 3)};
+      if (!colliders_.empty()) {
+        const Vec3 x = origin_ + dx_ * Vec3(idx[0], idx[1], idx[2]);
+        collideNode(x, v, h, mixedFriction_ ? gfs_[node] / m : uniformMus_, mixedFriction_ ? gfk_[node] / m : uniformMuk_,
+                    side_.empty() ? nullptr : &side_[3 * node], m);
+      }
+      for (int a = 0; a < 3; ++a) {
+        const int lowest = a == 1 ? floorNode : wallLo_[a];
+        const bool low = idx[a] <= lowest, high = idx[a] >= wallHi_[a];
+        if (!low && !high) continue;
+        const float mus = mixedFriction_ ? gfs_[node] / m : uniformMus_;
+        const float muk = mixedFriction_ ? gfk_[node] / m : uniformMuk_;
+        if (low) applyWall(v, a, 1.0f, kind[2 * a], mus, muk);
+        else applyWall(v, a, -1.0f, kind[2 * a + 1], mus, muk);
       }
       gn.x = v[0];
       gn.y = v[1];

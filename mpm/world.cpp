@@ -153,6 +153,7 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     if (br.init.fixed) setMode(b, BodyMode::kFixed);
     else applyInit(ids, br.init);
   }
+  syncFixedColliders();
   // Particles outside every body (none from the sketch) simulate as free material.
   if (params_.substeps > 0) {
     const StepBound b = waveBound();
@@ -325,6 +326,7 @@ void MpmWorld::setMode(int body, BodyMode mode) {
   if (mode_.at(b) == BodyMode::kEmpty || mode == BodyMode::kEmpty) return;
   const BodyMode before = mode_[b];
   mode_[b] = mode;
+  if (before == BodyMode::kFixed || mode == BodyMode::kFixed) fixedDirty_.push_back(body);
   const std::uint32_t flags = mode == BodyMode::kDynamic ? 0u : phase::kPrescribed;
   const Vec3 v = before == BodyMode::kKinematic && mode == BodyMode::kDynamic ? carry_[b] : Vec3::Zero();
   for (std::int32_t i : members_[b]) {
@@ -435,6 +437,8 @@ std::vector<int> MpmWorld::removeParticles(const std::vector<std::int32_t>& ids)
   }
   std::sort(changed.begin(), changed.end());
   std::vector<int> out = changed;
+  for (int b : changed)
+    if (mode_[std::size_t(b)] == BodyMode::kFixed) fixedDirty_.push_back(b);
   for (int b : changed) {
     auto& mem = members_[std::size_t(b)];
     mem.erase(std::remove_if(mem.begin(), mem.end(), [&](std::int32_t i) { return !alive(i); }), mem.end());
@@ -443,6 +447,8 @@ std::vector<int> MpmWorld::removeParticles(const std::vector<std::int32_t>& ids)
       continue;
     }
     const std::vector<int> added = splitCut(b);
+    for (int nb : added)
+      if (mode_[std::size_t(nb)] == BodyMode::kFixed) fixedDirty_.push_back(nb);
     out.insert(out.end(), added.begin(), added.end());
   }
   std::sort(out.begin(), out.end());
@@ -553,11 +559,11 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
     case MpmPass::kGridUpdate:
       return on ? std::string("gravity, ") + wallsText(params_.walls) +
                       " walls (friction: the materials' static/dynamic_friction), ground y = " + num(params_.groundY) +
-                      (colliders_.empty() ? std::string() : ", " + std::to_string(colliders_.size()) + " mesh collider(s)")
+                      collidersText()
                 : "no dynamic particle";
     case MpmPass::kProjection:
       return on ? std::string("walls and ground") +
-                      (colliders_.empty() ? std::string() : ", " + std::to_string(colliders_.size()) + " mesh collider(s)")
+                      collidersText()
                 : "no dynamic particle";
     case MpmPass::kPlasticity:
       return on ? "plastic materials " + list : "no dynamic particle of a plastic kind (sand, snow, plasticine)";
@@ -815,6 +821,7 @@ bool MpmWorld::step() {
   // cup's shell) starts on its surface: put there before the step, as the projection would
   // in the step's first substep, so that the energy reference below is taken after the move
   // (which lifts water out of a floor: otherwise an energy_growth trip at step 0).
+  syncFixedColliders();
   if (placeInColliders_ && !colliders_.empty()) {
     poseColliders(double(steps_) * params_.dt, 0.0);
     for (std::size_t i = 0; i < parts_.size(); ++i)
@@ -889,6 +896,9 @@ GuardRecord MpmWorld::checkEnergy() {
 std::vector<std::string> MpmWorld::setColliders(const std::vector<MeshCollider>& descs,
                                                 const std::vector<TriangleSoup>& meshes, double maxBandVoxels) {
   if (descs.size() != meshes.size()) throw RuntimeError("MpmWorld::setColliders: one mesh per collider");
+  // The fixed bodies' fields go after the new mesh colliders.
+  colliders_.erase(colliders_.begin(), colliders_.begin() + std::ptrdiff_t(meshColliderCount()));
+  std::vector<Collider> fixed = std::move(colliders_);
   colliders_.clear();
   std::vector<std::string> notes(descs.size());
   for (std::size_t c = 0; c < descs.size(); ++c) {
@@ -900,11 +910,112 @@ std::vector<std::string> MpmWorld::setColliders(const std::vector<MeshCollider>&
                           " distance-field voxels at dx/2 = " + num(0.5 * dx_) + " m; the field uses " +
                           num(f.voxel()) + " m voxels instead (coarser contact; a smaller or cropped mesh keeps dx/2)");
   }
+  for (Collider& c : fixed) colliders_.push_back(std::move(c));
   side_.clear();
   if (!colliders_.empty()) side_.assign(3 * grid_.size(), 0.0f);
   placeInColliders_ = true;
   energy_.reset();
   return notes;
+}
+
+std::size_t MpmWorld::meshColliderCount() const {
+  std::size_t n = 0;
+  while (n < colliders_.size() && colliders_[n].body < 0) ++n;
+  return n;
+}
+
+std::string MpmWorld::collidersText() const {
+  const std::size_t mesh = meshColliderCount(), fixed = colliders_.size() - mesh;
+  std::string t;
+  if (mesh > 0) t += ", " + std::to_string(mesh) + " mesh collider(s)";
+  if (fixed > 0) t += ", " + std::to_string(fixed) + " fixed bod" + (fixed == 1 ? "y" : "ies") + " (as distance fields)";
+  return t;
+}
+
+namespace {
+
+// The closed surface of a set of voxels (cubes of side h centred on cell * h): the faces
+// between a voxel and an empty neighbour, two triangles each, wound counter-clockwise seen
+// from outside.
+TriangleSoup voxelSurface(std::vector<Vec3i> cells, double h) {
+  const auto less = [](const Vec3i& a, const Vec3i& b) {
+    return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+  };
+  std::sort(cells.begin(), cells.end(), less);
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  const auto occupied = [&](const Vec3i& c) { return std::binary_search(cells.begin(), cells.end(), c, less); };
+  TriangleSoup s;
+  for (const Vec3i& c : cells)
+    for (int axis = 0; axis < 3; ++axis)
+      for (int dir = -1; dir <= 1; dir += 2) {
+        Vec3i n = c;
+        n[axis] += dir;
+        if (occupied(n)) continue;
+        // The face's corners: centre + h/2 (dir e_axis +- e_u +- e_v), (u, v, axis) right-handed.
+        const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+        const Vec3 centre = h * c.cast<double>();
+        const auto corner = [&](int su, int sv) {
+          Vec3 p = centre;
+          p[axis] += 0.5 * h * dir;
+          p[u] += 0.5 * h * su;
+          p[v] += 0.5 * h * sv;
+          return p;
+        };
+        const auto base = std::int32_t(s.vertices.size());
+        s.vertices.push_back(corner(-1, -1));
+        s.vertices.push_back(corner(1, -1));
+        s.vertices.push_back(corner(1, 1));
+        s.vertices.push_back(corner(-1, 1));
+        if (dir > 0) {  // u x v = +e_axis: counter-clockwise seen from +axis
+          s.triangles.push_back({base, base + 1, base + 2});
+          s.triangles.push_back({base, base + 2, base + 3});
+        } else {
+          s.triangles.push_back({base, base + 2, base + 1});
+          s.triangles.push_back({base, base + 3, base + 2});
+        }
+      }
+  s.closed = true;
+  return s;
+}
+
+}  // namespace
+
+void MpmWorld::syncFixedColliders() {
+  if (fixedDirty_.empty()) return;
+  std::sort(fixedDirty_.begin(), fixedDirty_.end());
+  fixedDirty_.erase(std::unique(fixedDirty_.begin(), fixedDirty_.end()), fixedDirty_.end());
+  colliders_.erase(std::remove_if(colliders_.begin(), colliders_.end(),
+                                  [&](const Collider& c) {
+                                    return c.body >= 0 && std::binary_search(fixedDirty_.begin(), fixedDirty_.end(), c.body);
+                                  }),
+                   colliders_.end());
+  const double h = params_.spacing;
+  for (int b : fixedDirty_) {
+    const auto& mem = members_[std::size_t(b)];
+    if (mode_[std::size_t(b)] != BodyMode::kFixed || mem.empty()) continue;
+    // The body's frame: its first particle's voxel centre; the others' cells at integer h.
+    const auto first = std::size_t(mem.front());
+    const Vec3 origin(parts_.x[first], parts_.y[first], parts_.z[first]);
+    std::vector<Vec3i> cells;
+    cells.reserve(mem.size());
+    for (std::int32_t i : mem) {
+      const auto k = std::size_t(i);
+      const Vec3 d = (Vec3(parts_.x[k], parts_.y[k], parts_.z[k]) - origin) / h;
+      cells.emplace_back(int(std::lround(d.x())), int(std::lround(d.y())), int(std::lround(d.z())));
+    }
+    MeshCollider desc;
+    desc.name = "fixed body " + std::to_string(b);
+    desc.position = origin;
+    Collider c{desc, ColliderSdf(voxelSurface(std::move(cells), h), 1.0, 0.5 * h, 0.0)};
+    c.body = b;
+
+    const auto at = std::find_if(colliders_.begin(), colliders_.end(), [&](const Collider& o) { return o.body > b; });
+    colliders_.insert(at, std::move(c));
+  }
+  fixedDirty_.clear();
+  if (!colliders_.empty() && side_.empty()) side_.assign(3 * grid_.size(), 0.0f);
+  if (colliders_.empty()) side_.clear();
+  placeInColliders_ = true;
 }
 
 // Poses at t0 and t0 + h, and the world box the end pose's field covers.
@@ -922,11 +1033,70 @@ void MpmWorld::poseColliders(double t0, double h) {
       c.lo = c.lo.cwiseMin(w);
       c.hi = c.hi.cwiseMax(w);
     }
+    if (c.desc.keyframes.empty() && c.near.empty()) buildNearMask(c);
   }
+}
+
+// Samples the field at 8 points a cell (spacing dx/2: every point of the band lies within
+// 0.44 dx of one, inside the band's 0.75 dx at least), marks the cells of those that answer,
+// then grows the marks by the band's reach in cells, so a point the field answers for lies in
+// a marked cell. A box of more than 2^22 cells gets no mask.
+void MpmWorld::buildNearMask(Collider& c) const {
+  Vec3i lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max(0, int(std::floor((c.lo[a] - origin_[a]) / dx_)));
+    hi[a] = std::min(n_ - 1, int(std::floor((c.hi[a] - origin_[a]) / dx_)));
+    if (hi[a] < lo[a]) return;
+  }
+  const Vec3i dims = hi - lo + Vec3i::Ones();
+  const std::size_t cells = std::size_t(dims.x()) * std::size_t(dims.y()) * std::size_t(dims.z());
+  if (cells > (std::size_t(1) << 22)) return;
+  const auto at = [&](int i, int j, int k) { return (std::size_t(i) * std::size_t(dims.y()) + std::size_t(j)) * std::size_t(dims.z()) + std::size_t(k); };
+  std::vector<std::uint8_t> hit(cells, 0);
+  Collider::Probe p;
+  for (int i = 0; i < dims.x(); ++i)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int k = 0; k < dims.z(); ++k)
+        for (int s = 0; s < 8 && !hit[at(i, j, k)]; ++s) {
+          const Vec3 x = origin_ + dx_ * Vec3(lo.x() + i + 0.25 + 0.5 * (s & 1), lo.y() + j + 0.25 + 0.5 * ((s >> 1) & 1),
+                                               lo.z() + k + 0.25 + 0.5 * ((s >> 2) & 1));
+          if (c.probe(x, p, true)) hit[at(i, j, k)] = 1;
+        }
+  // Grow by r cells along each axis in turn (a box of side 2r + 1 about each mark).
+  const int r = int(std::ceil(c.sdf.reach() / dx_)) + 1;
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<std::uint8_t> grown(cells, 0);
+    for (int i = 0; i < dims.x(); ++i)
+      for (int j = 0; j < dims.y(); ++j)
+        for (int k = 0; k < dims.z(); ++k) {
+          if (!hit[at(i, j, k)]) continue;
+          Vec3i q(i, j, k);
+          const int from = std::max(0, q[axis] - r), to = std::min(dims[axis] - 1, q[axis] + r);
+          for (int t = from; t <= to; ++t) {
+            q[axis] = t;
+            grown[at(q.x(), q.y(), q.z())] = 1;
+          }
+        }
+    hit.swap(grown);
+  }
+  c.near = std::move(hit);
+  c.nearLo = lo;
+  c.nearDims = dims;
+  c.gridOrigin = origin_;
+  c.gridDx = dx_;
 }
 
 bool MpmWorld::Collider::probe(const Vec3& x, Probe& out, bool anywhere) const {
   if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) return false;
+  if (!near.empty()) {
+    std::size_t cell = 0;
+    for (int a = 0; a < 3; ++a) {
+      const int q = int(std::floor((x[a] - gridOrigin[a]) / gridDx)) - nearLo[a];
+      if (q < 0 || q >= nearDims[a]) return false;
+      cell = cell * std::size_t(nearDims[a]) + std::size_t(q);
+    }
+    if (!near[cell]) return false;
+  }
   out.local = R1.transpose() * (x - p1);
   Vec3 grad;
   if (!sdf.sample(out.local, out.phi, grad) || (out.phi >= 0.0 && !anywhere)) return false;

@@ -8,8 +8,9 @@
 //                    m_i += w_ip m_p,
 //                    (m v)_i += w_ip (m_p v_p + (m_p C_p - h V_p 4/dx^2 tau_p)(x_i - x_p))
 //                  (Hu et al. 2018 Eq. 16-17; tau = P F^T the Kirchhoff stress)
-//     grid_update  v_i = (m v)_i / m_i + h g; held nodes (fixed and carried bodies) take the
-//                  body's velocity; walls and ground: sticky, slip or separate with friction
+//     grid_update  v_i = (m v)_i / m_i + h g; nodes a carried body (a tool) holds push with its
+//                  velocity; nodes inside a mesh collider or a fixed body (as a distance
+//                  field) and at the walls and ground: sticky, slip or separate with friction
 //     g2p          v_p = sum w v_i, C_p = 4/dx^2 sum w v_i (x_i - x_p)^T, x_p += h v_p,
 //                  F_p <- (I + h C_p) F_p (fluid: J_p <- (1 + h tr C_p) J_p)
 //     projection   particles the grid let past a wall or the ground are put back on it and
@@ -122,7 +123,7 @@ class MpmWorld final : public Solver {
   // large for maxBandVoxels at dx/2), else an empty string.
   std::vector<std::string> setColliders(const std::vector<MeshCollider>& descs, const std::vector<TriangleSoup>& meshes,
                                         double maxBandVoxels = ColliderSdf::kMaxBandVoxels);
-  int colliderCount() const { return int(colliders_.size()); }
+  int colliderCount() const { return int(meshColliderCount()); }  // the scene's mesh colliders
 
   const MpmParams& params() const { return params_; }
   double dx() const { return dx_; }
@@ -289,8 +290,28 @@ class MpmWorld final : public Solver {
     // The collider's velocity at a world point now at x whose local point is `local`: where
     // that material point was at the substep's start, over the substep h.
     Vec3 velocityAt(const Vec3& x, const Vec3& local, double h) const { return (x - (R0 * local + p0)) / h; }
+    int body = -1;  // the fixed body this collider stands for; -1: a scene mesh collider
+    // A static collider's cells (of the MPM grid, over its world bounds) that its field may
+    // answer in (within its band or inside), grown by the band's reach: probe skips the field
+    // elsewhere (most of a pool's particles, every substep). Empty: no mask (a moving collider).
+    std::vector<std::uint8_t> near{};
+    Vec3i nearLo = Vec3i::Zero(), nearDims = Vec3i::Zero();
+    Vec3 gridOrigin = Vec3::Zero();
+    double gridDx = 0.0;
   };
+  void buildNearMask(Collider& c) const;
+  // The scene's mesh colliders, then one per fixed body (ascending body id).
   std::vector<Collider> colliders_;
+  // A fixed body is a collider, not a set of held grid nodes: its particles' voxels (cubes of
+  // side spacing around them) become a closed surface and its distance field (voxel spacing/2,
+  // aligned to the voxels' faces). Holding every node of its particles' stencils (as it once
+  // did) made the body a grid cell thicker on each side: a sketched cup with a 10-voxel
+  // interior held water only 7 voxels wide. The bodies whose field is out of date (made or
+  // unmade fixed, or cut) are rebuilt before the next step (and at construction, for the plan).
+  std::vector<int> fixedDirty_;
+  void syncFixedColliders();
+  std::size_t meshColliderCount() const;
+  std::string collidersText() const;  // ", 2 mesh collider(s), 1 fixed body (...)" for the plan
   void poseColliders(double t0, double h);
   // Imposes the colliders on a node (world position x) of velocity v; mus, muk: the node's
   // material friction (a collider's friction= replaces it).
@@ -302,7 +323,7 @@ class MpmWorld final : public Solver {
   void pushOutOfColliders(std::size_t i, double h);
   bool placeInColliders_ = false;  // particles or colliders came: push material out before the next step
   float lastH_ = 0.0f;  // s, the current substep
-  std::vector<std::uint8_t> held_;        // 1: a node a fixed body holds (sticky); 2: a carried body (one-sided)
+  std::vector<std::uint8_t> held_;        // 1: a node a carried body holds (one-sided)
   std::vector<float> hx_, hy_, hz_;       // m/s, the held velocity (allocated when first needed)
   std::vector<float> hn_;                 // per node 3: a carried body's outward normal (not unit)
   // Per node held by a carried body whose material's friction decides its contacts (a tool with

@@ -280,13 +280,23 @@ TEST(MpmWorld, FixedBodiesHoldStillAndPlanListsOnlyPassesWithWork) {
   BodyInit fixed;
   fixed.fixed = true;
   addBox(p, bodies, Vec3(0.4, 0.2, 0.4), 10, 2, 10, h, 0, fixed);  // a table top
-  addBox(p, bodies, Vec3(0.45, 0.3, 0.45), 5, 5, 5, h, 0);         // a block falling onto it
+  addBox(p, bodies, Vec3(0.42, 0.3, 0.42), 5, 5, 5, h, 0);         // a block falling onto its middle
   MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));
   const std::vector<float> y0(w.particles().y.begin(), w.particles().y.begin() + 200);
-  for (int s = 0; s < 40; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
   for (std::size_t i = 0; i < 200; ++i) EXPECT_EQ(w.particles().y[i], y0[i]);
   EXPECT_EQ(w.mode(0), BodyMode::kFixed);
   EXPECT_GT(comY(w, 1), 0.2 + 2 * h);  // held up by the table, not fallen through to the ground
+  // At rest (2 s) on the table's top face, not a grid cell above it: the table is a distance
+  // field at its voxels' faces. Its lowest particle rests within a voxel (half a grid cell)
+  // above the face (measured 6.5 mm: the grid holds it at the node inside the table) and not
+  // below it. When the table held its particles' whole stencils the block stood 1.5 dx out.
+  float lowest = 1.0f;
+  for (std::size_t i = 200; i < w.particles().size(); ++i) lowest = std::min(lowest, w.particles().y[i]);
+  const double top = 0.2 + 1.5 * h;
+  std::printf("block on a fixed table: lowest particle %.4f m, the table's top face %.4f m\n", lowest, top);
+  EXPECT_GT(lowest, top - 1e-4);
+  EXPECT_LT(lowest, top + h);
   bool plasticity = false;
   for (const PlanEntry& e : w.plan()) plasticity = plasticity || e.name == "plasticity";
   EXPECT_FALSE(plasticity);  // all elastic: the pass is off
@@ -1139,6 +1149,77 @@ TEST(MpmWorld, AToolsOwnFrictionDecidesWhatItDrags) {
   std::printf("block dragged %.5f m (friction 0), %.5f m (friction 2)\n", none, grip);
   EXPECT_GT(grip, 4.0 * std::abs(none));
   EXPECT_GT(grip, 0.03);
+}
+
+
+// A cup sketched as a fixed body: a floor and four walls one voxel thick around a 10 x 10-voxel
+// interior (h = 1 cm), with 8 x 5 x 8 voxels of water set in it. Returns the water's lowest
+// particle above the floor's top face, its centre's height above that face, and its width
+// across x and z (particle centre to centre), after 1 s at rest.
+struct FixedCupPool {
+  double lowest = 1e9, centre = 1e9, widthX = 0.0, widthZ = 0.0;
+};
+FixedCupPool fixedCupPool() {
+  const double h = 0.01;
+  const Vec3 corner(0.4, 0.2, 0.4);
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  BodyRange cup;
+  cup.first = 0;
+  cup.stroke = 0;
+  cup.init.fixed = true;
+  for (int i = 0; i < 12; ++i)
+    for (int j = 0; j < 9; ++j)
+      for (int k = 0; k < 12; ++k)
+        if (j == 0 || i == 0 || i == 11 || k == 0 || k == 11)
+          p.push(float(corner.x() + i * h), float(corner.y() + j * h), float(corner.z() + k * h), 0, 1);
+  cup.count = std::int32_t(p.size());
+  bodies.push_back(cup);
+  const std::size_t first = p.size();
+  addBox(p, bodies, corner + Vec3(2 * h, h, 2 * h), 8, 5, 8, h, 0);
+  Material water = makeMaterial(MaterialKind::kFluid, "water");
+  MpmWorld w(p, bodies, {water, elastic(5e5)}, unitDomain(h, 0));
+  FixedCupPool out;
+  while (w.time() < 1.0)
+    if (!w.step()) {
+      ADD_FAILURE() << w.guard().message();
+      return out;
+    }
+  const ParticleArrays& r = w.particles();
+  const double floorTop = corner.y() + 0.5 * h;
+  double lo[3] = {1e9, 1e9, 1e9}, hi[3] = {-1e9, -1e9, -1e9}, sumY = 0.0;
+  for (std::size_t i = first; i < r.size(); ++i) {
+    const double x[3] = {r.x[i], r.y[i], r.z[i]};
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], x[a]), hi[a] = std::max(hi[a], x[a]);
+    sumY += x[1];
+  }
+  out.lowest = lo[1] - floorTop;
+  out.centre = sumY / double(r.size() - first) - floorTop;
+  out.widthX = hi[0] - lo[0];
+  out.widthZ = hi[2] - lo[2];
+  return out;
+}
+
+// The water spreads to the cup's walls and floor: its particles span the 10 cm interior to
+// within half a voxel of each wall (measured 9.5 cm; the wall's faces, not its voxel centres,
+// bound it), its lowest sits on the floor's face (within a quarter voxel; measured 0), and its
+// centre is half the depth that its volume, 320 voxels over the 100-voxel floor, fills (1.6
+// cm), within -1 voxel (the lowest layer crowds onto the floor's face: measured 0.87 cm) and
+// +1/2 voxel. When the cup held every grid node its particles' stencils touch, as sticky, the
+// water stood 7 cm wide and 2.5 cm high and never moved; none of it may leave the interior.
+TEST(MpmWorld, WaterFillsACupSketchedAsAFixedBodyToItsWalls) {
+  const double h = 0.01, inside = 10 * h, depth = 320 * h / 100;
+  const FixedCupPool pool = fixedCupPool();
+  std::printf("water in a fixed cup: lowest %.4f m above the floor, centre %.4f m, width %.4f x %.4f m\n",
+              pool.lowest, pool.centre, pool.widthX, pool.widthZ);
+  EXPECT_GE(pool.lowest, -1e-4);
+  EXPECT_LE(pool.lowest, 0.25 * h);
+  EXPECT_GE(pool.centre, 0.5 * depth - h);
+  EXPECT_LE(pool.centre, 0.5 * depth + 0.5 * h);
+  for (double width : {pool.widthX, pool.widthZ}) {
+    EXPECT_GE(width, inside - h);
+    EXPECT_LE(width, inside + 1e-4);
+  }
 }
 
 }  // namespace
