@@ -306,6 +306,39 @@ TEST(MpmWorld, FixedBodiesHoldStillAndPlanListsOnlyPassesWithWork) {
     }
 }
 
+// A fixed body's field follows the sketch: with the table top erased (every particle removed)
+// the block that rested on it falls to the ground, and with a table released (made dynamic) the
+// block no longer rests on a field where the table was: both fall. The ground is at y = 0, the
+// table's top face at 0.215 m: the block's centre below 0.1 m (at its lowest: it bounces) means
+// it went down past it.
+TEST(MpmWorld, AFixedBodyCutOrReleasedAfterPlayNoLongerHoldsWhatRestedOnIt) {
+  const double h = 0.01;
+  for (const bool cut : {true, false}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies;
+    BodyInit fixed;
+    fixed.fixed = true;
+    addBox(p, bodies, Vec3(0.4, 0.2, 0.4), 10, 2, 10, h, 0, fixed);
+    addBox(p, bodies, Vec3(0.42, 0.24, 0.42), 5, 5, 5, h, 0);
+    MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));
+    for (int s = 0; s < 30; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+    ASSERT_GT(comY(w, 1), 0.2);
+    if (cut) {
+      std::vector<std::int32_t> top(200);
+      for (std::int32_t i = 0; i < 200; ++i) top[std::size_t(i)] = i;
+      w.removeParticles(top);
+    } else {
+      w.setMode(0, BodyMode::kDynamic);
+    }
+    double lowest = 1.0;  // the soft block bounces on the ground: its lowest centre
+    for (int s = 0; s < 40; ++s) {
+      ASSERT_TRUE(w.step()) << w.guard().message();
+      lowest = std::min(lowest, comY(w, 1));
+    }
+    EXPECT_LT(lowest, 0.1) << (cut ? "cut" : "released");
+  }
+}
+
 TEST(MpmWorld, AFixedSubstepCountAboveTheBoundIsAWarningNamingTheMaterial) {
   const double h = 0.01;
   ParticleArrays p;
