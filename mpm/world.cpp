@@ -700,7 +700,7 @@ double MpmWorld::pressure(std::int32_t i) const {
 
 // The buffers each pass owns, kept between steps (capacity): P2G the grid and the particle
 // sort it scatters in; the grid update the held (tool) nodes and the colliders' distance
-// fields; G2P the particle state it writes (C, F and the plastic scalar: J for a fluid).
+// fields (and static ones' cell masks); G2P the particle state it writes (C, F and the plastic scalar: J for a fluid).
 std::size_t MpmWorld::passBytes(MpmPass pass) const {
   switch (pass) {
     case MpmPass::kP2G: {
@@ -710,7 +710,7 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
     }
     case MpmPass::kGridUpdate: {
       std::size_t b = heldBytes(held_, hx_, hy_, hz_, hn_, hmus_, hmuk_);
-      for (const Collider& c : colliders_) b += c.sdf.bytes();
+      for (const Collider& c : colliders_) b += c.sdf.bytes() + heldBytes(c.near);
       return b;
     }
     case MpmPass::kG2P: return heldBytes(C_, F_, plastic_, fluidJ_);
@@ -911,6 +911,7 @@ std::vector<std::string> MpmWorld::setColliders(const std::vector<MeshCollider>&
                           num(f.voxel()) + " m voxels instead (coarser contact; a smaller or cropped mesh keeps dx/2)");
   }
   for (Collider& c : fixed) colliders_.push_back(std::move(c));
+  poseColliders(double(steps_) * params_.dt, 0.0);
   side_.clear();
   if (!colliders_.empty()) side_.assign(3 * grid_.size(), 0.0f);
   placeInColliders_ = true;
@@ -1015,6 +1016,7 @@ void MpmWorld::syncFixedColliders() {
   fixedDirty_.clear();
   if (!colliders_.empty() && side_.empty()) side_.assign(3 * grid_.size(), 0.0f);
   if (colliders_.empty()) side_.clear();
+  poseColliders(double(steps_) * params_.dt, 0.0);  // and the static ones' masks, for the plan
   placeInColliders_ = true;
 }
 
