@@ -1009,6 +1009,14 @@ void MpmWorld::syncFixedColliders() {
     desc.position = origin;
     Collider c{desc, ColliderSdf(voxelSurface(std::move(cells), h), 1.0, 0.5 * h, 0.0)};
     c.body = b;
+    double mus = 0.0, muk = 0.0;
+    for (std::int32_t i : mem) {
+      const MatModel& m = models_[std::size_t(parts_.material[std::size_t(i)])];
+      mus += double(m.mus);
+      muk += double(m.muk);
+    }
+    c.ownMus = float(mus / double(mem.size()));
+    c.ownMuk = float(muk / double(mem.size()));
 
     const auto at = std::find_if(colliders_.begin(), colliders_.end(), [&](const Collider& o) { return o.body > b; });
     colliders_.insert(at, std::move(c));
@@ -1137,8 +1145,9 @@ void MpmWorld::collideNode(const Vec3& x, float v[3], float h, float mus, float 
       const double vn = rel.dot(n);
       if (vn < 0.0) {
         rel -= vn * n;
-        const double fs = c.desc.friction ? *c.desc.friction : double(mus);
-        const double fk = c.desc.friction ? *c.desc.friction : double(muk);
+        const bool mean = !std::isnan(c.ownMus);  // a fixed body's material against the node's
+        const double fs = c.desc.friction ? *c.desc.friction : mean ? 0.5 * double(mus + c.ownMus) : double(mus);
+        const double fk = c.desc.friction ? *c.desc.friction : mean ? 0.5 * double(muk + c.ownMuk) : double(muk);
         rel *= coulombScale(rel.norm(), vn, fs, fk);
       }
     }

@@ -23,6 +23,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -291,6 +292,10 @@ class MpmWorld final : public Solver {
     // that material point was at the substep's start, over the substep h.
     Vec3 velocityAt(const Vec3& x, const Vec3& local, double h) const { return (x - (R0 * local + p0)) / h; }
     int body = -1;  // the fixed body this collider stands for; -1: a scene mesh collider
+    // A fixed body's own friction (static, dynamic: the mean over its particles' materials):
+    // a contact with it takes the mean of these and the touching material's, as between two
+    // scene materials (docs/formats.md). NaN: a mesh collider (its friction=, else the material's).
+    float ownMus = std::numeric_limits<float>::quiet_NaN(), ownMuk = std::numeric_limits<float>::quiet_NaN();
     // A static collider's cells (of the MPM grid, over its world bounds) that its field may
     // answer in (within its band or inside), grown by the band's reach: probe skips the field
     // elsewhere (most of a pool's particles, every substep). Empty: no mask (a moving collider).
