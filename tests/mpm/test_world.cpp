@@ -32,6 +32,17 @@ Material elastic(double E, ElasticModel model = ElasticModel::kCorotated) {
 
 double comY(const MpmWorld& w, int body) { return w.pose(body).centre.y(); }
 
+// Steps w until its time reaches t; false, with a failure naming the guard's diagnosis, where a
+// step is refused.
+bool runUntil(MpmWorld& w, double t) {
+  while (w.time() < t)
+    if (!w.step()) {
+      ADD_FAILURE() << w.guard().message();
+      return false;
+    }
+  return true;
+}
+
 }  // namespace
 
 // Quadratic B-splines: partition of unity, zero first moment (so sum of gradients is 0 and
@@ -914,11 +925,7 @@ CupPool cupPool(bool closed) {
   MpmWorld w(p, bodies, {water}, unitDomain(h, 0));
   w.setColliders({colliderDesc("cup")}, {cupSoup(closed)});
   CupPool out;
-  while (w.time() < 1.5)
-    if (!w.step()) {
-      ADD_FAILURE() << w.guard().message();
-      return out;
-    }
+  if (!runUntil(w, 1.5)) return out;
   const ParticleArrays& r = w.particles();
   float top = 0.0f;
   for (float y : r.y) top = std::max(top, y);
@@ -1244,11 +1251,7 @@ FixedCupPool fixedCupPool() {
   Material water = makeMaterial(MaterialKind::kFluid, "water");
   MpmWorld w(p, bodies, {water, elastic(5e5)}, unitDomain(h, 0));
   FixedCupPool out;
-  while (w.time() < 1.0)
-    if (!w.step()) {
-      ADD_FAILURE() << w.guard().message();
-      return out;
-    }
+  if (!runUntil(w, 1.0)) return out;
   const ParticleArrays& r = w.particles();
   const double floorTop = corner.y() + 0.5 * h;
   double lo[3] = {1e9, 1e9, 1e9}, hi[3] = {-1e9, -1e9, -1e9}, sumY = 0.0;
