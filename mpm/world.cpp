@@ -1017,7 +1017,10 @@ void MpmWorld::syncFixedColliders() {
     }
     c.ownMus = float(mus / double(mem.size()));
     c.ownMuk = float(muk / double(mem.size()));
-
+    if (c.sdf.voxel() > 0.5 * h * (1.0 + 1e-9))
+      warnings_.push_back("fixed body " + std::to_string(b) + " (stroke " + std::to_string(parts_.stroke[first]) + "): its surface of " +
+                          num(c.sdf.area()) + " m^2 needs a distance field coarser than h/2 = " + num(0.5 * h) + " m (" +
+                          num(c.sdf.voxel()) + " m voxels): its contacts are that much coarser");
     const auto at = std::find_if(colliders_.begin(), colliders_.end(), [&](const Collider& o) { return o.body > b; });
     colliders_.insert(at, std::move(c));
   }
