@@ -350,6 +350,30 @@ TEST(MpmWorld, AFixedBodyCutOrReleasedAfterPlayNoLongerHoldsWhatRestedOnIt) {
   }
 }
 
+// A fixed body drawn after play is a collider from the next step: a block falling from 0.4 m
+// onto a table top drawn at 0.2 m after 5 steps (the block still 0.34 m up) rests on its top
+// face (its lowest particle within a voxel above 0.215 m), not on the ground.
+TEST(MpmWorld, AFixedBodyDrawnAfterPlayHoldsWhatFallsOnIt) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  addBox(p, bodies, Vec3(0.42, 0.4, 0.42), 5, 5, 5, h, 0);
+  MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));
+  for (int s = 0; s < 5; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  ParticleArrays top;
+  std::vector<BodyRange> unused;
+  addBox(top, unused, Vec3(0.4, 0.2, 0.4), 10, 2, 10, h, 0);
+  BodyRange shape;
+  shape.init.fixed = true;
+  const int table = w.addBody(top, shape, /*kinematic=*/false);
+  EXPECT_EQ(w.mode(table), BodyMode::kFixed);
+  for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  float lowest = 1.0f;
+  for (std::int32_t i : w.bodyParticles(0)) lowest = std::min(lowest, w.particles().y[std::size_t(i)]);
+  EXPECT_GT(lowest, 0.215f - 1e-4f);
+  EXPECT_LT(lowest, 0.215f + float(h));
+}
+
 TEST(MpmWorld, AFixedSubstepCountAboveTheBoundIsAWarningNamingTheMaterial) {
   const double h = 0.01;
   ParticleArrays p;
