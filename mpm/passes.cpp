@@ -65,9 +65,11 @@ void MpmWorld::sortByBlock() {
     colourBlocks_[((bx & 1) << 2) | ((by & 1) << 1) | (bz & 1)].push_back(static_cast<std::int32_t>(b));
     mark(bx, by, bz);
   }
-  // Prescribed particles hold the nodes of their stencils.
+  // Carried bodies' particles hold the nodes of their stencils (fixed bodies are colliders:
+  // their nodes matter only where dynamic material reaches, which marks them above).
   for (std::size_t i = 0; i < n; ++i) {
     if (phase::dynamic(parts_.phase[i]) || phase::has(parts_.phase[i], phase::kRemoved)) continue;
+    if (mode_[std::size_t(parts_.group(i))] != BodyMode::kKinematic) continue;
     const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
     const int by = stencilBase(parts_.y[i] - oy, inv, n_);
     const int bz = stencilBase(parts_.z[i] - oz, inv, n_);
