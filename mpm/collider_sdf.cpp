@@ -86,7 +86,9 @@ bool ColliderSdf::sample(const Vec3& local, double& phi, Vec3& gradient) const {
   const Vec3 f(std::floor(u.x()), std::floor(u.y()), std::floor(u.z()));
   const Vec3 t = u - f;
   const openvdb::Coord base(int(f.x()), int(f.y()), int(f.z()));
-  openvdb::FloatGrid::ConstAccessor acc = impl_->grid->getConstAccessor();
+  // Unregistered (the tree never changes after construction): a registered accessor costs a
+  // concurrent hash-map insert and erase per sample.
+  openvdb::FloatGrid::ConstUnsafeAccessor acc = impl_->grid->getConstUnsafeAccessor();
   double c[2][2][2];
   bool anyInBand = false;
   using Leaf = openvdb::FloatGrid::TreeType::LeafNodeType;
