@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <string>
 #include <random>
@@ -31,6 +32,13 @@ Material elastic(double E, ElasticModel model = ElasticModel::kCorotated) {
 }
 
 double comY(const MpmWorld& w, int body) { return w.pose(body).centre.y(); }
+
+// The height of a body's lowest particle (m).
+float lowestOf(const MpmWorld& w, int body) {
+  float lowest = std::numeric_limits<float>::infinity();
+  for (std::int32_t i : w.bodyParticles(body)) lowest = std::min(lowest, w.particles().y[std::size_t(i)]);
+  return lowest;
+}
 
 // Steps w until its time reaches t; false, with a failure naming the guard's diagnosis, where a
 // step is refused.
@@ -302,8 +310,7 @@ TEST(MpmWorld, FixedBodiesHoldStillAndPlanListsOnlyPassesWithWork) {
   // field at its voxels' faces. Its lowest particle rests within a voxel (half a grid cell)
   // above the face (measured 6.5 mm: the grid holds it at the node inside the table) and not
   // below it. When the table held its particles' whole stencils the block stood 1.5 dx out.
-  float lowest = 1.0f;
-  for (std::size_t i = 200; i < w.particles().size(); ++i) lowest = std::min(lowest, w.particles().y[i]);
+  const float lowest = lowestOf(w, 1);
   const double top = 0.2 + 1.5 * h;
   std::printf("block on a fixed table: lowest particle %.4f m, the table's top face %.4f m\n", lowest, top);
   EXPECT_GT(lowest, top - 1e-4);
@@ -368,8 +375,7 @@ TEST(MpmWorld, AFixedBodyDrawnAfterPlayHoldsWhatFallsOnIt) {
   const int table = w.addBody(top, shape, /*kinematic=*/false);
   EXPECT_EQ(w.mode(table), BodyMode::kFixed);
   for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
-  float lowest = 1.0f;
-  for (std::int32_t i : w.bodyParticles(0)) lowest = std::min(lowest, w.particles().y[std::size_t(i)]);
+  const float lowest = lowestOf(w, 0);
   EXPECT_GT(lowest, 0.215f - 1e-4f);
   EXPECT_LT(lowest, 0.215f + float(h));
 }
