@@ -67,7 +67,8 @@ void MpmWorld::sortByBlock() {
   }
   // Carried bodies' particles hold the nodes of their stencils (fixed bodies are colliders:
   // their nodes matter only where dynamic material reaches, which marks them above).
-  for (std::size_t i = 0; i < n; ++i) {
+  const std::size_t carriedScan = anyCarried() ? n : 0;
+  for (std::size_t i = 0; i < carriedScan; ++i) {
     if (phase::dynamic(parts_.phase[i]) || phase::has(parts_.phase[i], phase::kRemoved)) continue;
     if (mode_[std::size_t(parts_.group(i))] != BodyMode::kKinematic) continue;
     const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
@@ -198,7 +199,8 @@ void MpmWorld::p2g(float h) {
   // pull, along the normal sum w (x_node - x_p) over the carried particles reaching the node
   // (pointing away from the body; MPM's mass-gradient contact normal, Bardenhagen et al. 2000).
   // Fixed bodies are colliders (syncFixedColliders), not held nodes.
-  for (std::size_t i = 0; i < parts_.size(); ++i) {
+  const std::size_t carriedScan = anyCarried() ? parts_.size() : 0;
+  for (std::size_t i = 0; i < carriedScan; ++i) {
     if (phase::dynamic(parts_.phase[i]) || phase::has(parts_.phase[i], phase::kRemoved)) continue;
     if (mode_[std::size_t(parts_.group(i))] != BodyMode::kKinematic) continue;
     if (hx_.empty()) {

@@ -22,6 +22,7 @@
 // sorted by grid block, rebuilt every substep with a stable counting sort.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -314,6 +315,8 @@ class MpmWorld final : public Solver {
   // interior held water only 7 voxels wide. The bodies whose field is out of date (made or
   // unmade fixed, or cut) are rebuilt before the next step (and at construction, for the plan).
   std::vector<int> fixedDirty_;
+  // Whether any body is carried (a tool): only then do the passes look for held nodes.
+  bool anyCarried() const { return std::find(mode_.begin(), mode_.end(), BodyMode::kKinematic) != mode_.end(); }
   void syncFixedColliders();
   std::size_t meshColliderCount() const;
   std::string collidersText() const;  // ", 2 mesh collider(s), 1 fixed body (...)" for the plan
