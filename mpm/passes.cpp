@@ -50,6 +50,7 @@ void MpmWorld::sortByBlock() {
   for (std::size_t i = 0; i < n; ++i)
     if (blockKey_[i] >= 0) order_[std::size_t(fill[std::size_t(blockKey_[i])]++)] = static_cast<std::int32_t>(i);
   for (auto& c : colourBlocks_) c.clear();
+  particleBlocks_.clear();
   std::fill(nodeBlockMark_.begin(), nodeBlockMark_.end(), 0);
   const auto mark = [&](int bx, int by, int bz) {
     for (int a = 0; a < 2; ++a)
@@ -63,6 +64,7 @@ void MpmWorld::sortByBlock() {
     const int bx = int(b / (std::size_t(nb_) * nb_)), by = int(b / std::size_t(nb_) % std::size_t(nb_)),
               bz = int(b % std::size_t(nb_));
     colourBlocks_[((bx & 1) << 2) | ((by & 1) << 1) | (bz & 1)].push_back(static_cast<std::int32_t>(b));
+    particleBlocks_.push_back(static_cast<std::int32_t>(b));
     mark(bx, by, bz);
   }
   // Carried bodies' particles hold the nodes of their stencils (fixed bodies are colliders:
@@ -116,83 +118,114 @@ void MpmWorld::p2g(float h) {
   const float volume = float(params_.spacing * params_.spacing * params_.spacing);
   const float stressScale = -h * volume * 4.0f * inv * inv;  // Hu et al. 2018 Eq. 16: -h V_p 4/dx^2
   const float ox = float(origin_.x()), oy = float(origin_.y()), oz = float(origin_.z());
-  const bool mixed = mixedFriction_;
-  const auto scatter = [&](std::size_t i) {
-    const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
-    const float mp = parts_.mass[i];
-    const MatModel& mat = models_[std::size_t(parts_.material[i])];
-    const float ms = mp * mat.mus, mk = mp * mat.muk;
-    const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
-    // Node (a, b, c) receives wt * (mp, mp v + A d) with d = ((a, b, c) - f) dx: per axis the
-    // column of A times that axis's offset, as 4 lanes (mass lane 0), summed in the order
-    // ((mp v + A_0 d_a) + A_1 d_b) + A_2 d_c.
-    F4 X[3], Y[3], Z[3];
-    for (int k = 0; k < 3; ++k) {
-      const float da = (float(k) - st.f[0]) * dx, db = (float(k) - st.f[1]) * dx, dc = (float(k) - st.f[2]) * dx;
-      X[k] = F4::set(0.0f, A(0, 0) * da, A(1, 0) * da, A(2, 0) * da);
-      Y[k] = F4::set(0.0f, A(0, 1) * db, A(1, 1) * db, A(2, 1) * db);
-      Z[k] = F4::set(0.0f, A(0, 2) * dc, A(1, 2) * dc, A(2, 2) * dc);
-    }
-    const F4 M = F4::set(mp, mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]);
-    // Locals, not captures or members: an SSE store may alias anything reached through a
-    // pointer, so the grid's base and the flags would be reloaded after every node's store.
-    Node* const grid = grid_.data();
-    const bool mix = mixed;
-    // A fluid particle also scatters its mass and m J for J-bar, in the same loop (its own
-    // instance, so that other particles' loop carries no test for it).
-    float* const jbar = jbar_.data();
-    const float mJ = mat.kind == MaterialKind::kFluid ? mp * plastic_[i] : 0.0f;
-    const auto nodes = [&](auto fluid) {
+  // Each block's particles scatter into a tile of its own, the 6^3 nodes their stencils can
+  // reach (bases in the block's 4 cells, plus 2), which stays in L1 and is indexed by fixed
+  // strides; the tile is then added to the grid. Two records per tile node: the node's
+  // (mass, momentum), and where needed (fluid mass, m J, m mu_s, m mu_k) for J-bar and
+  // per-material friction, so that one 4-lane operation serves all four.
+  constexpr int kT = kBlock + 2, kTile = kT * kT * kT;
+  const bool extra = mixedFriction_ || !jbar_.empty();
+  // One block: scatter its particles into the tile, then add the tile to the grid (blocks of
+  // one colour never share a node, so the adds need no lock and run in a fixed order).
+  const auto block = [&](std::size_t b, F4* tile, F4* tileExtra) {
+    const int Bx = int(b / (std::size_t(nb_) * nb_)) * kBlock, By = int(b / std::size_t(nb_) % std::size_t(nb_)) * kBlock,
+              Bz = int(b % std::size_t(nb_)) * kBlock;
+    std::fill_n(tile, kTile, F4::splat(0.0f));
+    if (extra) std::fill_n(tileExtra, kTile, F4::splat(0.0f));
+    float* const side = side_.empty() ? nullptr : side_.data();
+    for (std::int32_t o = blockStart_[b]; o < blockStart_[b + 1]; ++o) {
+      const auto i = std::size_t(order_[std::size_t(o)]);
+      const float p[3] = {parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz};
+      int base[3];
+      float f[3], w[3][3];
       for (int a = 0; a < 3; ++a) {
-        const F4 Ma = M + X[a];
-        for (int b = 0; b < 3; ++b) {
-          const float wab = st.w[0][a] * st.w[1][b];
-          const F4 r = Ma + Y[b];
-          const std::size_t row = st.ix[a] + st.iy[b];
-          for (int c = 0; c < 3; ++c) {
-            const float wt = wab * st.w[2][c];
-            const std::size_t node = row + st.iz[c];
-            Node* const g = grid + node;
-            (F4::load(g) + F4::splat(wt) * (r + Z[c])).store(g);
-            if (mix) {
-              gfs_[node] += wt * ms;
-              gfk_[node] += wt * mk;
-            }
-            if constexpr (decltype(fluid)::value == 2) {  // not every particle a fluid
-              jbar[2 * node] += wt * mp;
-              jbar[2 * node + 1] += wt * mJ;
-            } else if constexpr (decltype(fluid)::value == 1) {  // all fluid: fluid mass = node mass
-              jbar[2 * node + 1] += wt * mJ;
+        base[a] = stencilBase(p[a], inv, n_);
+        f[a] = p[a] * inv - float(base[a]);
+        bsplineWeights(f[a], w[a]);
+      }
+      const float mp = parts_.mass[i];
+      const MatModel& mat = models_[std::size_t(parts_.material[i])];
+      const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
+      // Node (a, b, c) receives wt * (mp, mp v + A d) with d = ((a, b, c) - f) dx: per axis the
+      // column of A times that axis's offset, as 4 lanes (mass lane 0), summed in the order
+      // ((mp v + A_0 d_a) + A_1 d_b) + A_2 d_c.
+      F4 X[3], Y[3], Z[3];
+      for (int k = 0; k < 3; ++k) {
+        const float da = (float(k) - f[0]) * dx, db = (float(k) - f[1]) * dx, dc = (float(k) - f[2]) * dx;
+        X[k] = F4::set(0.0f, A(0, 0) * da, A(1, 0) * da, A(2, 0) * da);
+        Y[k] = F4::set(0.0f, A(0, 1) * db, A(1, 1) * db, A(2, 1) * db);
+        Z[k] = F4::set(0.0f, A(0, 2) * dc, A(1, 2) * dc, A(2, 2) * dc);
+      }
+      const F4 M = F4::set(mp, mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]);
+      // A fluid's mass and m J for J-bar (zero for other materials), mass times friction.
+      const bool fluid = mat.kind == MaterialKind::kFluid;
+      const F4 E = F4::set(fluid ? mp : 0.0f, fluid ? mp * plastic_[i] : 0.0f, mp * mat.mus, mp * mat.muk);
+      F4* const t0 = tile + ((base[0] - Bx) * kT + (base[1] - By)) * kT + (base[2] - Bz);
+      const auto nodes = [&](auto withExtra) {
+        F4* const e0 = tileExtra + (t0 - tile);
+        for (int a = 0; a < 3; ++a) {
+          const F4 Ma = M + X[a];
+          for (int bb = 0; bb < 3; ++bb) {
+            const float wab = w[0][a] * w[1][bb];
+            const F4 r = Ma + Y[bb];
+            const int row = (a * kT + bb) * kT;
+            for (int c = 0; c < 3; ++c) {
+              const F4 wt = F4::splat(wab * w[2][c]);
+              t0[row + c] = t0[row + c] + wt * (r + Z[c]);
+              if constexpr (decltype(withExtra)::value) e0[row + c] = e0[row + c] + wt * E;
             }
           }
         }
-      }
-    };
-    if (mat.kind != MaterialKind::kFluid) nodes(std::integral_constant<int, 0>{});
-    else if (fluidOnly_) nodes(std::integral_constant<int, 1>{});
-    else nodes(std::integral_constant<int, 2>{});
-    // Where colliders are, m (x_p - x_node) per axis, in a loop of its own (few scenes).
-    float* const side = side_.empty() ? nullptr : side_.data();
-    if (!side) return;
-    float s[3][3];
-    for (int k = 0; k < 3; ++k)
-      for (int axis = 0; axis < 3; ++axis) s[axis][k] = mp * (st.f[axis] - float(k)) * dx;
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) {
-        const float wab = st.w[0][a] * st.w[1][b];
-        for (int c = 0; c < 3; ++c) {
-          const float wt = wab * st.w[2][c];
-          const std::size_t node = st.node(a, b, c);
-          side[3 * node] += wt * s[0][a];
-          side[3 * node + 1] += wt * s[1][b];
-          side[3 * node + 2] += wt * s[2][c];
+      };
+      if (extra) nodes(std::true_type{});
+      else nodes(std::false_type{});
+      // Where colliders are, m (x_p - x_node) per axis, straight into the grid (few scenes).
+      if (!side) continue;
+      const Stencil st = makeStencil(p[0], p[1], p[2], inv, n_, nb_);
+      float s[3][3];
+      for (int k = 0; k < 3; ++k)
+        for (int axis = 0; axis < 3; ++axis) s[axis][k] = mp * (st.f[axis] - float(k)) * dx;
+      for (int a = 0; a < 3; ++a)
+        for (int bb = 0; bb < 3; ++bb) {
+          const float wab = st.w[0][a] * st.w[1][bb];
+          for (int c = 0; c < 3; ++c) {
+            const float wt = wab * st.w[2][c];
+            const std::size_t node = st.node(a, bb, c);
+            side[3 * node] += wt * s[0][a];
+            side[3 * node + 1] += wt * s[1][bb];
+            side[3 * node + 2] += wt * s[2][c];
+          }
         }
-      }
+    }
+    // The tile into the grid (nodes past the grid's last get nothing: stencils never reach them).
+    const bool fluidJ = !jbar_.empty(), fluidOnly = fluidOnly_, mix = mixedFriction_;
+    for (int a = 0; a < kT && Bx + a < n_; ++a)
+      for (int bb = 0; bb < kT && By + bb < n_; ++bb)
+        for (int c = 0; c < kT && Bz + c < n_; ++c) {
+          const int gx = Bx + a, gy = By + bb, gz = Bz + c;
+          const std::size_t node = ((std::size_t(gx >> 2) * std::size_t(nb_) + std::size_t(gy >> 2)) * std::size_t(nb_) +
+                                    std::size_t(gz >> 2)) * 64 +
+                                   std::size_t(((gx & 3) << 4) | ((gy & 3) << 2) | (gz & 3));
+          const int t = (a * kT + bb) * kT + c;
+          Node* const g = &grid_[node];
+          (F4::load(g) + tile[t]).store(g);
+          if (!extra) continue;
+          const F4 e = tileExtra[t];
+          if (fluidJ) {
+            if (!fluidOnly) jbar_[2 * node] += e.lane(0);
+            jbar_[2 * node + 1] += e.lane(1);
+          }
+          if (mix) {
+            gfs_[node] += e.lane(2);
+            gfk_[node] += e.lane(3);
+          }
+        }
   };
   for (const auto& blocks : colourBlocks_)
     forEach(blocks.size(), [&](std::size_t k) {
-      const auto b = std::size_t(blocks[k]);
-      for (std::int32_t o = blockStart_[b]; o < blockStart_[b + 1]; ++o) scatter(std::size_t(order_[std::size_t(o)]));
+      alignas(16) F4 tile[kTile];
+      alignas(16) F4 tileExtra[kTile];
+      block(std::size_t(blocks[k]), tile, tileExtra);
     });
   // Carried bodies (tools): the nodes of their particles' stencils move with them, in id order
   // (a node two bodies hold takes the later one's velocity), one-sided: they push and never
@@ -294,21 +327,51 @@ void MpmWorld::gridUpdate(float h) {
 void MpmWorld::g2p(float h) {
   const float inv = float(1.0 / dx_), dx = float(dx_);
   const float ox = float(origin_.x()), oy = float(origin_.y()), oz = float(origin_.z());
-  forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
-    for (std::size_t o = lo; o < hi; ++o) {
-      const auto i = std::size_t(order_[o]);
-      const Stencil st = makeStencil(parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz, inv, n_, nb_);
+  // Block by block, as p2g: the 6^3 nodes a block's particles can reach are copied into a tile
+  // that stays in L1 and is read with fixed strides.
+  constexpr int kT = kBlock + 2, kTile = kT * kT * kT;
+  forEach(particleBlocks_.size(), [&](std::size_t k) {
+    const auto blk = std::size_t(particleBlocks_[k]);
+    const int Bx = int(blk / (std::size_t(nb_) * nb_)) * kBlock, By = int(blk / std::size_t(nb_) % std::size_t(nb_)) * kBlock,
+              Bz = int(blk % std::size_t(nb_)) * kBlock;
+    alignas(16) F4 tile[kTile];
+    for (int a = 0; a < kT; ++a)
+      for (int bb = 0; bb < kT; ++bb)
+        for (int c = 0; c < kT; ++c) {
+          const int gx = Bx + a, gy = By + bb, gz = Bz + c;
+          const int t = (a * kT + bb) * kT + c;
+          if (gx >= n_ || gy >= n_ || gz >= n_) {  // past the grid's last node: no stencil reaches it
+            tile[t] = F4::splat(0.0f);
+            continue;
+          }
+          const std::size_t node = ((std::size_t(gx >> 2) * std::size_t(nb_) + std::size_t(gy >> 2)) * std::size_t(nb_) +
+                                    std::size_t(gz >> 2)) * 64 +
+                                   std::size_t(((gx & 3) << 4) | ((gy & 3) << 2) | (gz & 3));
+          tile[t] = F4::load(&grid_[node]);
+        }
+    for (std::int32_t o = blockStart_[blk]; o < blockStart_[blk + 1]; ++o) {
+      const auto i = std::size_t(order_[std::size_t(o)]);
+      const float p[3] = {parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz};
+      int base[3];
+      float f[3], w[3][3];
+      for (int a = 0; a < 3; ++a) {
+        base[a] = stencilBase(p[a], inv, n_);
+        f[a] = p[a] * inv - float(base[a]);
+        bsplineWeights(f[a], w[a]);
+      }
+      const F4* const t0 = tile + ((base[0] - Bx) * kT + (base[1] - By)) * kT + (base[2] - Bz);
       // Per node u = wt * v_node, summed into v and into B's three columns u d_axis. Lane 0
       // carries the node's mass along, unused; where a fluid is, its J_node, summed into J-bar.
       F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
       for (int a = 0; a < 3; ++a) {
-        const F4 d0 = F4::splat((float(a) - st.f[0]) * dx);
-        for (int b = 0; b < 3; ++b) {
-          const F4 d1 = F4::splat((float(b) - st.f[1]) * dx);
-          const float wab = st.w[0][a] * st.w[1][b];
+        const F4 d0 = F4::splat((float(a) - f[0]) * dx);
+        for (int bb = 0; bb < 3; ++bb) {
+          const F4 d1 = F4::splat((float(bb) - f[1]) * dx);
+          const float wab = w[0][a] * w[1][bb];
+          const int row = (a * kT + bb) * kT;
           for (int c = 0; c < 3; ++c) {
-            const F4 d2 = F4::splat((float(c) - st.f[2]) * dx);
-            const F4 u = F4::splat(wab * st.w[2][c]) * F4::load(&grid_[st.node(a, b, c)]);
+            const F4 d2 = F4::splat((float(c) - f[2]) * dx);
+            const F4 u = F4::splat(wab * w[2][c]) * t0[row + c];
             v4 = v4 + u;
             B0 = B0 + u * d0;
             B1 = B1 + u * d1;

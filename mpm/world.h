@@ -340,6 +340,7 @@ class MpmWorld final : public Solver {
   // Sorting: dynamic particles by block, and the blocks that have any, by colour.
   std::vector<std::int32_t> order_, blockStart_, blockKey_, blockFill_;
   std::vector<std::int32_t> colourBlocks_[8];
+  std::vector<std::int32_t> particleBlocks_;  // the blocks that hold dynamic particles, ascending
   std::vector<std::int32_t> activeNodeBlocks_;
   std::vector<std::uint8_t> nodeBlockMark_;
 
