@@ -360,24 +360,32 @@ void MpmWorld::g2p(float h) {
         bsplineWeights(f[a], w[a]);
       }
       const F4* const t0 = tile + ((base[0] - Bx) * kT + (base[1] - By)) * kT + (base[2] - Bz);
-      // Per node u = wt * v_node, summed into v and into B's three columns u d_axis. Lane 0
-      // carries the node's mass along, unused; where a fluid is, its J_node, summed into J-bar.
+      // v = sum w g and B's columns sum w g d_axis over the nodes g (w = w0 w1 w2, d_axis
+      // the node's offset along that axis), factored axis by axis: per row (a, b) the sums
+      // over c of w2 g and w2 d2 g, then over b, then over a, so each node costs one load,
+      // two products and two adds. Lane 0 carries the node's mass lane along, unused; where a
+      // fluid is, its J_node, summed into J-bar.
+      F4 W[3][3], WD[3][3];  // per axis: w_k, w_k d_k as 4 equal lanes
+      for (int ax = 0; ax < 3; ++ax)
+        for (int q = 0; q < 3; ++q) {
+          W[ax][q] = F4::splat(w[ax][q]);
+          WD[ax][q] = F4::splat(w[ax][q] * ((float(q) - f[ax]) * dx));
+        }
       F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
       for (int a = 0; a < 3; ++a) {
-        const F4 d0 = F4::splat((float(a) - f[0]) * dx);
+        F4 Sa = F4::splat(0.0f), Ua = Sa, Ta = Sa;
         for (int bb = 0; bb < 3; ++bb) {
-          const F4 d1 = F4::splat((float(bb) - f[1]) * dx);
-          const float wab = w[0][a] * w[1][bb];
-          const int row = (a * kT + bb) * kT;
-          for (int c = 0; c < 3; ++c) {
-            const F4 d2 = F4::splat((float(c) - f[2]) * dx);
-            const F4 u = F4::splat(wab * w[2][c]) * t0[row + c];
-            v4 = v4 + u;
-            B0 = B0 + u * d0;
-            B1 = B1 + u * d1;
-            B2 = B2 + u * d2;
-          }
+          const F4* const g = t0 + (a * kT + bb) * kT;
+          const F4 S = (W[2][0] * g[0] + W[2][1] * g[1]) + W[2][2] * g[2];
+          const F4 T = (WD[2][0] * g[0] + WD[2][1] * g[1]) + WD[2][2] * g[2];
+          Sa = Sa + W[1][bb] * S;
+          Ua = Ua + WD[1][bb] * S;
+          Ta = Ta + W[1][bb] * T;
         }
+        v4 = v4 + W[0][a] * Sa;
+        B0 = B0 + WD[0][a] * Sa;
+        B1 = B1 + W[0][a] * Ua;
+        B2 = B2 + W[0][a] * Ta;
       }
       const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
       const float jbar = v4.lane(0);  // a fluid's J-bar: sum over nodes of w J_node
