@@ -4,6 +4,9 @@
 #include <cmath>
 #include <limits>
 #include <type_traits>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "mpm/constitutive.h"
 #include "mpm/kernels.h"
@@ -13,6 +16,122 @@
 namespace physketch::mpm {
 
 using namespace detail;
+
+// --- the 27-node loops of P2G and G2P on a block's tile ----------------------------------
+//
+// A tile holds the 6^3 nodes a block's particles reach, z fastest, one F4 record per node;
+// t0 points at a particle's stencil base. Two versions of each: SSE (4 lanes, one node at a
+// time) and AVX2 (8 lanes: nodes c = 0 and 1 of a row at once, c = 2 alone). Every lane does
+// the same IEEE operations in the same order in both, so they give bit-identical results
+// (tests/mpm: MpmWorld.Avx2AndSseTransfersGiveBitIdenticalStates).
+
+namespace {
+
+constexpr int kT = kBlock + 2, kTile = kT * kT * kT;  // a block's tile: nodes per edge, nodes
+
+// P2G: node (a, b, c) += wt (r_ab + Z_c), r_ab = (M + X_a) + Y_b, wt = (w0_a w1_b) w2_c; and
+// where e0 is given, e0's node += wt E.
+void scatterSse(F4* t0, F4* e0, const float (&w)[3][3], const F4 (&X)[3], const F4 (&Y)[3], const F4 (&Z)[3], F4 M,
+                F4 E) {
+  for (int a = 0; a < 3; ++a) {
+    const F4 Ma = M + X[a];
+    for (int b = 0; b < 3; ++b) {
+      const float wab = w[0][a] * w[1][b];
+      const F4 r = Ma + Y[b];
+      const int row = (a * kT + b) * kT;
+      for (int c = 0; c < 3; ++c) {
+        const F4 wt = F4::splat(wab * w[2][c]);
+        t0[row + c] = t0[row + c] + wt * (r + Z[c]);
+        if (e0) e0[row + c] = e0[row + c] + wt * E;
+      }
+    }
+  }
+}
+
+// G2P: S = sum_c w2_c g_c and T = sum_c (w2 d2)_c g_c over a row's three nodes, then over
+// b and a as g2p documents; returns v (out[0]) and B's columns (out[1..3]).
+void gatherSse(const F4* t0, const F4 (&W)[3][3], const F4 (&WD)[3][3], F4 (&out)[4]) {
+  F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
+  for (int a = 0; a < 3; ++a) {
+    F4 Sa = F4::splat(0.0f), Ua = Sa, Ta = Sa;
+    for (int b = 0; b < 3; ++b) {
+      const F4* const g = t0 + (a * kT + b) * kT;
+      const F4 S = (W[2][0] * g[0] + W[2][1] * g[1]) + W[2][2] * g[2];
+      const F4 T = (WD[2][0] * g[0] + WD[2][1] * g[1]) + WD[2][2] * g[2];
+      Sa = Sa + W[1][b] * S;
+      Ua = Ua + WD[1][b] * S;
+      Ta = Ta + W[1][b] * T;
+    }
+    v4 = v4 + W[0][a] * Sa;
+    B0 = B0 + WD[0][a] * Sa;
+    B1 = B1 + W[0][a] * Ua;
+    B2 = B2 + W[0][a] * Ta;
+  }
+  out[0] = v4, out[1] = B0, out[2] = B1, out[3] = B2;
+}
+
+#if defined(__x86_64__) && defined(__SSE2__)
+#define PHYSKETCH_MPM_AVX2 1
+__attribute__((target("avx2"))) void scatterAvx2(F4* t0, F4* e0, const float (&w)[3][3], const F4 (&X)[3],
+                                                 const F4 (&Y)[3], const F4 (&Z)[3], F4 M, F4 E) {
+  const __m256 w01 = _mm256_setr_ps(w[2][0], w[2][0], w[2][0], w[2][0], w[2][1], w[2][1], w[2][1], w[2][1]);
+  const __m256 z01 = _mm256_set_m128(Z[1].v, Z[0].v);
+  const __m256 e2 = _mm256_set_m128(E.v, E.v);
+  for (int a = 0; a < 3; ++a) {
+    const F4 Ma = M + X[a];
+    for (int b = 0; b < 3; ++b) {
+      const float wab = w[0][a] * w[1][b];
+      const F4 r = Ma + Y[b];
+      const int row = (a * kT + b) * kT;
+      float* const g = reinterpret_cast<float*>(t0 + row);
+      const __m256 wt = _mm256_mul_ps(_mm256_set1_ps(wab), w01);
+      const __m256 r2 = _mm256_set_m128(r.v, r.v);
+      _mm256_storeu_ps(g, _mm256_add_ps(_mm256_loadu_ps(g), _mm256_mul_ps(wt, _mm256_add_ps(r2, z01))));
+      const F4 wt2 = F4::splat(wab * w[2][2]);
+      t0[row + 2] = t0[row + 2] + wt2 * (r + Z[2]);
+      if (e0) {
+        float* const e = reinterpret_cast<float*>(e0 + row);
+        _mm256_storeu_ps(e, _mm256_add_ps(_mm256_loadu_ps(e), _mm256_mul_ps(wt, e2)));
+        e0[row + 2] = e0[row + 2] + wt2 * E;
+      }
+    }
+  }
+}
+
+__attribute__((target("avx2"))) void gatherAvx2(const F4* t0, const F4 (&W)[3][3], const F4 (&WD)[3][3], F4 (&out)[4]) {
+  const __m256 w01 = _mm256_set_m128(W[2][1].v, W[2][0].v), wd01 = _mm256_set_m128(WD[2][1].v, WD[2][0].v);
+  F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
+  for (int a = 0; a < 3; ++a) {
+    F4 Sa = F4::splat(0.0f), Ua = Sa, Ta = Sa;
+    for (int b = 0; b < 3; ++b) {
+      const F4* const g = t0 + (a * kT + b) * kT;
+      const __m256 g01 = _mm256_loadu_ps(reinterpret_cast<const float*>(g));
+      const __m256 s01 = _mm256_mul_ps(w01, g01), t01 = _mm256_mul_ps(wd01, g01);
+      const F4 S = F4{_mm_add_ps(_mm256_castps256_ps128(s01), _mm256_extractf128_ps(s01, 1))} + W[2][2] * g[2];
+      const F4 T = F4{_mm_add_ps(_mm256_castps256_ps128(t01), _mm256_extractf128_ps(t01, 1))} + WD[2][2] * g[2];
+      Sa = Sa + W[1][b] * S;
+      Ua = Ua + WD[1][b] * S;
+      Ta = Ta + W[1][b] * T;
+    }
+    v4 = v4 + W[0][a] * Sa;
+    B0 = B0 + WD[0][a] * Sa;
+    B1 = B1 + W[0][a] * Ua;
+    B2 = B2 + W[0][a] * Ta;
+  }
+  out[0] = v4, out[1] = B0, out[2] = B1, out[3] = B2;
+}
+#endif
+
+}  // namespace
+
+bool MpmWorld::avx2Supported() {
+#ifdef PHYSKETCH_MPM_AVX2
+  static const bool yes = __builtin_cpu_supports("avx2");
+  return yes;
+#else
+  return false;
+#endif
+}
 
 // --- the passes --------------------------------------------------------------------
 
@@ -123,8 +242,8 @@ void MpmWorld::p2g(float h) {
   // strides; the tile is then added to the grid. Two records per tile node: the node's
   // (mass, momentum), and where needed (fluid mass, m J, m mu_s, m mu_k) for J-bar and
   // per-material friction, so that one 4-lane operation serves all four.
-  constexpr int kT = kBlock + 2, kTile = kT * kT * kT;
   const bool extra = mixedFriction_ || !jbar_.empty();
+  const bool avx2 = avx2_;
   // One block: scatter its particles into the tile, then add the tile to the grid (blocks of
   // one colour never share a node, so the adds need no lock and run in a fixed order).
   const auto block = [&](std::size_t b, F4* tile, F4* tileExtra) {
@@ -161,24 +280,12 @@ void MpmWorld::p2g(float h) {
       const bool fluid = mat.kind == MaterialKind::kFluid;
       const F4 E = F4::set(fluid ? mp : 0.0f, fluid ? mp * plastic_[i] : 0.0f, mp * mat.mus, mp * mat.muk);
       F4* const t0 = tile + ((base[0] - Bx) * kT + (base[1] - By)) * kT + (base[2] - Bz);
-      const auto nodes = [&](auto withExtra) {
-        F4* const e0 = tileExtra + (t0 - tile);
-        for (int a = 0; a < 3; ++a) {
-          const F4 Ma = M + X[a];
-          for (int bb = 0; bb < 3; ++bb) {
-            const float wab = w[0][a] * w[1][bb];
-            const F4 r = Ma + Y[bb];
-            const int row = (a * kT + bb) * kT;
-            for (int c = 0; c < 3; ++c) {
-              const F4 wt = F4::splat(wab * w[2][c]);
-              t0[row + c] = t0[row + c] + wt * (r + Z[c]);
-              if constexpr (decltype(withExtra)::value) e0[row + c] = e0[row + c] + wt * E;
-            }
-          }
-        }
-      };
-      if (extra) nodes(std::true_type{});
-      else nodes(std::false_type{});
+      F4* const e0 = extra ? tileExtra + (t0 - tile) : nullptr;
+#ifdef PHYSKETCH_MPM_AVX2
+      if (avx2) scatterAvx2(t0, e0, w, X, Y, Z, M, E);
+      else
+#endif
+        scatterSse(t0, e0, w, X, Y, Z, M, E);
       // Where colliders are, m (x_p - x_node) per axis, straight into the grid (few scenes).
       if (!side) continue;
       const Stencil st = makeStencil(p[0], p[1], p[2], inv, n_, nb_);
@@ -329,7 +436,7 @@ void MpmWorld::g2p(float h) {
   const float ox = float(origin_.x()), oy = float(origin_.y()), oz = float(origin_.z());
   // Block by block, as p2g: the 6^3 nodes a block's particles can reach are copied into a tile
   // that stays in L1 and is read with fixed strides.
-  constexpr int kT = kBlock + 2, kTile = kT * kT * kT;
+  const bool avx2 = avx2_;
   forEach(particleBlocks_.size(), [&](std::size_t k) {
     const auto blk = std::size_t(particleBlocks_[k]);
     const int Bx = int(blk / (std::size_t(nb_) * nb_)) * kBlock, By = int(blk / std::size_t(nb_) % std::size_t(nb_)) * kBlock,
@@ -371,22 +478,13 @@ void MpmWorld::g2p(float h) {
           W[ax][q] = F4::splat(w[ax][q]);
           WD[ax][q] = F4::splat(w[ax][q] * ((float(q) - f[ax]) * dx));
         }
-      F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
-      for (int a = 0; a < 3; ++a) {
-        F4 Sa = F4::splat(0.0f), Ua = Sa, Ta = Sa;
-        for (int bb = 0; bb < 3; ++bb) {
-          const F4* const g = t0 + (a * kT + bb) * kT;
-          const F4 S = (W[2][0] * g[0] + W[2][1] * g[1]) + W[2][2] * g[2];
-          const F4 T = (WD[2][0] * g[0] + WD[2][1] * g[1]) + WD[2][2] * g[2];
-          Sa = Sa + W[1][bb] * S;
-          Ua = Ua + WD[1][bb] * S;
-          Ta = Ta + W[1][bb] * T;
-        }
-        v4 = v4 + W[0][a] * Sa;
-        B0 = B0 + WD[0][a] * Sa;
-        B1 = B1 + W[0][a] * Ua;
-        B2 = B2 + W[0][a] * Ta;
-      }
+      F4 sums[4];
+#ifdef PHYSKETCH_MPM_AVX2
+      if (avx2) gatherAvx2(t0, W, WD, sums);
+      else
+#endif
+        gatherSse(t0, W, WD, sums);
+      const F4 &v4 = sums[0], &B0 = sums[1], &B1 = sums[2], &B2 = sums[3];
       const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
       const float jbar = v4.lane(0);  // a fluid's J-bar: sum over nodes of w J_node
       const float v[3] = {v4.lane(1), v4.lane(2), v4.lane(3)};

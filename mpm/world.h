@@ -93,6 +93,10 @@ class MpmWorld final : public Solver {
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool on) override { validate_ = on; }
+  // P2G's and G2P's node loops in AVX2 where the CPU has it (the default), else SSE; both give
+  // bit-identical results. False forces SSE (tests compare the two).
+  void setAvx2(bool on) { avx2_ = on && avx2Supported(); }
+  static bool avx2Supported();
   void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
   const GuardLog& guardLog() const override { return guardLog_; }
 
@@ -352,6 +356,7 @@ class MpmWorld final : public Solver {
   std::vector<std::int8_t> edgeSide_;
   int lastSubsteps_ = 0;
   bool validate_ = false;
+  bool avx2_ = avx2Supported();
   GuardLog guardLog_;  // the events a run continued past (policy warn)
   std::vector<bool> work_;
   std::vector<std::string> warnings_;

@@ -180,6 +180,18 @@ TEST(MpmPlasticity, TaitPressureIsZeroAtRestAndPushesBackWhenCompressed) {
   EXPECT_EQ(t(0, 1), 0.0f);
 }
 
+// invPow's squaring path against pow in double: whole exponents 1..16 and fractional ones
+// (pow's path), J from strongly compressed to stretched. Within 1e-6 relative: float's
+// rounding over at most 8 products and a division (a few ulp of 6e-8); a wrong exponent bit
+// is off by a factor J^k, over 1 % here.
+TEST(MpmPlasticity, InvPowMatchesPowForWholeAndFractionalExponents) {
+  for (float gamma : {1.0f, 2.0f, 3.0f, 5.0f, 7.0f, 8.0f, 13.0f, 16.0f, 1.5f, 6.9f, 17.0f})
+    for (float J : {0.5f, 0.8f, 0.97f, 0.999f, 1.0f, 1.003f, 1.2f, 1.9f}) {
+      const double want = std::pow(double(J), -double(gamma));
+      EXPECT_NEAR(invPow(J, gamma), want, 1e-6 * want) << "J " << J << " gamma " << gamma;
+    }
+}
+
 // --- svd3 (mpm/svd3.h) against Eigen's JacobiSVD in double --------------------------------
 
 namespace {
