@@ -126,8 +126,12 @@ inline void pushOnly(float v[3], float hx, float hy, float hz, const float n[3],
 
 // The lowest node of a particle's 3-node stencil along one axis: floor(x/dx - 1/2), clamped
 // so that base + 2 is still a node of the grid (nodes 0..n-1): no write ever leaves the grid.
+// Truncation stands in for floor (SSE2 has no floor instruction): they differ only below 0,
+// which is clamped to 0 first, as is NaN (the guard reports it); values past int's range are
+// cut at 1e9 before the conversion.
 inline int stencilBase(float fromOrigin, float invDx, int n) {
-  return std::clamp(int(std::floor(fromOrigin * invDx - 0.5f)), 0, n - 3);
+  const float u = fromOrigin * invDx - 0.5f;
+  return !(u >= 0.0f) ? 0 : std::min(int(std::min(u, 1e9f)), n - 3);
 }
 
 // A particle's 3x3x3 stencil on the block-major grid (4^3 nodes per block, nb blocks per

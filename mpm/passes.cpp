@@ -268,12 +268,13 @@ void MpmWorld::p2g(float h) {
       // Node (a, b, c) receives wt * (mp, mp v + A d) with d = ((a, b, c) - f) dx: per axis the
       // column of A times that axis's offset, as 4 lanes (mass lane 0), summed in the order
       // ((mp v + A_0 d_a) + A_1 d_b) + A_2 d_c.
+      const F4 A0 = F4::set(0.0f, A(0, 0), A(1, 0), A(2, 0)), A1 = F4::set(0.0f, A(0, 1), A(1, 1), A(2, 1)),
+               A2 = F4::set(0.0f, A(0, 2), A(1, 2), A(2, 2));
       F4 X[3], Y[3], Z[3];
       for (int k = 0; k < 3; ++k) {
-        const float da = (float(k) - f[0]) * dx, db = (float(k) - f[1]) * dx, dc = (float(k) - f[2]) * dx;
-        X[k] = F4::set(0.0f, A(0, 0) * da, A(1, 0) * da, A(2, 0) * da);
-        Y[k] = F4::set(0.0f, A(0, 1) * db, A(1, 1) * db, A(2, 1) * db);
-        Z[k] = F4::set(0.0f, A(0, 2) * dc, A(1, 2) * dc, A(2, 2) * dc);
+        X[k] = A0 * F4::splat((float(k) - f[0]) * dx);
+        Y[k] = A1 * F4::splat((float(k) - f[1]) * dx);
+        Z[k] = A2 * F4::splat((float(k) - f[2]) * dx);
       }
       const F4 M = F4::set(mp, mp * parts_.vx[i], mp * parts_.vy[i], mp * parts_.vz[i]);
       // A fluid's mass and m J for J-bar (zero for other materials), mass times friction.
@@ -484,19 +485,15 @@ void MpmWorld::g2p(float h) {
       else
 #endif
         gatherSse(t0, W, WD, sums);
-      const F4 &v4 = sums[0], &B0 = sums[1], &B1 = sums[2], &B2 = sums[3];
+      alignas(16) float out[16];  // v's record, then B's columns (lanes 1-3: rows; lane 0 unused)
+      for (int q = 0; q < 4; ++q) sums[q].store(out + 4 * q);
       const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
-      const float jbar = v4.lane(0);  // a fluid's J-bar: sum over nodes of w J_node
-      const float v[3] = {v4.lane(1), v4.lane(2), v4.lane(3)};
-      float Bm[3][3];  // sum of w v d^T (row r, column axis)
-      for (int r = 0; r < 3; ++r) {
-        Bm[r][0] = B0.lane(r + 1);
-        Bm[r][1] = B1.lane(r + 1);
-        Bm[r][2] = B2.lane(r + 1);
-      }
-      Eigen::Matrix3f B;
-      B << Bm[0][0], Bm[0][1], Bm[0][2], Bm[1][0], Bm[1][1], Bm[1][2], Bm[2][0], Bm[2][1], Bm[2][2];
-      const Eigen::Matrix3f C = (4.0f * inv * inv) * B;  // Hu et al. 2018 Eq. 17 with D^-1 = 4/dx^2
+      const float jbar = out[0];  // a fluid's J-bar: sum over nodes of w J_node
+      const float v[3] = {out[1], out[2], out[3]};
+      const float cScale = 4.0f * inv * inv;  // Hu et al. 2018 Eq. 17 with D^-1 = 4/dx^2
+      Eigen::Matrix3f C;
+      for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) C(r, c) = cScale * out[4 * (c + 1) + r + 1];
       parts_.vx[i] = v[0];
       parts_.vy[i] = v[1];
       parts_.vz[i] = v[2];
