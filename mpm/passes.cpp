@@ -144,30 +144,40 @@ bool MpmWorld::avx2Supported() {
 void MpmWorld::sortByBlock() {
   const std::size_t n = parts_.size();
   const std::size_t blocks = std::size_t(nb_) * nb_ * nb_;
+  // The keys, and whether any differs from the last sort's: if none does, that sort's order
+  // is this one's too (a stable sort of the same keys), and only the lists below are redone.
+  const bool sameSize = blockKey_.size() == n && blockStart_.size() == blocks + 1;
   blockKey_.resize(n);
+  keyChanged_.assign((n + kChunk - 1) / kChunk, 0);
   const float inv = float(1.0 / dx_);
   const float ox = float(origin_.x()), oy = float(origin_.y()), oz = float(origin_.z());
   forRange(n, [&](std::size_t lo, std::size_t hi) {
+    std::uint8_t changed = 0;
     for (std::size_t i = lo; i < hi; ++i) {
-      if (!phase::dynamic(parts_.phase[i])) {
-        blockKey_[i] = -1;
-        continue;
+      std::int32_t key = -1;
+      if (phase::dynamic(parts_.phase[i])) {
+        const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
+        const int by = stencilBase(parts_.y[i] - oy, inv, n_);
+        const int bz = stencilBase(parts_.z[i] - oz, inv, n_);
+        key = ((bx >> 2) * nb_ + (by >> 2)) * nb_ + (bz >> 2);
       }
-      const int bx = stencilBase(parts_.x[i] - ox, inv, n_);
-      const int by = stencilBase(parts_.y[i] - oy, inv, n_);
-      const int bz = stencilBase(parts_.z[i] - oz, inv, n_);
-      blockKey_[i] = ((bx >> 2) * nb_ + (by >> 2)) * nb_ + (bz >> 2);
+      changed |= std::uint8_t(key != blockKey_[i]);
+      blockKey_[i] = key;
     }
+    keyChanged_[lo / kChunk] = changed;
   });
-  blockStart_.assign(blocks + 1, 0);
-  for (std::size_t i = 0; i < n; ++i)
-    if (blockKey_[i] >= 0) ++blockStart_[std::size_t(blockKey_[i]) + 1];
-  for (std::size_t b = 0; b < blocks; ++b) blockStart_[b + 1] += blockStart_[b];
-  order_.resize(std::size_t(blockStart_[blocks]));
-  std::vector<std::int32_t>& fill = blockFill_;
-  fill.assign(blockStart_.begin(), blockStart_.end() - 1);
-  for (std::size_t i = 0; i < n; ++i)
-    if (blockKey_[i] >= 0) order_[std::size_t(fill[std::size_t(blockKey_[i])]++)] = static_cast<std::int32_t>(i);
+  const bool resort = !sameSize || std::any_of(keyChanged_.begin(), keyChanged_.end(), [](std::uint8_t c) { return c != 0; });
+  if (resort) {
+    blockStart_.assign(blocks + 1, 0);
+    for (std::size_t i = 0; i < n; ++i)
+      if (blockKey_[i] >= 0) ++blockStart_[std::size_t(blockKey_[i]) + 1];
+    for (std::size_t b = 0; b < blocks; ++b) blockStart_[b + 1] += blockStart_[b];
+    order_.resize(std::size_t(blockStart_[blocks]));
+    std::vector<std::int32_t>& fill = blockFill_;
+    fill.assign(blockStart_.begin(), blockStart_.end() - 1);
+    for (std::size_t i = 0; i < n; ++i)
+      if (blockKey_[i] >= 0) order_[std::size_t(fill[std::size_t(blockKey_[i])]++)] = static_cast<std::int32_t>(i);
+  }
   for (auto& c : colourBlocks_) c.clear();
   particleBlocks_.clear();
   std::fill(nodeBlockMark_.begin(), nodeBlockMark_.end(), 0);

@@ -343,6 +343,7 @@ class MpmWorld final : public Solver {
   std::vector<float> hmus_, hmuk_;
   // Sorting: dynamic particles by block, and the blocks that have any, by colour.
   std::vector<std::int32_t> order_, blockStart_, blockKey_, blockFill_;
+  std::vector<std::uint8_t> keyChanged_;  // per chunk of particles: a block key changed since the last sort
   std::vector<std::int32_t> colourBlocks_[8];
   std::vector<std::int32_t> particleBlocks_;  // the blocks that hold dynamic particles, ascending
   std::vector<std::int32_t> activeNodeBlocks_;

@@ -322,6 +322,28 @@ TEST(MpmWorld, ParticlesNeverLeaveTheDomain) {
   EXPECT_FALSE(v.step());  // a tripped world refuses to step
 }
 
+// The guard's checks run in parallel chunks of 4,096 particles; it names the lowest-id
+// particle that fails, whichever chunk finishes first: two fast boxes, the first in the
+// second chunk and the second in the fourth, behind slow ones (ids counted by hand).
+TEST(MpmWorld, TheGuardNamesTheLowestFailingParticleAcrossChunks) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> b;
+  BodyInit fast;
+  fast.velocity = Vec3(90.0, 0.0, 0.0);
+  addBox(p, b, Vec3(0.1, 0.1, 0.1), 17, 17, 17, h, 0);        // ids 0..4912, at rest
+  addBox(p, b, Vec3(0.3, 0.5, 0.5), 4, 4, 4, h, 0, fast);     // 4913..4976: chunk 1
+  addBox(p, b, Vec3(0.6, 0.1, 0.6), 20, 20, 20, h, 0);        // 4977..12976
+  addBox(p, b, Vec3(0.3, 0.7, 0.2), 4, 4, 4, h, 0, fast);     // 12977..13040: chunk 3
+  ASSERT_EQ(p.size(), 13041u);
+  MpmWorld w(p, b, {elastic(5e4)}, unitDomain(h, 2));
+  w.setValidate(true);
+  EXPECT_FALSE(w.step());
+  EXPECT_EQ(w.guard().kind, GuardKind::kCfl) << w.guard().message();
+  EXPECT_GE(w.guard().particle, 4913);
+  EXPECT_LT(w.guard().particle, 4977);
+}
+
 TEST(MpmWorld, FixedBodiesHoldStillAndPlanListsOnlyPassesWithWork) {
   const double h = 0.01;
   ParticleArrays p;
