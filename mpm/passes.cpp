@@ -219,9 +219,16 @@ Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) const {
   switch (m.kind) {
     case MaterialKind::kFluid: return fluidKirchhoff<float>(fluidJ_[i], C_[i], m.bulk, m.gamma, m.viscosity);
     case MaterialKind::kSand:
-    case MaterialKind::kPlasticine: return henckyKirchhoff<float>(svd3<float>(F), m.mu, m.lambda);
+    case MaterialKind::kPlasticine: {
+      if (!svdCached_) return henckyKirchhoff<float>(svd3<float>(F), m.mu, m.lambda);
+      Svd3<float> d;  // the return map's: V is not needed
+      d.U = svdU_[i];
+      d.sigma = svdS_[i];
+      return henckyKirchhoff<float>(d, m.mu, m.lambda);
+    }
     case MaterialKind::kSnow: {
       const float s = snowHardening(m.xi, plastic_[i]);
+      if (svdCached_) return corotatedKirchhoff<float>(F, svdU_[i], s * m.mu, s * m.lambda);
       return corotatedKirchhoff<float>(F, s * m.mu, s * m.lambda);
     }
     default:
@@ -621,6 +628,10 @@ void MpmWorld::pushOutOfColliders(std::size_t i, double h) {
 }
 
 void MpmWorld::plasticity() {
+  if (svdU_.size() != parts_.size()) {
+    svdU_.resize(parts_.size());
+    svdS_.resize(parts_.size());
+  }
   forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
     for (std::size_t o = lo; o < hi; ++o) {
       const auto i = std::size_t(order_[o]);
@@ -643,8 +654,15 @@ void MpmWorld::plasticity() {
         s = snowClamp<float>(d.sigma, m.thetaC, m.thetaS, m.xi, plastic_[i]);
       }
       F_[i] = d.U * s.asDiagonal() * d.V.transpose();
+      if (m.kind == MaterialKind::kSnow) {
+        svdU_[i] = d.U * d.V.transpose();
+      } else {
+        svdU_[i] = d.U;
+        svdS_[i] = s;
+      }
     }
   });
+  svdCached_ = svdCacheOn_;
 }
 
 }  // namespace physketch::mpm

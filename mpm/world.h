@@ -96,6 +96,9 @@ class MpmWorld final : public Solver {
   // P2G's and G2P's node loops in AVX2 where the CPU has it (the default), else SSE; both give
   // bit-identical results. False forces SSE (tests compare the two).
   void setAvx2(bool on) { avx2_ = on && avx2Supported(); }
+  // P2G's stress for plastic materials from the return map's SVD of the substep before (the
+  // default; see svdU_), or from an SVD of its own (false: tests compare the two).
+  void setSvdCache(bool on) { svdCacheOn_ = on; }
   static bool avx2Supported();
   void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
   const GuardLog& guardLog() const override { return guardLog_; }
@@ -224,6 +227,16 @@ class MpmWorld final : public Solver {
   std::vector<MatModel> models_;     // per material, as MPM runs it
   // Per particle (ids as parts_): affine velocity C (1/s), deformation gradient F, plastic scalar.
   std::vector<Eigen::Matrix3f> C_, F_;
+  // Plastic materials: the SVD the return map made of each particle's F in the last substep
+  // (F = U diag(s) V^T is what it wrote), which the next substep's P2G stress needs again: U and
+  // s for the Hencky models (sand, plasticine), R = U V^T in svdU_ for snow. Valid from a
+  // step's first plasticity pass to the step's end (svdCached_): a step's first P2G takes its
+  // own SVD, so a step depends on its start state alone (the guard's replays repeat it bit for
+  // bit). Sized to the particles when a plastic material exists.
+  std::vector<Eigen::Matrix3f> svdU_;
+  std::vector<Eigen::Vector3f> svdS_;
+  bool svdCached_ = false;
+  bool svdCacheOn_ = true;
   std::vector<float> plastic_;
   // Per particle, fluids: the J its pressure is computed from -- J-bar, the B-spline average
   // through the grid of its neighbours' J, advanced by the substep's divergence. A particle's
