@@ -213,7 +213,7 @@ void MpmWorld::sortByBlock() {
 }
 
 // The Kirchhoff stress tau = P F^T of particle i (Pa), by its material's model.
-Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) const {
+Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) {
   const MatModel& m = models_[std::size_t(parts_.material[i])];
   const Eigen::Matrix3f& F = F_[i];
   switch (m.kind) {
@@ -231,9 +231,18 @@ Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) const {
       if (svdCached_) return corotatedKirchhoff<float>(F, svdU_[i], s * m.mu, s * m.lambda);
       return corotatedKirchhoff<float>(F, s * m.mu, s * m.lambda);
     }
-    default:
-      return m.elastic == ElasticModel::kNeoHookean ? neoHookeanKirchhoff<float>(F, m.mu, m.lambda)
-                                                    : corotatedKirchhoff<float>(F, m.mu, m.lambda);
+    default: {
+      if (m.elastic == ElasticModel::kNeoHookean) return neoHookeanKirchhoff<float>(F, m.mu, m.lambda);
+      Eigen::Matrix3f R;
+      if (polarCached_ && polarFrom(F, polarQ_[i], R)) return corotatedKirchhoff<float>(F, R, m.mu, m.lambda);
+      const Svd3<float> d = svd3<float>(F);
+      R = d.U * d.V.transpose();
+      if (!polarQ_.empty()) {
+        const Eigen::Quaternionf q(R);
+        polarQ_[i] = Eigen::Vector4f(q.x(), q.y(), q.z(), q.w());
+      }
+      return corotatedKirchhoff<float>(F, R, m.mu, m.lambda);
+    }
   }
 }
 
@@ -261,6 +270,11 @@ void MpmWorld::p2g(float h) {
   // per-material friction, so that one 4-lane operation serves all four.
   const bool extra = mixedFriction_ || !jbar_.empty();
   const bool avx2 = avx2_;
+  bool corotated = false;
+  for (const MatModel& m : models_)
+    corotated |= m.kind != MaterialKind::kFluid && !m.plastic && m.elastic != ElasticModel::kNeoHookean;
+  if (!(svdCacheOn_ && corotated)) polarQ_.clear();
+  else if (polarQ_.size() != parts_.size()) polarQ_.resize(parts_.size());
   // One block: scatter its particles into the tile, then add the tile to the grid (blocks of
   // one colour never share a node, so the adds need no lock and run in a fixed order).
   const auto block = [&](std::size_t b, F4* tile, F4* tileExtra) {
@@ -352,6 +366,7 @@ void MpmWorld::p2g(float h) {
       alignas(16) F4 tileExtra[kTile];
       block(std::size_t(blocks[k]), tile, tileExtra);
     });
+  polarCached_ = !polarQ_.empty();  // the next substeps' P2G starts from these rotations
   // Carried bodies (tools): the nodes of their particles' stencils move with them, in id order
   // (a node two bodies hold takes the later one's velocity), one-sided: they push and never
   // pull, along the normal sum w (x_node - x_p) over the carried particles reaching the node

@@ -802,7 +802,7 @@ bool MpmWorld::runPass(MpmPass pass, int substep, bool checkNow, F&& f) {
 bool MpmWorld::runStep(int substeps, bool checkEachPass) {
   const float h = float(params_.dt / substeps);
   const auto runs = [&](MpmPass p) { return bool(work_[std::size_t(p)]); };
-  svdCached_ = false;  // see svdU_
+  svdCached_ = polarCached_ = false;  // see svdU_, polarQ_
   for (int s = 0; s < substeps; ++s) {
     lastH_ = h;
     if (!colliders_.empty()) poseColliders(double(steps_) * params_.dt + double(s) * double(h), double(h));

@@ -218,7 +218,7 @@ class MpmWorld final : public Solver {
   void g2p(float h);
   void projection(int substep);
   void plasticity();
-  Eigen::Matrix3f kirchhoff(std::size_t i) const;
+  Eigen::Matrix3f kirchhoff(std::size_t i);
   std::size_t passBytes(MpmPass pass) const;
 
   MpmParams params_;
@@ -237,6 +237,11 @@ class MpmWorld final : public Solver {
   std::vector<Eigen::Vector3f> svdS_;
   bool svdCached_ = false;
   bool svdCacheOn_ = true;
+  // Fixed-corotated elastic materials: each particle's polar rotation of the substep before, as
+  // a unit quaternion (x y z w), where P2G's next one starts (polarFrom: a turn or two, not an
+  // SVD). Valid from a step's first P2G to the step's end (polarCached_), like svdU_.
+  std::vector<Eigen::Vector4f> polarQ_;
+  bool polarCached_ = false;
   std::vector<float> plastic_;
   // Per particle, fluids: the J its pressure is computed from -- J-bar, the B-spline average
   // through the grid of its neighbours' J, advanced by the substep's divergence. A particle's
