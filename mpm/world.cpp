@@ -698,13 +698,15 @@ double MpmWorld::pressure(std::int32_t i) const {
   return double(m.bulk) / double(m.gamma) * (std::pow(double(fluidJ_[k]), -double(m.gamma)) - 1.0);
 }
 
-// The buffers each pass owns, kept between steps (capacity): P2G the grid and the particle
-// sort it scatters in; the grid update the held (tool) nodes and the colliders' distance
-// fields (and static ones' cell masks); G2P the particle state it writes (C, F and the plastic scalar: J for a fluid).
+// The buffers each pass owns, kept between steps (capacity): P2G the grid, the particle
+// sort it scatters in and the jelly's rotations; the grid update the held (tool) nodes and the
+// colliders' distance fields (and static ones' cell masks); G2P the particle state it writes
+// (C, F and the plastic scalar: J for a fluid); plasticity the SVDs it leaves for P2G.
 std::size_t MpmWorld::passBytes(MpmPass pass) const {
   switch (pass) {
     case MpmPass::kP2G: {
-      std::size_t b = heldBytes(grid_, gfs_, gfk_, jbar_, side_, order_, blockStart_, blockKey_, activeNodeBlocks_, nodeBlockMark_);
+      std::size_t b = heldBytes(grid_, gfs_, gfk_, jbar_, side_, order_, blockStart_, blockKey_, activeNodeBlocks_, nodeBlockMark_,
+                                particleBlocks_, keyChanged_, polarQ_);
       for (const auto& c : colourBlocks_) b += heldBytes(c);
       return b;
     }
@@ -714,6 +716,7 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
       return b;
     }
     case MpmPass::kG2P: return heldBytes(C_, F_, plastic_, fluidJ_);
+    case MpmPass::kPlasticity: return heldBytes(svdU_, svdS_);
     case MpmPass::kProjection: return heldBytes(edgeCounts_, edgeFirst_, edgeSide_);
     default: return 0;
   }
