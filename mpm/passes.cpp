@@ -50,24 +50,32 @@ void scatterSse(F4* t0, F4* e0, const float (&w)[3][3], const F4 (&X)[3], const 
 
 // G2P: S = sum_c w2_c g_c and T = sum_c (w2 d2)_c g_c over a row's three nodes, then over
 // b and a as g2p documents; returns v (out[0]) and B's columns (out[1..3]).
+// Gather's sums past the rows: row b's S and T into its plane's (S, its d1 moment, T), and
+// plane a's into the particle's (v, B0, B1, B2). Shared by both versions.
+inline void addRow(const F4 (&W)[3][3], const F4 (&WD)[3][3], int b, F4 S, F4 T, F4 (&plane)[3]) {
+  plane[0] = plane[0] + W[1][b] * S;
+  plane[1] = plane[1] + WD[1][b] * S;
+  plane[2] = plane[2] + W[1][b] * T;
+}
+inline void addPlane(const F4 (&W)[3][3], const F4 (&WD)[3][3], int a, const F4 (&plane)[3], F4 (&out)[4]) {
+  out[0] = out[0] + W[0][a] * plane[0];
+  out[1] = out[1] + WD[0][a] * plane[0];
+  out[2] = out[2] + W[0][a] * plane[1];
+  out[3] = out[3] + W[0][a] * plane[2];
+}
+
 void gatherSse(const F4* t0, const F4 (&W)[3][3], const F4 (&WD)[3][3], F4 (&out)[4]) {
-  F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
+  out[0] = out[1] = out[2] = out[3] = F4::splat(0.0f);
   for (int a = 0; a < 3; ++a) {
-    F4 Sa = F4::splat(0.0f), Ua = Sa, Ta = Sa;
+    F4 plane[3] = {F4::splat(0.0f), F4::splat(0.0f), F4::splat(0.0f)};
     for (int b = 0; b < 3; ++b) {
       const F4* const g = t0 + (a * kT + b) * kT;
       const F4 S = (W[2][0] * g[0] + W[2][1] * g[1]) + W[2][2] * g[2];
       const F4 T = (WD[2][0] * g[0] + WD[2][1] * g[1]) + WD[2][2] * g[2];
-      Sa = Sa + W[1][b] * S;
-      Ua = Ua + WD[1][b] * S;
-      Ta = Ta + W[1][b] * T;
+      addRow(W, WD, b, S, T, plane);
     }
-    v4 = v4 + W[0][a] * Sa;
-    B0 = B0 + WD[0][a] * Sa;
-    B1 = B1 + W[0][a] * Ua;
-    B2 = B2 + W[0][a] * Ta;
+    addPlane(W, WD, a, plane, out);
   }
-  out[0] = v4, out[1] = B0, out[2] = B1, out[3] = B2;
 }
 
 #if defined(__x86_64__) && defined(__SSE2__)
@@ -100,25 +108,19 @@ __attribute__((target("avx2"))) void scatterAvx2(F4* t0, F4* e0, const float (&w
 
 __attribute__((target("avx2"))) void gatherAvx2(const F4* t0, const F4 (&W)[3][3], const F4 (&WD)[3][3], F4 (&out)[4]) {
   const __m256 w01 = _mm256_set_m128(W[2][1].v, W[2][0].v), wd01 = _mm256_set_m128(WD[2][1].v, WD[2][0].v);
-  F4 v4 = F4::splat(0.0f), B0 = v4, B1 = v4, B2 = v4;
+  out[0] = out[1] = out[2] = out[3] = F4::splat(0.0f);
   for (int a = 0; a < 3; ++a) {
-    F4 Sa = F4::splat(0.0f), Ua = Sa, Ta = Sa;
+    F4 plane[3] = {F4::splat(0.0f), F4::splat(0.0f), F4::splat(0.0f)};
     for (int b = 0; b < 3; ++b) {
       const F4* const g = t0 + (a * kT + b) * kT;
       const __m256 g01 = _mm256_loadu_ps(reinterpret_cast<const float*>(g));
       const __m256 s01 = _mm256_mul_ps(w01, g01), t01 = _mm256_mul_ps(wd01, g01);
       const F4 S = F4{_mm_add_ps(_mm256_castps256_ps128(s01), _mm256_extractf128_ps(s01, 1))} + W[2][2] * g[2];
       const F4 T = F4{_mm_add_ps(_mm256_castps256_ps128(t01), _mm256_extractf128_ps(t01, 1))} + WD[2][2] * g[2];
-      Sa = Sa + W[1][b] * S;
-      Ua = Ua + WD[1][b] * S;
-      Ta = Ta + W[1][b] * T;
+      addRow(W, WD, b, S, T, plane);
     }
-    v4 = v4 + W[0][a] * Sa;
-    B0 = B0 + WD[0][a] * Sa;
-    B1 = B1 + W[0][a] * Ua;
-    B2 = B2 + W[0][a] * Ta;
+    addPlane(W, WD, a, plane, out);
   }
-  out[0] = v4, out[1] = B0, out[2] = B1, out[3] = B2;
 }
 #endif
 
