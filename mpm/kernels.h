@@ -134,6 +134,39 @@ inline int stencilBase(float fromOrigin, float invDx, int n) {
   return !(u >= 0.0f) ? 0 : std::min(int(std::min(u, 1e9f)), n - 3);
 }
 
+// The index of node (x, y, z) on the block-major grid (4^3 nodes per block, nb blocks per axis).
+inline std::size_t blockMajorNode(int x, int y, int z, int nb) {
+  return ((std::size_t(x >> 2) * std::size_t(nb) + std::size_t(y >> 2)) * std::size_t(nb) + std::size_t(z >> 2)) * 64 +
+         std::size_t(((x & 3) << 4) | ((y & 3) << 2) | (z & 3));
+}
+
+// Block b's first node along each axis.
+inline void blockCorner(std::size_t b, int nb, int corner[3]) {
+  corner[0] = int(b / (std::size_t(nb) * std::size_t(nb))) * kBlock;
+  corner[1] = int(b / std::size_t(nb) % std::size_t(nb)) * kBlock;
+  corner[2] = int(b % std::size_t(nb)) * kBlock;
+}
+
+// A particle's stencil in its block's tile (the nodes from the block's corner on, `edge` per
+// axis, z fastest): the offsets f = x/dx - base and the B-spline weights per axis, and the
+// tile index of its base node. p: the particle's position relative to the grid origin (m).
+struct TileStencil {
+  float f[3];
+  float w[3][3];
+  int offset;
+};
+inline TileStencil tileStencil(const float (&p)[3], float invDx, int n, const int (&corner)[3], int edge) {
+  TileStencil s;
+  int base[3];
+  for (int a = 0; a < 3; ++a) {
+    base[a] = stencilBase(p[a], invDx, n);
+    s.f[a] = p[a] * invDx - float(base[a]);
+    bsplineWeights(s.f[a], s.w[a]);
+  }
+  s.offset = ((base[0] - corner[0]) * edge + (base[1] - corner[1])) * edge + (base[2] - corner[2]);
+  return s;
+}
+
 // A particle's 3x3x3 stencil on the block-major grid (4^3 nodes per block, nb blocks per
 // axis): the B-spline weights, the offsets f = x/dx - base, and per axis the part of each
 // node's index that axis contributes, so that node (a, b, c) is ix[a] + iy[b] + iz[c] with no

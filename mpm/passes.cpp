@@ -280,21 +280,18 @@ void MpmWorld::p2g(float h) {
   // One block: scatter its particles into the tile, then add the tile to the grid (blocks of
   // one colour never share a node, so the adds need no lock and run in a fixed order).
   const auto block = [&](std::size_t b, F4* tile, F4* tileExtra) {
-    const int Bx = int(b / (std::size_t(nb_) * nb_)) * kBlock, By = int(b / std::size_t(nb_) % std::size_t(nb_)) * kBlock,
-              Bz = int(b % std::size_t(nb_)) * kBlock;
+    int corner[3];
+    blockCorner(b, nb_, corner);
+    const int Bx = corner[0], By = corner[1], Bz = corner[2];
     std::fill_n(tile, kTile, F4::splat(0.0f));
     if (extra) std::fill_n(tileExtra, kTile, F4::splat(0.0f));
     float* const side = side_.empty() ? nullptr : side_.data();
     for (std::int32_t o = blockStart_[b]; o < blockStart_[b + 1]; ++o) {
       const auto i = std::size_t(order_[std::size_t(o)]);
       const float p[3] = {parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz};
-      int base[3];
-      float f[3], w[3][3];
-      for (int a = 0; a < 3; ++a) {
-        base[a] = stencilBase(p[a], inv, n_);
-        f[a] = p[a] * inv - float(base[a]);
-        bsplineWeights(f[a], w[a]);
-      }
+      const TileStencil st = tileStencil(p, inv, n_, corner, kT);
+      const auto& f = st.f;
+      const auto& w = st.w;
       const float mp = parts_.mass[i];
       const MatModel& mat = models_[std::size_t(parts_.material[i])];
       const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
@@ -313,7 +310,7 @@ void MpmWorld::p2g(float h) {
       // A fluid's mass and m J for J-bar (zero for other materials), mass times friction.
       const bool fluid = mat.kind == MaterialKind::kFluid;
       const F4 E = F4::set(fluid ? mp : 0.0f, fluid ? mp * plastic_[i] : 0.0f, mp * mat.mus, mp * mat.muk);
-      F4* const t0 = tile + ((base[0] - Bx) * kT + (base[1] - By)) * kT + (base[2] - Bz);
+      F4* const t0 = tile + st.offset;
       F4* const e0 = extra ? tileExtra + (t0 - tile) : nullptr;
 #ifdef PHYSKETCH_MPM_AVX2
       if (avx2) scatterAvx2(t0, e0, w, X, Y, Z, M, E);
@@ -322,16 +319,16 @@ void MpmWorld::p2g(float h) {
         scatterSse(t0, e0, w, X, Y, Z, M, E);
       // Where colliders are, m (x_p - x_node) per axis, straight into the grid (few scenes).
       if (!side) continue;
-      const Stencil st = makeStencil(p[0], p[1], p[2], inv, n_, nb_);
+      const Stencil gs = makeStencil(p[0], p[1], p[2], inv, n_, nb_);
       float s[3][3];
       for (int k = 0; k < 3; ++k)
-        for (int axis = 0; axis < 3; ++axis) s[axis][k] = mp * (st.f[axis] - float(k)) * dx;
+        for (int axis = 0; axis < 3; ++axis) s[axis][k] = mp * (gs.f[axis] - float(k)) * dx;
       for (int a = 0; a < 3; ++a)
         for (int bb = 0; bb < 3; ++bb) {
-          const float wab = st.w[0][a] * st.w[1][bb];
+          const float wab = gs.w[0][a] * gs.w[1][bb];
           for (int c = 0; c < 3; ++c) {
-            const float wt = wab * st.w[2][c];
-            const std::size_t node = st.node(a, bb, c);
+            const float wt = wab * gs.w[2][c];
+            const std::size_t node = gs.node(a, bb, c);
             side[3 * node] += wt * s[0][a];
             side[3 * node + 1] += wt * s[1][bb];
             side[3 * node + 2] += wt * s[2][c];
@@ -344,9 +341,7 @@ void MpmWorld::p2g(float h) {
       for (int bb = 0; bb < kT && By + bb < n_; ++bb)
         for (int c = 0; c < kT && Bz + c < n_; ++c) {
           const int gx = Bx + a, gy = By + bb, gz = Bz + c;
-          const std::size_t node = ((std::size_t(gx >> 2) * std::size_t(nb_) + std::size_t(gy >> 2)) * std::size_t(nb_) +
-                                    std::size_t(gz >> 2)) * 64 +
-                                   std::size_t(((gx & 3) << 4) | ((gy & 3) << 2) | (gz & 3));
+          const std::size_t node = blockMajorNode(gx, gy, gz, nb_);
           const int t = (a * kT + bb) * kT + c;
           Node* const g = &grid_[node];
           (F4::load(g) + tile[t]).store(g);
@@ -474,8 +469,9 @@ void MpmWorld::g2p(float h) {
   const bool avx2 = avx2_;
   forEach(particleBlocks_.size(), [&](std::size_t k) {
     const auto blk = std::size_t(particleBlocks_[k]);
-    const int Bx = int(blk / (std::size_t(nb_) * nb_)) * kBlock, By = int(blk / std::size_t(nb_) % std::size_t(nb_)) * kBlock,
-              Bz = int(blk % std::size_t(nb_)) * kBlock;
+    int corner[3];
+    blockCorner(blk, nb_, corner);
+    const int Bx = corner[0], By = corner[1], Bz = corner[2];
     alignas(16) F4 tile[kTile];
     for (int a = 0; a < kT; ++a)
       for (int bb = 0; bb < kT; ++bb)
@@ -486,22 +482,15 @@ void MpmWorld::g2p(float h) {
             tile[t] = F4::splat(0.0f);
             continue;
           }
-          const std::size_t node = ((std::size_t(gx >> 2) * std::size_t(nb_) + std::size_t(gy >> 2)) * std::size_t(nb_) +
-                                    std::size_t(gz >> 2)) * 64 +
-                                   std::size_t(((gx & 3) << 4) | ((gy & 3) << 2) | (gz & 3));
-          tile[t] = F4::load(&grid_[node]);
+          tile[t] = F4::load(&grid_[blockMajorNode(gx, gy, gz, nb_)]);
         }
     for (std::int32_t o = blockStart_[blk]; o < blockStart_[blk + 1]; ++o) {
       const auto i = std::size_t(order_[std::size_t(o)]);
       const float p[3] = {parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz};
-      int base[3];
-      float f[3], w[3][3];
-      for (int a = 0; a < 3; ++a) {
-        base[a] = stencilBase(p[a], inv, n_);
-        f[a] = p[a] * inv - float(base[a]);
-        bsplineWeights(f[a], w[a]);
-      }
-      const F4* const t0 = tile + ((base[0] - Bx) * kT + (base[1] - By)) * kT + (base[2] - Bz);
+      const TileStencil st = tileStencil(p, inv, n_, corner, kT);
+      const auto& f = st.f;
+      const auto& w = st.w;
+      const F4* const t0 = tile + st.offset;
       // v = sum w g and B's columns sum w g d_axis over the nodes g (w = w0 w1 w2, d_axis
       // the node's offset along that axis), factored axis by axis: per row (a, b) the sums
       // over c of w2 g and w2 d2 g, then over b, then over a, so each node costs one load,
