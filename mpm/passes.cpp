@@ -48,8 +48,6 @@ void scatterSse(F4* t0, F4* e0, const float (&w)[3][3], const F4 (&X)[3], const 
   }
 }
 
-// G2P: S = sum_c w2_c g_c and T = sum_c (w2 d2)_c g_c over a row's three nodes, then over
-// b and a as g2p documents; returns v (out[0]) and B's columns (out[1..3]).
 // Gather's sums past the rows: row b's S and T into its plane's (S, its d1 moment, T), and
 // plane a's into the particle's (v, B0, B1, B2). Shared by both versions.
 inline void addRow(const F4 (&W)[3][3], const F4 (&WD)[3][3], int b, F4 S, F4 T, F4 (&plane)[3]) {
@@ -64,6 +62,8 @@ inline void addPlane(const F4 (&W)[3][3], const F4 (&WD)[3][3], int a, const F4 
   out[3] = out[3] + W[0][a] * plane[2];
 }
 
+// G2P: S = sum_c w2_c g_c and T = sum_c (w2 d2)_c g_c over a row's three nodes, then over
+// b and a as g2p documents; returns v (out[0]) and B's columns (out[1..3]).
 void gatherSse(const F4* t0, const F4 (&W)[3][3], const F4 (&WD)[3][3], F4 (&out)[4]) {
   out[0] = out[1] = out[2] = out[3] = F4::splat(0.0f);
   for (int a = 0; a < 3; ++a) {
@@ -275,8 +275,13 @@ void MpmWorld::p2g(float h) {
   bool corotated = false;
   for (const MatModel& m : models_)
     corotated |= m.kind != MaterialKind::kFluid && !m.plastic && m.elastic != ElasticModel::kNeoHookean;
-  if (!(svdCacheOn_ && corotated)) polarQ_.clear();
-  else if (polarQ_.size() != parts_.size()) polarQ_.resize(parts_.size());
+  if (!(svdCacheOn_ && corotated)) {
+    polarQ_.clear();
+    polarCached_ = false;
+  } else if (polarQ_.size() != parts_.size()) {
+    polarQ_.resize(parts_.size());
+    polarCached_ = false;  // new or renumbered particles: none has its rotation yet
+  }
   // One block: scatter its particles into the tile, then add the tile to the grid (blocks of
   // one colour never share a node, so the adds need no lock and run in a fixed order).
   const auto block = [&](std::size_t b, F4* tile, F4* tileExtra) {
