@@ -155,14 +155,18 @@ struct TileStencil {
   float w[3][3];
   int offset;
 };
+// One axis of a stencil: its base node, the offset f = x/dx - base and the three weights.
+inline int axisStencil(float fromOrigin, float invDx, int n, float& f, float w[3]) {
+  const int base = stencilBase(fromOrigin, invDx, n);
+  f = fromOrigin * invDx - float(base);
+  bsplineWeights(f, w);
+  return base;
+}
+
 inline TileStencil tileStencil(const float (&p)[3], float invDx, int n, const int (&corner)[3], int edge) {
   TileStencil s;
   int base[3];
-  for (int a = 0; a < 3; ++a) {
-    base[a] = stencilBase(p[a], invDx, n);
-    s.f[a] = p[a] * invDx - float(base[a]);
-    bsplineWeights(s.f[a], s.w[a]);
-  }
+  for (int a = 0; a < 3; ++a) base[a] = axisStencil(p[a], invDx, n, s.f[a], s.w[a]);
   s.offset = ((base[0] - corner[0]) * edge + (base[1] - corner[1])) * edge + (base[2] - corner[2]);
   return s;
 }
@@ -186,9 +190,7 @@ inline Stencil makeStencil(float x, float y, float z, float invDx, int n, int nb
   const int localShift[3] = {4, 2, 0};
   std::size_t* idx[3] = {s.ix, s.iy, s.iz};
   for (int a = 0; a < 3; ++a) {
-    const int base = stencilBase(p[a], invDx, n);
-    s.f[a] = p[a] * invDx - float(base);
-    bsplineWeights(s.f[a], s.w[a]);
+    const int base = axisStencil(p[a], invDx, n, s.f[a], s.w[a]);
     for (int k = 0; k < 3; ++k) {
       const int node = base + k;
       idx[a][k] = std::size_t(node >> 2) * blockStride[a] + (std::size_t(node & 3) << localShift[a]);

@@ -418,8 +418,9 @@ void MpmWorld::gridUpdate(float h) {
   const int floorNode = std::max(wallLo_[1], groundNode_);
   forEach(activeNodeBlocks_.size(), [&](std::size_t k) {
     const auto block = std::size_t(activeNodeBlocks_[k]);
-    const int bx = int(block / (std::size_t(nb_) * nb_)) * kBlock, by = int(block / std::size_t(nb_) % std::size_t(nb_)) * kBlock,
-              bz = int(block % std::size_t(nb_)) * kBlock;
+    int corner[3];
+    blockCorner(block, nb_, corner);
+    const int bx = corner[0], by = corner[1], bz = corner[2];
     for (int l = 0; l < 64; ++l) {
       const std::size_t node = block * 64 + std::size_t(l);
       Node& gn = grid_[node];

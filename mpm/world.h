@@ -96,8 +96,9 @@ class MpmWorld final : public Solver {
   // P2G's and G2P's node loops in AVX2 where the CPU has it (the default), else SSE; both give
   // bit-identical results. False forces SSE (tests compare the two).
   void setAvx2(bool on) { avx2_ = on && avx2Supported(); }
-  // P2G's stress for plastic materials from the return map's SVD of the substep before (the
-  // default; see svdU_), or from an SVD of its own (false: tests compare the two).
+  // P2G's stress for plastic materials from the return map's SVD of the substep before, and
+  // for fixed-corotated ones from their rotation of the substep before (the default; see svdU_
+  // and polarQ_), or from an SVD of its own (false: tests compare the two).
   void setSvdCache(bool on) { svdCacheOn_ = on; }
   static bool avx2Supported();
   void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
