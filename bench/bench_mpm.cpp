@@ -5,8 +5,9 @@
 // one substep per step.
 //   fluid_cube / corotated_cube: 64,000 particles (40^3) on a 64^3 grid, the peers' constants
 //     (rho = 1; fluid E = 400 as the bulk modulus, gamma = 1; fixed corotated E = 1000, nu = 0.2);
-//   elastic_cube / sand_cube: 262,144 particles (64^3) on a 128^3 grid (E = 1e3, nu = 0.2, rho = 1:
-//     the peers' solid; the earlier E = 1e4 broke the explicit bound 5-fold and inverted at step 12).
+//   fluid_cube / elastic_cube / sand_cube: 262,144 particles (64^3) on a 128^3 grid (the fluid as
+//     above; the solids E = 1e3, nu = 0.2, rho = 1: the peers' solid; the earlier E = 1e4 broke
+//     the explicit bound 5-fold and inverted at step 12).
 // Prints CSV rows `bench,case,particles,threads,metric,value,unit`: particle_steps_per_s (the
 // median of --repeats timed runs of --steps steps, after one warm-up step), ms_<pass> per
 // step, and the process's peak resident memory after the case.
@@ -129,6 +130,7 @@ int main(int argc, char** argv) {
   const std::vector<Case> cases = {
       {"fluid_cube", 40, 64, peerMaterial(MaterialKind::kFluid, 400.0, 0.2)},
       {"corotated_cube", 40, 64, peerMaterial(MaterialKind::kElastic, 1000.0, 0.2)},
+      {"fluid_cube", 64, 128, peerMaterial(MaterialKind::kFluid, 400.0, 0.2)},
       {"elastic_cube", 64, 128, peerMaterial(MaterialKind::kElastic, 1e3, 0.2)},
       {"sand_cube", 64, 128, peerMaterial(MaterialKind::kSand, 1e3, 0.2)},
   };

@@ -859,9 +859,12 @@ bool MpmWorld::step() {
   // The start of the step: to replay it with a check after every pass (naming the pass that
   // produced a bad value), and under policy warn to complete a step the guard stopped midway.
   Saved& start = start_;
+  // Where every dynamic particle is a fluid nothing changes F (g2p updates a solid's only), so
+  // it is neither kept nor restored.
+  const bool keepF = !fluidOnly_;
   if (!validate_ || guardLog_.policy == GuardPolicy::kWarn) {
     // In three parts on the threads (C and F are 36 bytes a particle each, the rest 32).
-    forEach(3, [&](std::size_t part) {
+    forEach(keepF ? 3 : 2, [&](std::size_t part) {
       if (part == 0) {
         start.x = parts_.x, start.y = parts_.y, start.z = parts_.z;
         start.vx = parts_.vx, start.vy = parts_.vy, start.vz = parts_.vz;
@@ -877,7 +880,8 @@ bool MpmWorld::step() {
   const auto restoreStart = [&] {
     parts_.x = start.x, parts_.y = start.y, parts_.z = start.z;
     parts_.vx = start.vx, parts_.vy = start.vy, parts_.vz = start.vz;
-    plastic_ = start.plastic, fluidJ_ = start.fluidJ, C_ = start.C, F_ = start.F, atEdge_ = start.atEdge, firstEdge_ = start.firstEdge;
+    plastic_ = start.plastic, fluidJ_ = start.fluidJ, C_ = start.C, atEdge_ = start.atEdge, firstEdge_ = start.firstEdge;
+    if (keepF) F_ = start.F;
   };
   const bool checks = work_[std::size_t(MpmPass::kGuard)];
   const auto endChecks = [&] {

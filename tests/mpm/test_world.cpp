@@ -663,6 +663,40 @@ TEST(MpmWorld, ValidateGivesTheSameStatesAndTheGuardNamesPassAndMaterial) {
   EXPECT_FALSE(w.step());
 }
 
+// Under --guard warn a step the guard stopped is run again from its saved start, so it ends as
+// the same step checked after every pass (--validate) does: a jelly block and a water block thrown
+// at 12 m/s break the velocity CFL (1.25 cells a substep of 1/480 s, a recoverable kind) at once. Every state
+// the step changes must be restored, the jelly's deformation gradients among them (skipping F
+// is right only where every dynamic particle is a fluid, which g2p never gives an F); the water
+// alone checks that skip.
+TEST(MpmWorld, AStepTheGuardStoppedUnderWarnEndsAsTheValidatedStepDoes) {
+  const double h = 0.01;
+  for (const bool withJelly : {true, false}) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies;
+    BodyInit thrown;
+    thrown.velocity = Vec3(12.0, 0.0, 0.0);
+    addBox(p, bodies, Vec3(0.2, 0.3, 0.3), 6, 6, 6, h, 1, thrown);
+    if (withJelly) addBox(p, bodies, Vec3(0.2, 0.3, 0.6), 6, 6, 6, h, 0, thrown);
+    Material water = makeMaterial(MaterialKind::kFluid, "water");
+    std::vector<std::uint64_t> hashes[2];
+    long warned[2] = {0, 0};
+    for (int v = 0; v < 2; ++v) {
+      MpmWorld w(p, bodies, {elastic(5e4), water}, unitDomain(h, 2, 1.0 / 240.0));
+      w.setGuardPolicy(GuardPolicy::kWarn);
+      w.setValidate(v == 1);
+      for (int s = 0; s < 4; ++s) {
+        ASSERT_TRUE(w.step()) << w.guard().message();
+        hashes[v].push_back(w.stateHash());
+      }
+      warned[v] = w.guardLog().total();
+    }
+    EXPECT_GT(warned[0], 0) << "the throw should break the velocity CFL";
+    EXPECT_EQ(warned[0], warned[1]);
+    EXPECT_EQ(hashes[0], hashes[1]) << (withJelly ? "water and jelly" : "water alone");
+  }
+}
+
 // Walls and ground take their friction from the materials touching them (static_friction,
 // dynamic_friction, mass-weighted per node). A block sliding at 2 m/s on the ground: without
 // friction it keeps its speed; with mu = 0.5 Coulomb's law slows it by mu g t (0.98 m/s in
