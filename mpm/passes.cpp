@@ -269,7 +269,8 @@ void MpmWorld::p2g(float h) {
   // reach (bases in the block's 4 cells, plus 2), which stays in L1 and is indexed by fixed
   // strides; the tile is then added to the grid. Two records per tile node: the node's
   // (mass, momentum), and where needed (fluid mass, m J, m mu_s, m mu_k) for J-bar and
-  // per-material friction, so that one 4-lane operation serves all four.
+  // per-material friction, so that one 4-lane operation serves all four; where colliders are,
+  // a third tile holds the nodes' sums of m (x_p - x_node).
   const bool extra = mixedFriction_ || !jbar_.empty();
   const bool avx2 = avx2_;
   bool corotated = false;
@@ -284,13 +285,14 @@ void MpmWorld::p2g(float h) {
   }
   // One block: scatter its particles into the tile, then add the tile to the grid (blocks of
   // one colour never share a node, so the adds need no lock and run in a fixed order).
-  const auto block = [&](std::size_t b, F4* tile, F4* tileExtra) {
+  const auto block = [&](std::size_t b, F4* tile, F4* tileExtra, F4* tileSide) {
     int corner[3];
     blockCorner(b, nb_, corner);
     const int Bx = corner[0], By = corner[1], Bz = corner[2];
     std::fill_n(tile, kTile, F4::splat(0.0f));
     if (extra) std::fill_n(tileExtra, kTile, F4::splat(0.0f));
     float* const side = side_.empty() ? nullptr : side_.data();
+    if (side) std::fill_n(tileSide, kTile, F4::splat(0.0f));
     for (std::int32_t o = blockStart_[b]; o < blockStart_[b + 1]; ++o) {
       const auto i = std::size_t(order_[std::size_t(o)]);
       const float p[3] = {parts_.x[i] - ox, parts_.y[i] - oy, parts_.z[i] - oz};
@@ -322,23 +324,23 @@ void MpmWorld::p2g(float h) {
       else
 #endif
         scatterSse(t0, e0, w, X, Y, Z, M, E);
-      // Where colliders are, m (x_p - x_node) per axis, straight into the grid (few scenes).
+      // Where colliders are, a third tile of m (x_p - x_node) per axis (lanes 1-3): the same
+      // scatter with M = 0 and per axis the offset's moment in its own lane, so node (a, b, c)
+      // gets wt m ((f - (a, b, c)) dx).
       if (!side) continue;
-      const Stencil gs = makeStencil(p[0], p[1], p[2], inv, n_, nb_);
-      float s[3][3];
-      for (int k = 0; k < 3; ++k)
-        for (int axis = 0; axis < 3; ++axis) s[axis][k] = mp * (gs.f[axis] - float(k)) * dx;
-      for (int a = 0; a < 3; ++a)
-        for (int bb = 0; bb < 3; ++bb) {
-          const float wab = gs.w[0][a] * gs.w[1][bb];
-          for (int c = 0; c < 3; ++c) {
-            const float wt = wab * gs.w[2][c];
-            const std::size_t node = gs.node(a, bb, c);
-            side[3 * node] += wt * s[0][a];
-            side[3 * node + 1] += wt * s[1][bb];
-            side[3 * node + 2] += wt * s[2][c];
-          }
-        }
+      F4 SX[3], SY[3], SZ[3];
+      for (int k = 0; k < 3; ++k) {
+        SX[k] = F4::set(0.0f, mp * (f[0] - float(k)) * dx, 0.0f, 0.0f);
+        SY[k] = F4::set(0.0f, 0.0f, mp * (f[1] - float(k)) * dx, 0.0f);
+        SZ[k] = F4::set(0.0f, 0.0f, 0.0f, mp * (f[2] - float(k)) * dx);
+      }
+      F4* const s0 = tileSide + st.offset;
+      const F4 zero = F4::splat(0.0f);
+#ifdef PHYSKETCH_MPM_AVX2
+      if (avx2) scatterAvx2(s0, nullptr, w, SX, SY, SZ, zero, zero);
+      else
+#endif
+        scatterSse(s0, nullptr, w, SX, SY, SZ, zero, zero);
     }
     // The tile into the grid (nodes past the grid's last get nothing: stencils never reach them).
     const bool fluidJ = !jbar_.empty(), fluidOnly = fluidOnly_, mix = mixedFriction_;
@@ -350,6 +352,11 @@ void MpmWorld::p2g(float h) {
           const int t = (a * kT + bb) * kT + c;
           Node* const g = &grid_[node];
           (F4::load(g) + tile[t]).store(g);
+          if (side) {
+            alignas(16) float m[4];
+            tileSide[t].store(m);
+            for (int axis = 0; axis < 3; ++axis) side[3 * node + std::size_t(axis)] += m[axis + 1];
+          }
           if (!extra) continue;
           const F4 e = tileExtra[t];
           if (fluidJ) {
@@ -366,7 +373,8 @@ void MpmWorld::p2g(float h) {
     forEach(blocks.size(), [&](std::size_t k) {
       alignas(16) F4 tile[kTile];
       alignas(16) F4 tileExtra[kTile];
-      block(std::size_t(blocks[k]), tile, tileExtra);
+      alignas(16) F4 tileSide[kTile];
+      block(std::size_t(blocks[k]), tile, tileExtra, tileSide);
     });
   polarCached_ = !polarQ_.empty();  // the next substeps' P2G starts from these rotations
   // Carried bodies (tools): the nodes of their particles' stencils move with them, in id order

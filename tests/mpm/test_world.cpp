@@ -263,8 +263,9 @@ TEST(MpmWorld, OneAndTwoThreadsGiveBitIdenticalStates) {
 }
 
 // P2G's and G2P's node loops in AVX2 and in SSE (MpmWorld::setAvx2): the same mixed scene,
-// with per-material friction and J-bar scattered beside the momentum, gives the same state
-// hash after every step (each lane does the same IEEE operations in both).
+// with per-material friction, J-bar and (a fixed slab being a collider) the sums of
+// m (x_p - x_node) scattered beside the momentum, gives the same state hash after every step
+// (each lane does the same IEEE operations in both).
 TEST(MpmWorld, Avx2AndSseTransfersGiveBitIdenticalStates) {
   if (!MpmWorld::avx2Supported()) GTEST_SKIP() << "no AVX2";
   const double h = 0.01;
@@ -279,6 +280,12 @@ TEST(MpmWorld, Avx2AndSseTransfersGiveBitIdenticalStates) {
   spin.spin = Vec3(0, 3, 0);
   for (int k = 0; k < 3; ++k)
     addBox(p, bodies, Vec3(0.1 + 0.2 * k, 0.05 + 0.05 * (k % 2), 0.3), 11, 11, 11, h, std::int16_t(k), k == 0 ? spin : BodyInit{});
+  // A fixed slab with water falling on it: a collider, so P2G also scatters the nodes' sums of
+  // m (x_p - x_node) for every particle.
+  BodyInit fixed;
+  fixed.fixed = true;
+  addBox(p, bodies, Vec3(0.7, 0.15, 0.3), 20, 2, 11, h, 0, fixed);
+  addBox(p, bodies, Vec3(0.72, 0.2, 0.32), 8, 8, 8, h, 2);
   const auto run = [&](bool avx2) {
     MpmWorld w(p, bodies, mats, unitDomain(h, 0));
     w.setAvx2(avx2);
