@@ -863,7 +863,8 @@ bool MpmWorld::step() {
   // it is neither kept nor restored.
   const bool keepF = !fluidOnly_;
   if (!validate_ || guardLog_.policy == GuardPolicy::kWarn) {
-    // In three parts on the threads (C and F are 36 bytes a particle each, the rest 32).
+    // In three parts on the threads (C and F are 36 bytes a particle each, the rest 32; two
+    // parts without F).
     forEach(keepF ? 3 : 2, [&](std::size_t part) {
       if (part == 0) {
         start.x = parts_.x, start.y = parts_.y, start.z = parts_.z;
