@@ -1981,9 +1981,22 @@ void PbdWorld::restitution(double h) {
   });
 }
 
+bool PbdWorld::heldAgainst(std::size_t b, const Vec3& d) const {
+  const BodyPlaneContacts& bp = contacts_.bodyPlane;
+  for (std::size_t c = 0; c < bp.size(); ++c)
+    if (std::size_t(bp.body[c]) == b && bp.touched[c] &&
+        contacts_.planes[std::size_t(bp.plane[c])].normal.dot(d) <= -0.5)
+      return true;
+  return false;
+}
+
 // Between two rigid bodies, the same law with the mean of their restitutions (as friction
 // takes the mean of theirs): the pair's contact point leaves at -e u relative to the other body,
-// through both bodies' generalized inverse masses. In pair order, serially: deterministic.
+// through both bodies' generalized inverse masses. A body held by the ground against its share
+// (heldAgainst) takes none: the ground takes it, as a fixed body would (without that, a ball
+// dropped on a slab lying on the ground bounced off it as off a free body, a fifth as high, and
+// the slab, driven into the ground, bounced off the ground). In pair order, serially:
+// deterministic.
 void PbdWorld::bodyRestitution(double slow) {
   for (const PairHit& hit : pairHits_) {
     const auto a = std::size_t(hit.a), b = std::size_t(hit.b);
@@ -1997,16 +2010,17 @@ void PbdWorld::bodyRestitution(double slow) {
     const double dv = -e * hit.approach - vn;
     if (dv <= 0.0) continue;  // already leaving faster than that
     const RigidPose pa{ma.c, ma.q, invMass_[a], invInertiaRest_[a]}, pb{mb.c, mb.q, invMass_[b], invInertiaRest_[b]};
-    const double wa = da ? generalizedInverseMass(pa, hit.point, n) : 0.0;
-    const double wb = db ? generalizedInverseMass(pb, hit.point, n) : 0.0;
+    const bool ha = da && heldAgainst(a, n), hb = db && heldAgainst(b, -n);  // a takes +p n, b -p n
+    const double wa = da && !ha ? generalizedInverseMass(pa, hit.point, n) : 0.0;
+    const double wb = db && !hb ? generalizedInverseMass(pb, hit.point, n) : 0.0;
     if (wa + wb <= 0.0) continue;
     const double p = dv / (wa + wb);  // impulse (N s), on a along n and on b against it
-    if (da) {
+    if (da && !ha) {
       const Mat3 R = ma.q.toRotationMatrix();
       ma.v += (p * invMass_[a]) * n;
       ma.w += R * invInertiaRest_[a] * R.transpose() * ra.cross(p * n);
     }
-    if (db) {
+    if (db && !hb) {
       const Mat3 R = mb.q.toRotationMatrix();
       mb.v -= (p * invMass_[b]) * n;
       mb.w -= R * invInertiaRest_[b] * R.transpose() * rb.cross(p * n);

@@ -229,6 +229,10 @@ class PbdWorld final : public Solver {
   std::vector<int> shockLevel_;
   std::vector<std::int32_t> shockQueue_, shockFirst_, shockNext_, shockOrder_;
   void bodyRestitution(double slow);
+  // Whether rigid body b, pushed along the unit direction d, is held by a plane it touched this
+  // substep whose normal opposes d (within 60 degrees): a body resting on the ground, hit from
+  // above, passes the blow to the ground instead of taking it.
+  bool heldAgainst(std::size_t b, const Vec3& d) const;
   bool energyClosed() const;
   EnergySums energyNow() const;
 

@@ -533,8 +533,10 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
 // the surface: every particle gets the same velocity change, so the body's shape is untouched.
 // e: the pair's mean with a body, the body's own against the ground and colliders (which have
 // none). A dynamic rigid body or another soft body shares the bounce when it is all the body hit
-// (one partner, nothing else), taking the opposite impulse (momentum is kept); a body that hit a
-// dynamic partner and something else at once stays inelastic. Serial over bodies: deterministic.
+// (one partner, nothing else), taking the opposite impulse (momentum is kept); a rigid partner
+// the ground holds against the blow (heldAgainst) is a surface like a fixed body instead, also
+// when the body hit it and something else at once; a body that hit a free dynamic partner and
+// something else at once stays inelastic. Serial over bodies: deterministic.
 void PbdWorld::softBodyRestitution(double h) {
   if (softBounce_.empty()) return;
   const double slow = 2.0 * params_.gravity.norm() * h;
@@ -584,15 +586,24 @@ void PbdWorld::softBodyRestitution(double h) {
       continue;
     }
     if (!bouncySoft(b)) continue;
-    const bool pair = sb.partnerCount > 0;
+    // A dynamic partner the ground holds against the blow (heldAgainst) is a surface like a
+    // fixed one: it takes no impulse, and it may be hit together with other surfaces.
+    const bool held = sb.partnerCount > 0 && sb.partner >= 0 && heldAgainst(std::size_t(sb.partner), -n);
+    const bool pair = sb.partnerCount > 0 && !held;
     if (pair && (sb.partner < 0 || sb.partnerCount != sb.count)) continue;
     Vec3 before = sb.vSurface / sb.count, after = before;
     Vec3 point = Vec3::Zero();
-    if (pair) {
+    if (sb.partnerCount > 0 && sb.partner >= 0) {
       const Motion& mo = motion_[std::size_t(sb.partner)];
       point = sb.partnerPoints / sb.partnerCount;
-      before = sb.partnerVBefore / sb.partnerCount;
-      after = mo.v + mo.w.cross(point - mo.c);
+      const Vec3 now = mo.v + mo.w.cross(point - mo.c);
+      if (sb.partnerCount == sb.count) {
+        before = sb.partnerVBefore / sb.partnerCount;
+        after = now;
+      } else {  // a held partner and other surfaces: the mean over all the contacts
+        before = (sb.vSurface + sb.partnerVBefore) / sb.count;
+        after = (sb.vSurface + double(sb.partnerCount) * now) / sb.count;
+      }
     }
     const double u = (sb.vBefore - before).dot(n);
     if (u >= -slow) continue;
