@@ -922,6 +922,7 @@ bool PbdWorld::step() {
   // now (a removed tool leaves one body: find_neighbors is off, particle_contact still on).
   contacts_.particlePair.clear();
   pairHits_.clear();
+  fixedTouches_.clear();
   looseHits_.clear();
   bodyHits_.clear();
   asleep_.resize(members_.size(), 0);
@@ -1521,6 +1522,7 @@ void PbdWorld::bodyContact() {
   const double touch = 2.0 * params_.particleRadius;
   const bool bounce = work_[std::size_t(PbdPass::kRestitution)];
   pairHits_.clear();
+  fixedTouches_.clear();
   // Graph colouring: pairs of one colour share no dynamic body, so they are solved in
   // parallel, colour after colour (Gauss-Seidel across colours, Jacobi-free within: each
   // pair reads and writes only its own two bodies). Greedy in pair order: the colours
@@ -1549,6 +1551,7 @@ void PbdWorld::bodyContact() {
   std::vector<PairHit> hits(bounce ? npairs : 0);
   std::vector<char> hit(bounce ? npairs : 0, 0);
   std::vector<char> pairTouches(npairs, 0);
+  std::vector<Vec3> touchNormal(bounce ? npairs : 0, Vec3::Zero());  // the first touch's normal, from b towards a
   // Each pair's normal corrections this substep, summed (kg m), and its friction corrections,
   // summed as vectors (on body a): opposite corrections of successive sweeps cancel.
   std::vector<double> pairNormal(npairs, 0.0);
@@ -1636,6 +1639,7 @@ void PbdWorld::bodyContact() {
       for (const TouchingPair& t : touchingPairs) dmax = std::max(dmax, t.depth * t.start.dot(n));
       if (dmax <= 0.0) return;
       pairTouches[c] = 1;
+      if (bounce && touchNormal[c].isZero()) touchNormal[c] = n;
       const Vec3 pc = psum / wsum;
       const double wa = da ? generalizedInverseMass(pa, pc, n) : 0.0, wb = db ? generalizedInverseMass(pb, pc, n) : 0.0;
       if (wa + wb <= 0.0) return;
@@ -1731,6 +1735,12 @@ void PbdWorld::bodyContact() {
   }
   for (std::size_t c = 0; c < hit.size(); ++c)
     if (hit[c]) pairHits_.push_back(hits[c]);
+  for (std::size_t c = 0; c < touchNormal.size(); ++c) {
+    if (!pairTouches[c]) continue;
+    const auto a = std::size_t(pairs.a[c]), b = std::size_t(pairs.b[c]);
+    if (mode_[b] == BodyMode::kFixed && mode_[a] == BodyMode::kDynamic) fixedTouches_.push_back({pairs.a[c], touchNormal[c]});
+    if (mode_[a] == BodyMode::kFixed && mode_[b] == BodyMode::kDynamic) fixedTouches_.push_back({pairs.b[c], -touchNormal[c]});
+  }
   groundLastWord();
   shockPropagation(pairTouches, [&](std::size_t c, bool frozenA, bool frozenB) {
     solve(c, params_.iterations, frozenA, frozenB);
@@ -1987,15 +1997,17 @@ bool PbdWorld::heldAgainst(std::size_t b, const Vec3& d) const {
     if (std::size_t(bp.body[c]) == b && bp.touched[c] &&
         contacts_.planes[std::size_t(bp.plane[c])].normal.dot(d) <= -0.5)
       return true;
+  for (const FixedTouch& t : fixedTouches_)
+    if (std::size_t(t.body) == b && t.normal.dot(d) <= -0.5) return true;
   return false;
 }
 
 // Between two rigid bodies, the same law with the mean of their restitutions (as friction
 // takes the mean of theirs): the pair's contact point leaves at -e u relative to the other body,
-// through both bodies' generalized inverse masses. A body held by the ground against its share
-// (heldAgainst) takes none: the ground takes it, as a fixed body would (without that, a ball
-// dropped on a slab lying on the ground bounced off it as off a free body, a fifth as high, and
-// the slab, driven into the ground, bounced off the ground). In pair order, serially:
+// through both bodies' generalized inverse masses. A body held against its share by the ground
+// or a fixed body (heldAgainst) takes none: what holds it takes it (without that, a ball dropped
+// on a slab lying on the ground bounced off it as off a free body, a fifth as high, and the
+// slab, driven into the ground, bounced off the ground). In pair order, serially:
 // deterministic.
 void PbdWorld::bodyRestitution(double slow) {
   for (const PairHit& hit : pairHits_) {
