@@ -795,7 +795,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
       return heldBytes(bp.body, bp.plane, bp.first, bp.count, bp.candidates, bp.touched, bp.point, bp.approachSpeed,
                        bp.normalImpulse);
     case PbdPass::kBodyContact: return heldBytes(pp.a, pp.b, pp.first, pp.count, pp.pa, pp.pb);
-    case PbdPass::kRestitution: return heldBytes(pairHits_);
+    case PbdPass::kRestitution: return heldBytes(pairHits_, fixedTouches_);
     case PbdPass::kFindNeighbors: return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j);
     case PbdPass::kParticleContact: return surface(contacts_.particlePlane);
     case PbdPass::kFluidNeighbors: return fluid_ ? fluid_->neighborBytes() : 0;
