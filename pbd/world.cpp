@@ -795,7 +795,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
       return heldBytes(bp.body, bp.plane, bp.first, bp.count, bp.candidates, bp.touched, bp.point, bp.approachSpeed,
                        bp.normalImpulse);
     case PbdPass::kBodyContact: return heldBytes(pp.a, pp.b, pp.first, pp.count, pp.pa, pp.pb);
-    case PbdPass::kRestitution: return heldBytes(pairHits_, fixedTouches_);
+    case PbdPass::kRestitution: return heldBytes(pairHits_, bodyTouches_);
     case PbdPass::kFindNeighbors: return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j);
     case PbdPass::kParticleContact: return surface(contacts_.particlePlane);
     case PbdPass::kFluidNeighbors: return fluid_ ? fluid_->neighborBytes() : 0;
@@ -922,7 +922,7 @@ bool PbdWorld::step() {
   // now (a removed tool leaves one body: find_neighbors is off, particle_contact still on).
   contacts_.particlePair.clear();
   pairHits_.clear();
-  fixedTouches_.clear();
+  bodyTouches_.clear();
   looseHits_.clear();
   bodyHits_.clear();
   asleep_.resize(members_.size(), 0);
@@ -1522,7 +1522,7 @@ void PbdWorld::bodyContact() {
   const double touch = 2.0 * params_.particleRadius;
   const bool bounce = work_[std::size_t(PbdPass::kRestitution)];
   pairHits_.clear();
-  fixedTouches_.clear();
+  bodyTouches_.clear();
   // Graph colouring: pairs of one colour share no dynamic body, so they are solved in
   // parallel, colour after colour (Gauss-Seidel across colours, Jacobi-free within: each
   // pair reads and writes only its own two bodies). Greedy in pair order: the colours
@@ -1738,8 +1738,8 @@ void PbdWorld::bodyContact() {
   for (std::size_t c = 0; c < touchNormal.size(); ++c) {
     if (!pairTouches[c]) continue;
     const auto a = std::size_t(pairs.a[c]), b = std::size_t(pairs.b[c]);
-    if (mode_[b] == BodyMode::kFixed && mode_[a] == BodyMode::kDynamic) fixedTouches_.push_back({pairs.a[c], touchNormal[c]});
-    if (mode_[a] == BodyMode::kFixed && mode_[b] == BodyMode::kDynamic) fixedTouches_.push_back({pairs.b[c], -touchNormal[c]});
+    if (mode_[a] == BodyMode::kDynamic) bodyTouches_.push_back({pairs.a[c], pairs.b[c], touchNormal[c]});
+    if (mode_[b] == BodyMode::kDynamic) bodyTouches_.push_back({pairs.b[c], pairs.a[c], -touchNormal[c]});
   }
   groundLastWord();
   shockPropagation(pairTouches, [&](std::size_t c, bool frozenA, bool frozenB) {
@@ -1991,21 +1991,38 @@ void PbdWorld::restitution(double h) {
   });
 }
 
+// A depth-first search down the stack: b is held if a plane, a fixed or sleeping body holds it,
+// or a dynamic body it rests on (against d) is held in turn. Each body is visited once, so a
+// ring of touching bodies ends; the touches are few (the pairs that touched this substep).
 bool PbdWorld::heldAgainst(std::size_t b, const Vec3& d) const {
   const BodyPlaneContacts& bp = contacts_.bodyPlane;
-  for (std::size_t c = 0; c < bp.size(); ++c)
-    if (std::size_t(bp.body[c]) == b && bp.touched[c] &&
-        contacts_.planes[std::size_t(bp.plane[c])].normal.dot(d) <= -0.5)
-      return true;
-  for (const FixedTouch& t : fixedTouches_)
-    if (std::size_t(t.body) == b && t.normal.dot(d) <= -0.5) return true;
+  const auto onPlane = [&](std::size_t x) {
+    for (std::size_t c = 0; c < bp.size(); ++c)
+      if (std::size_t(bp.body[c]) == x && bp.touched[c] && contacts_.planes[std::size_t(bp.plane[c])].normal.dot(d) <= -0.5)
+        return true;
+    return false;
+  };
+  std::vector<char> seen(members_.size(), 0);
+  std::vector<std::size_t> todo{b};
+  seen[b] = 1;
+  while (!todo.empty()) {
+    const std::size_t x = todo.back();
+    todo.pop_back();
+    if (onPlane(x)) return true;
+    for (const BodyTouch& t : bodyTouches_) {
+      if (std::size_t(t.body) != x || t.normal.dot(d) > -0.5) continue;
+      const auto o = std::size_t(t.other);
+      if (mode_[o] == BodyMode::kFixed || (mode_[o] == BodyMode::kDynamic && !moving(o))) return true;
+      if (mode_[o] == BodyMode::kDynamic && !seen[o]) seen[o] = 1, todo.push_back(o);
+    }
+  }
   return false;
 }
 
 // Between two rigid bodies, the same law with the mean of their restitutions (as friction
 // takes the mean of theirs): the pair's contact point leaves at -e u relative to the other body,
 // through both bodies' generalized inverse masses. A body held against its share by the ground
-// or a fixed body (heldAgainst) takes none: what holds it takes it (without that, a ball dropped
+// or a fixed body, directly or through a stack (heldAgainst), takes none: what holds it takes it (without that, a ball dropped
 // on a slab lying on the ground bounced off it as off a free body, a fifth as high, and the
 // slab, driven into the ground, bounced off the ground). In pair order, serially:
 // deterministic.

@@ -229,17 +229,20 @@ class PbdWorld final : public Solver {
   std::vector<int> shockLevel_;
   std::vector<std::int32_t> shockQueue_, shockFirst_, shockNext_, shockOrder_;
   void bodyRestitution(double slow);
-  // Whether rigid body b, pushed along the unit direction d, is held by a plane or a fixed body
-  // it touched this substep whose normal opposes d (within 60 degrees): a body resting on the
-  // ground or on a fixed table, hit from above, passes the blow on instead of taking it.
+  // Whether rigid body b, pushed along the unit direction d, is held by what it touched this
+  // substep on the side d points to (the contact normal opposing d within 60 degrees): a plane,
+  // a fixed or sleeping body, or a dynamic body itself held against d. A body resting on the
+  // ground, on a fixed table or on a stack standing on either, hit from above, passes the blow on
+  // instead of taking it.
   bool heldAgainst(std::size_t b, const Vec3& d) const;
-  // Dynamic rigid bodies that touched a fixed body in this substep's body_contact, with the
-  // contact normal pointing into the dynamic body (for heldAgainst; only when restitution runs).
-  struct FixedTouch {
-    std::int32_t body = 0;
+  // Rigid body pairs that touched in this substep's body_contact with a dynamic body on at least
+  // one side, once per dynamic side: the body, what it touched and the contact normal pointing
+  // into the body (for heldAgainst; only when restitution runs).
+  struct BodyTouch {
+    std::int32_t body = 0, other = 0;
     Vec3 normal = Vec3::Zero();
   };
-  std::vector<FixedTouch> fixedTouches_;
+  std::vector<BodyTouch> bodyTouches_;
   bool energyClosed() const;
   EnergySums energyNow() const;
 

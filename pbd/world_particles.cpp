@@ -534,7 +534,7 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
 // e: the pair's mean with a body, the body's own against the ground and colliders (which have
 // none). A dynamic rigid body or another soft body shares the bounce when it is all the body hit
 // (one partner, nothing else), taking the opposite impulse (momentum is kept); a rigid partner
-// the ground or a fixed body holds against the blow (heldAgainst) is a fixed surface instead, also
+// the ground, a fixed body or a stack on either holds against the blow (heldAgainst) is a fixed surface instead, also
 // when the body hit it and something else at once; a body that hit a free dynamic partner and
 // something else at once stays inelastic. Serial over bodies: deterministic.
 void PbdWorld::softBodyRestitution(double h) {
@@ -586,8 +586,9 @@ void PbdWorld::softBodyRestitution(double h) {
       continue;
     }
     if (!bouncySoft(b)) continue;
-    // A dynamic partner the ground or a fixed body holds against the blow (heldAgainst) is a
-    // surface like a fixed one: it takes no impulse, and it may be hit together with others.
+    // A dynamic partner held against the blow (heldAgainst: by the ground, a fixed body or a
+    // stack standing on one) is a surface like a fixed one: it takes no impulse, and it may be
+    // hit together with others.
     const bool held = sb.partnerCount > 0 && sb.partner >= 0 && heldAgainst(std::size_t(sb.partner), -n);
     const bool pair = sb.partnerCount > 0 && !held;
     if (pair && (sb.partner < 0 || sb.partnerCount != sb.count)) continue;

@@ -677,35 +677,53 @@ TEST(RigidBody, ABallBouncesOffAnotherBodyWithTheMeanRestitution) {
   }
 }
 
-// The same drop onto a slab that is not fixed but rests on the ground, or on a fixed table: what
-// it rests on holds it against the ball's push, so the ball leaves as from the fixed slab (e =
-// 0.8: apex e^2 h0 = 0.128 m, the same 3 % of h0; measured 0.124 on the ground). Bouncing off
-// the slab as a free body instead (the slab, twice the ball's mass, taking its share of the
-// impulse), the ball rose 0.027 m and the slab, driven into the ground, bounced off it 2 cm high
-// (measured before the rule). The slab stays down: its lowest particle where it lay, within 5 %
-// of r.
+// The same drop onto a slab that is not fixed but rests on the ground, on a fixed table, or on
+// another slab lying on the ground (a stack): what it rests on holds it against the ball's push,
+// so the ball leaves as from the fixed slab (e = 0.8: apex e^2 h0 = 0.128 m, the same 3 % of h0;
+// measured 0.124 on the ground). Bouncing off the slab as a free body instead (the slab, twice
+// the ball's mass, taking its share of the impulse), the ball rose 0.027 m and the slab, driven
+// into the ground, bounced off it 2 cm high (measured before the rule; on the stack, before the
+// hold passed down through the lower slab, 0.027 m too), also when both slabs have fallen asleep
+// before the ball arrives (the ball wakes the upper one; the lower sleeps on and holds as a fixed
+// body would). The slab stays down: its lowest particle where it lay, within 5 % of r.
 TEST(RigidBody, ABallBouncesOffABodyRestingOnTheGroundAsOffAFixedOne) {
-  for (const bool onTable : {false, true}) {
+  enum class Under { kGround, kTable, kSlabOnTheGround, kSleepingSlabs };
+  for (const Under under : {Under::kGround, Under::kTable, Under::kSlabOnTheGround, Under::kSleepingSlabs}) {
+    const char* what = under == Under::kGround ? "ground"
+                       : under == Under::kTable ? "table"
+                       : under == Under::kSlabOnTheGround ? "slab on the ground"
+                                                          : "slab on the ground, both asleep";
     ParticleArrays p;
-    const double base = onTable ? 0.1 + 3 * kSpacing + kSpacing : kRadius;  // the slab's lowest centres
-    const double top = base + 3 * kSpacing;                                 // and its top ones
+    // The slab's lowest centres: on the ground, or a spacing above the top centres of the table
+    // (at 0.1) or of the lower slab (on the ground), each 4 layers thick.
+    const double base = under == Under::kGround ? kRadius : under == Under::kTable ? 0.1 + 4 * kSpacing : kRadius + 4 * kSpacing;
+    const double top = base + 3 * kSpacing;  // and its top ones
     std::vector<BodyRange> bodies{addBox(p, Vec3(-0.1, base, -0.1), 21, 4, 21, 0, 1),
                                   addBall(p, Vec3(0.0, top + 0.2 + 6 * kSpacing + kSpacing, 0.0), 6, 1, 0)};
-    if (onTable) {
+    if (under == Under::kTable) {
       bodies.push_back(addBox(p, Vec3(-0.12, 0.1, -0.12), 25, 4, 25, 2, 1));
       bodies.back().init.fixed = true;
+    } else if (under != Under::kGround) {
+      bodies.push_back(addBox(p, Vec3(-0.1, kRadius, -0.1), 21, 4, 21, 2, 1));
     }
     std::vector<Material> m = rigidMaterial(0.0);
     m.push_back(m[0]);
     m[0].restitution = m[1].restitution = 0.8;
-    PbdWorld w(p, bodies, m, params(8, 4, onTable ? -100.0 : 0.0));
-    const double apex = firstBounceApex(w, 1, w.pose(1).centre.y() - 0.2);
-    std::printf("ball on a slab lying on the %s: apex %.4f m (closed form 0.128)\n", onTable ? "table" : "ground", apex);
-    ASSERT_GE(apex, 0.0) << (onTable ? "on the table" : "on the ground") << ": no bounce";
-    EXPECT_NEAR(apex, 0.8 * 0.8 * 0.2, 0.03 * 0.2) << (onTable ? "on the table" : "on the ground");
+    PbdParams prm = params(8, 4, under == Under::kTable ? -100.0 : 0.0);
+    if (under == Under::kSleepingSlabs) prm.sleepSpeed = 0.02, prm.sleepTime = 0.05;
+    PbdWorld w(p, bodies, m, prm);
+    const double rest = w.pose(1).centre.y() - 0.2;
+    if (under == Under::kSleepingSlabs) {  // 0.1 s: the ball falls 5 of its 20 cm
+      for (int s = 0; s < 6; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+      ASSERT_TRUE(w.asleep(0) && w.asleep(2)) << "the slabs did not fall asleep";
+    }
+    const double apex = firstBounceApex(w, 1, rest);
+    std::printf("ball on a slab lying on the %s: apex %.4f m (closed form 0.128)\n", what, apex);
+    ASSERT_GE(apex, 0.0) << "on the " << what << ": no bounce";
+    EXPECT_NEAR(apex, 0.8 * 0.8 * 0.2, 0.03 * 0.2) << "on the " << what;
     double lowest = 1e9;
     for (std::int32_t i : w.bodyParticles(0)) lowest = std::min(lowest, double(w.particles().y[std::size_t(i)]));
-    EXPECT_NEAR(lowest, base, 0.05 * kRadius) << (onTable ? "on the table" : "on the ground");
+    EXPECT_NEAR(lowest, base, 0.05 * kRadius) << "on the " << what;
   }
 }
 
