@@ -109,7 +109,8 @@ void FluidSolver::buildWallTable() {
   const int reach = int(std::ceil(h / d));
   const double cs = 45.0 / (3.14159265358979323846 * std::pow(h, 6));
   std::vector<float>&tableB = walls_[kB], &tableDB = walls_[kDB];
-  tableB.assign(kWallSamples, 0.0f), tableDB.assign(kWallSamples, 0.0f), wallV_.assign(kWallSamples, 0.0f);
+  std::vector<float>& tableV = walls_[kV];
+  tableB.assign(kWallSamples, 0.0f), tableDB.assign(kWallSamples, 0.0f), tableV.assign(kWallSamples, 0.0f);
   for (int s = 0; s < kWallSamples; ++s) {
     const double y = h * double(s) / double(kWallSamples - 1);
     double b = 0, db = 0, v = 0;
@@ -132,7 +133,7 @@ void FluidSolver::buildWallTable() {
           v += nu * cs * (h - rr) * (h - rr) * rr / (r2 + 0.01 * h * h) * laplaceScale_ * morris;
         }
     }
-    tableB[s] = float(b), tableDB[s] = float(db), wallV_[s] = float(v);
+    tableB[s] = float(b), tableDB[s] = float(db), tableV[s] = float(v);
   }
   buildCornerTables();
 }
@@ -165,8 +166,18 @@ void FluidSolver::buildCornerTables() {
     const double q = w / wdq;
     return (std::pow(q, params_.scorrN) - double(scorrBeta_) * q) * (h - dist) * (h - dist) / dist * z0;
   };
-  const auto sum = [&](const double* y, int axes, double& term, double& d0, double& push) {
-    term = 0, d0 = 0, push = 0;
+  // The viscosity's weight of a ghost at distance dist (calibrated, buildWallTable's) times the
+  // no-slip factor: for a ghost behind several planes the largest of theirs, so that the planes'
+  // tables less the edges' plus the corners' count it once with it (max(a, b) = a + b - min(a, b);
+  // max(a, b, c) = sum - pairs' mins + min(a, b, c)); the edge and corner tables hold the mins.
+  const double cs = 45.0 / (3.14159265358979323846 * std::pow(h, 6));
+  const auto viscous = [&](double dist, const double* y, const double* z, int axes) {
+    double morris = 1e300;
+    for (int k = 0; k < axes; ++k) morris = std::min(morris, 1.0 + (z[k] - y[k]) / std::max(y[k], 0.5 * r));
+    return nu * cs * (h - dist) * (h - dist) * dist / (dist * dist + 0.01 * h * h) * double(laplaceScale_) * morris;
+  };
+  const auto sum = [&](const double* y, int axes, double& term, double& d0, double& push, double& visc) {
+    term = 0, d0 = 0, push = 0, visc = 0;
     int m[3] = {0, 0, 0};
     for (m[0] = 0; m[0] <= reach; ++m[0])
       for (m[1] = axes >= 2 ? 0 : -reach; m[1] <= reach; ++m[1])
@@ -180,6 +191,7 @@ void FluidSolver::buildCornerTables() {
           term += nu * cp * q * q * q;
           d0 += nu * cp * 3.0 * q * q * (-2.0 * z[0]);
           push += scorr(q * q * q, std::sqrt(h * h - q), z[0]);
+          visc += viscous(std::sqrt(h * h - q), y, z, axes);
         }
   };
   const int E = kEdgeSamples, C = kCornerSamples;
@@ -187,30 +199,32 @@ void FluidSolver::buildCornerTables() {
   walls_[kS].assign(std::size_t(S), 0.0f);
   for (int i = 0; i < S; ++i) {
     const double y[3] = {h * i / (S - 1), 0.0, 0.0};
-    double term, d0, push;
-    sum(y, 1, term, d0, push);
+    double term, d0, push, visc;
+    sum(y, 1, term, d0, push, visc);
     walls_[kS][std::size_t(i)] = float(push);
   }
   walls_[kQ].assign(std::size_t(E) * E, 0.0f), walls_[kDQ].assign(std::size_t(E) * E, 0.0f);
-  walls_[kQS].assign(std::size_t(E) * E, 0.0f);
+  walls_[kQS].assign(std::size_t(E) * E, 0.0f), walls_[kQV].assign(std::size_t(E) * E, 0.0f);
   for (int i = 0; i < E; ++i)
     for (int j = 0; j < E; ++j) {
       const double y[3] = {h * i / (E - 1), h * j / (E - 1), 0.0};
-      double term, d0, push;
-      sum(y, 2, term, d0, push);
+      double term, d0, push, visc;
+      sum(y, 2, term, d0, push, visc);
       const std::size_t at = std::size_t(i) * E + j;
       walls_[kQ][at] = float(term), walls_[kDQ][at] = float(d0), walls_[kQS][at] = float(push);
+      walls_[kQV][at] = float(visc);
     }
   walls_[kO].assign(std::size_t(C) * C * C, 0.0f), walls_[kDO].assign(std::size_t(C) * C * C, 0.0f);
-  walls_[kOS].assign(std::size_t(C) * C * C, 0.0f);
+  walls_[kOS].assign(std::size_t(C) * C * C, 0.0f), walls_[kOV].assign(std::size_t(C) * C * C, 0.0f);
   for (int i = 0; i < C; ++i)
     for (int j = 0; j < C; ++j)
       for (int k = 0; k < C; ++k) {
         const double y[3] = {h * i / (C - 1), h * j / (C - 1), h * k / (C - 1)};
-        double term, d0, push;
-        sum(y, 3, term, d0, push);
+        double term, d0, push, visc;
+        sum(y, 3, term, d0, push, visc);
         const std::size_t at = (std::size_t(i) * C + j) * C + k;
         walls_[kO][at] = float(term), walls_[kDO][at] = float(d0), walls_[kOS][at] = float(push);
+        walls_[kOV][at] = float(visc);
       }
 }
 
@@ -439,7 +453,7 @@ void FluidSolver::computeSolidVolumes() {
 
 namespace {
 
-// walls: the tables B, dB, Q, dQ, O, dO of buildWallTable.
+// walls: the tables of buildWallTable, in WallTable order (B, dB, Q, dQ, O, dO, S, QS, OS, V, QV, OV).
 PairArgs pairArgs(const FluidParams& p, const std::vector<float>* walls, float* rec,
                   const std::vector<std::int32_t>& bidx,
                   const std::vector<std::int32_t>& boff, const std::vector<std::int32_t>& bk, float* dx, float* dy,
@@ -464,6 +478,7 @@ PairArgs pairArgs(const FluidParams& p, const std::vector<float>* walls, float* 
   a.wallInvStep = float(wallB.size() - 1) / h;
   a.wallQ = wallQ.data(), a.wallDQ = walls[3].data(), a.wallO = wallO.data(), a.wallDO = walls[5].data();
   a.wallS = walls[6].data(), a.wallQS = walls[7].data(), a.wallOS = walls[8].data();
+  a.wallV = walls[9].data(), a.wallQV = walls[10].data(), a.wallOV = walls[11].data();
   a.edgeSamples = int(std::lround(std::sqrt(double(wallQ.size()))));
   a.cornerSamples = int(std::lround(std::cbrt(double(wallO.size()))));
   a.edgeInvStep = float(a.edgeSamples - 1) / h;
@@ -683,7 +698,7 @@ void FluidSolver::viscosityPass(float h, const ViscousSolids* solids) {
       viscMass_[i] = role == kRoleFluid ? ri[kMass] : role == ViscousSolids::kFree ? 1.0f / ri[kW] : 0.0f;
     }
   });
-  const float invStep = float(wallV_.size() - 1) / kh;
+  const PairArgs walls = pairArgs(params_, walls_, nullptr, bidx_, boff_, bk_, nullptr, nullptr, nullptr, n_);
   // h K_ij = h 2 nu_i nu_j mu_ij |gradW_ij| r / (r^2 + 0.01 h^2), |gradW| = cs (h - r)^2,
   // between a fluid particle and a fluid or coupled solid neighbour (viscK_; a solid's mu is
   // its fluid neighbour's, so both rows hold the same bits); a fixed solid neighbour and the
@@ -716,17 +731,7 @@ void FluidSolver::viscosityPass(float h, const ViscousSolids* solids) {
         }
         viscK_[i * width + k] = w;
       }
-      if (isFluid) {
-        const float scale = h * 2.0f * ri[kNu] * muR_[i];
-        for (int axis = 0; axis < 3; ++axis)
-          for (const float y : {ri[axis] - params_.wallLo[axis], params_.wallHi[axis] - ri[axis]}) {
-            if (!(y < kh)) continue;
-            const float u = std::max(y, 0.0f) * invStep;
-            const int sIdx = std::min(int(u), int(wallV_.size()) - 2);
-            const float f = u - float(sIdx);
-            extra += scale * (wallV_[std::size_t(sIdx)] + f * (wallV_[std::size_t(sIdx) + 1] - wallV_[std::size_t(sIdx)]));
-          }
-      }
+      if (isFluid) extra += h * 2.0f * ri[kNu] * muR_[i] * detail::wallViscosity(walls, ri);
       viscExtra_[i] = extra;
       for (int c = 0; c < 3; ++c) viscRhs_[c][i] = rhs[c];
       // Fluid and free rows: their diagonal, for Jacobi (the row's weights are still in

@@ -300,11 +300,11 @@ class FluidSolver {
   // The same for s_corr's push from the ghosts (the pairs' term, normal to the plane, summed
   // over a plane's, an edge's and a corner's ghosts): S(y), QS(y1, y2) and OS(y1, y2, y3),
   // each the component along the first argument's axis.
-  enum WallTable { kB, kDB, kQ, kDQ, kO, kDO, kS, kQS, kOS, kWallTables };
+  // And the walls' share of the viscosity's Laplacian weight: sum over ghost samples g of
+  // nu_g |gradW| r / (r^2 + 0.01 h^2) (calibrated) times Morris's no-slip factor, by distance
+  // from the plane V(y), and where walls meet QV(y1, y2) and OV(y1, y2, y3) (detail::wallViscosity).
+  enum WallTable { kB, kDB, kQ, kDQ, kO, kDO, kS, kQS, kOS, kV, kQV, kOV, kWallTables };
   std::vector<float> walls_[kWallTables];
-  // The walls' share of the viscosity's Laplacian weight: sum over ghost samples g of
-  // nu_g |gradW| r / (r^2 + 0.01 h^2) (calibrated), by distance from the plane as B.
-  std::vector<float> wallV_;
   // Per particle, in rank (cell) order, one 32-byte record so that a neighbour's data is
   // one load (the SIMD kernel transposes 8 records into 8 lanes, no gathers):
   //   x, y, z (m), nu (m^3, rest volume), w (1/kg), lambda, fluid (0/1), m (kg; 0 for solids)

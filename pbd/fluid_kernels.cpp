@@ -99,6 +99,32 @@ WallTerm edgeTerm(const PairArgs& a, const float* p) {
   return e;
 }
 
+float wallViscosity(const PairArgs& a, const float* p) {
+  const NearWalls near(a, p);
+  const auto& y = near.y;
+  const auto& count = near.count;
+  const int axes = near.axes;
+  float sum = 0.0f;
+  for (int k = 0; k < 3; ++k)
+    for (int s = 0; s < count[k]; ++s) {
+      const float u = y[k][s] * a.wallInvStep;
+      const int i = std::min(int(u), a.wallSamples - 2);
+      const float f = u - float(i);
+      sum = sum + (a.wallV[i] + f * (a.wallV[i + 1] - a.wallV[i]));
+    }
+  const int E = a.edgeSamples, C = a.cornerSamples;
+  for (int k0 = 0; axes >= 2 && k0 < 3; ++k0)
+    for (int k1 = k0 + 1; k1 < 3; ++k1)
+      for (int s0 = 0; s0 < count[k0]; ++s0)
+        for (int s1 = 0; s1 < count[k1]; ++s1)  // ghosts behind both planes: counted twice
+          sum = sum - lerp2(a.wallQV, E, y[k0][s0] * a.edgeInvStep, y[k1][s1] * a.edgeInvStep);
+  for (int s0 = 0; axes == 3 && s0 < count[0]; ++s0)
+    for (int s1 = 0; s1 < count[1]; ++s1)
+      for (int s2 = 0; s2 < count[2]; ++s2)  // behind all three
+        sum = sum + lerp3(a.wallOV, C, y[0][s0] * a.cornerInvStep, y[1][s1] * a.cornerInvStep, y[2][s2] * a.cornerInvStep);
+  return sum;
+}
+
 void wallScorr(const PairArgs& a, const float* p, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   if (!(a.scorrK > 0.0f)) return;

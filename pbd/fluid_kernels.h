@@ -62,6 +62,10 @@ struct PairArgs {
   const float* wallS = nullptr;
   const float* wallQS = nullptr;
   const float* wallOS = nullptr;
+  // The viscosity's weight of the ghosts, on the same samples: V(y), QV(y1, y2), OV(y1, y2, y3).
+  const float* wallV = nullptr;
+  const float* wallQV = nullptr;
+  const float* wallOV = nullptr;
   int edgeSamples = 0, cornerSamples = 0;
   float edgeInvStep = 0, cornerInvStep = 0;
 };
@@ -107,6 +111,11 @@ WallTerm wallTerm(const PairArgs& a, const float* p);
 // The part of wallTerm for a particle within h of two or three walls (inclusion-exclusion
 // of their ghosts): added to the planes' sum; 0 elsewhere.
 WallTerm edgeTerm(const PairArgs& a, const float* p);
+// The walls' ghosts' share of the viscosity's Laplacian weight at a fluid particle at p (the sum
+// over the ghosts of their calibrated weight times Morris's no-slip factor; 0 beyond h of every
+// wall): the planes' V, less QV for every two walls within h, plus OV for three, so a ghost
+// behind two or three planes counts once, with the largest of its planes' factors.
+float wallViscosity(const PairArgs& a, const float* p);
 // s_corr between a fluid particle at p and the walls' ghosts (each of the fluid particle's own
 // mass): its share of dp (m), added before the walls' clamp; 0 beyond h of every wall.
 void wallScorr(const PairArgs& a, const float* p, float out[3]);
