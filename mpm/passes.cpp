@@ -301,7 +301,26 @@ void MpmWorld::p2g(float h) {
       const auto& w = st.w;
       const float mp = parts_.mass[i];
       const MatModel& mat = models_[std::size_t(parts_.material[i])];
-      const Eigen::Matrix3f A = stressScale * kirchhoff(i) + mp * C_[i];
+      Eigen::Matrix3f A;
+      if (mat.kind == MaterialKind::kFluid) {
+        // fluidKirchhoff written out here, with the same operations in the same order (the same
+        // bits), and for an inviscid fluid without its viscous term, whose zeros change no sum:
+        // tau = J (-p I + mu (C + C^T)), p = K / gamma (J^-gamma - 1). Through kirchhoff() (a
+        // call, a switch, matrices returned) it cost P2G 15 % of a fluid cube's (bench_mpm).
+        const float J = fluidJ_[i], pressure = mat.bulk / mat.gamma * (invPow(J, mat.gamma) - 1.0f);
+        const Eigen::Matrix3f& C = C_[i];
+        if (mat.viscosity == 0.0f) {
+          A = mp * C;
+          A.diagonal().array() += stressScale * (J * -pressure);
+        } else {
+          for (int c = 0; c < 3; ++c)
+            for (int r = 0; r < 3; ++r)
+              A(r, c) = stressScale * (J * (-pressure * (r == c ? 1.0f : 0.0f) + mat.viscosity * (C(r, c) + C(c, r)))) +
+                        mp * C(r, c);
+        }
+      } else {
+        A = stressScale * kirchhoff(i) + mp * C_[i];
+      }
       // Node (a, b, c) receives wt * (mp, mp v + A d) with d = ((a, b, c) - f) dx: per axis the
       // column of A times that axis's offset, as 4 lanes (mass lane 0), summed in the order
       // ((mp v + A_0 d_a) + A_1 d_b) + A_2 d_c.
@@ -475,13 +494,33 @@ void MpmWorld::gridUpdate(float h) {
   });
 }
 
-void MpmWorld::g2p(float h) {
+void MpmWorld::g2p(float h, int substep, bool summarize) {
   const float inv = float(1.0 / dx_), dx = float(dx_);
   const float ox = float(origin_.x()), oy = float(origin_.y()), oz = float(origin_.z());
+  // The walls' projection (see projection()): particles within 1.5 dx of a wall are at the
+  // domain's edge, the ground is not an edge.
+  const float margin = 1.5f * float(dx_);
+  float edgeLo[3], edgeHi[3];
+  for (int a = 0; a < 3; ++a) {
+    edgeLo[a] = lo_[a] + margin;
+    edgeHi[a] = hi_[a] - margin;
+  }
+  if (groundNode_ >= 0 || params_.groundY >= double(lo_[1])) edgeLo[1] = -std::numeric_limits<float>::infinity();
+  // The guard's bounds (check and checkParticles), as they compute them.
+  const double vmax = lastSubsteps_ > 0 ? dx_ / (params_.dt / lastSubsteps_) : std::numeric_limits<double>::infinity();
+  const float grx = float(params_.gravity.x()), gry = float(params_.gravity.y()), grz = float(params_.gravity.z());
+  blockTails_.assign(particleBlocks_.size(), BlockTail{});
   // Block by block, as p2g: the 6^3 nodes a block's particles can reach are copied into a tile
   // that stays in L1 and is read with fixed strides.
   const bool avx2 = avx2_;
+  const double vmax2 = vmax * vmax;
+  const float near2 = float(0.99 * vmax2);  // below it no float rounding reaches vmax2
+  const float lo[3] = {lo_[0], lo_[1], lo_[2]}, hi[3] = {hi_[0], hi_[1], hi_[2]};
   forEach(particleBlocks_.size(), [&](std::size_t k) {
+    BlockTail& tail = blockTails_[k];
+    // The block's energy in float, as the guard's own sums take blocks of 512 particles (a block
+    // holds 512 at 8 a cell).
+    float kinetic = 0.0f, potential = 0.0f, mass = 0.0f, lowest = std::numeric_limits<float>::infinity();
     const auto blk = std::size_t(particleBlocks_[k]);
     int corner[3];
     blockCorner(blk, nb_, corner);
@@ -531,23 +570,81 @@ void MpmWorld::g2p(float h) {
       Eigen::Matrix3f C;
       for (int c = 0; c < 3; ++c)
         for (int r = 0; r < 3; ++r) C(r, c) = cScale * out[4 * (c + 1) + r + 1];
-      parts_.vx[i] = v[0];
-      parts_.vy[i] = v[1];
-      parts_.vz[i] = v[2];
-      parts_.x[i] += h * v[0];
-      parts_.y[i] += h * v[1];
-      parts_.z[i] += h * v[2];
       C_[i] = C;
+      float J;  // the guard's: a fluid's smaller of its two J, a solid's det F
       if (fluid) {  // J only: a fluid has no rest shape
         const float grow = 1.0f + h * C.trace();
-        fluidJ_[i] = jbar * grow;
-        plastic_[i] = ((1.0f - kJbarRelax) * plastic_[i] + kJbarRelax * jbar) * grow;
+        const float own = ((1.0f - kJbarRelax) * plastic_[i] + kJbarRelax * jbar) * grow, grid = jbar * grow;
+        fluidJ_[i] = grid;
+        plastic_[i] = own;
+        J = std::min(own, grid);
       } else {
-        F_[i] = (Eigen::Matrix3f::Identity() + h * C) * F_[i];
+        const Eigen::Matrix3f F = (Eigen::Matrix3f::Identity() + h * C) * F_[i];
+        F_[i] = F;
+        J = summarize ? F.determinant() : 1.0f;
       }
+      // Speed past the CFL bound before the walls stop it (check(kG2P)), in double as check()
+      // tests it, where float says it may be near.
+      if (v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > near2) {
+        const double v2 = double(v[0]) * v[0] + double(v[1]) * v[1] + double(v[2]) * v[2];
+        if (v2 > vmax2 && (tail.cflFirst < 0 || std::int32_t(i) < tail.cflFirst)) tail.cflFirst = std::int32_t(i), tail.cflSpeed2 = v2;
+      }
+      // The projection's walls: put back on a wall it passed, its velocity into it dropped.
+      float nx[3] = {parts_.x[i] + h * v[0], parts_.y[i] + h * v[1], parts_.z[i] + h * v[2]};
+      float nv[3] = {v[0], v[1], v[2]};
+      int wall = -1;  // 0..5: x-, x+, y-, y+, z-, z+
+      for (int a = 0; a < 3; ++a) {
+        if (nx[a] < lo[a]) {
+          nx[a] = lo[a];
+          nv[a] = std::max(nv[a], 0.0f);
+        } else if (nx[a] > hi[a]) {
+          nx[a] = hi[a];
+          nv[a] = std::min(nv[a], 0.0f);
+        }  // NaN compares false both ways: left for the guard to report
+        if (nx[a] < edgeLo[a]) wall = 2 * a;
+        else if (nx[a] > edgeHi[a]) wall = 2 * a + 1;
+      }
+      parts_.x[i] = nx[0], parts_.y[i] = nx[1], parts_.z[i] = nx[2];
+      parts_.vx[i] = nv[0], parts_.vy[i] = nv[1], parts_.vz[i] = nv[2];
+      if (wall >= 0) {
+        ++tail.atEdge;
+        if (tail.firstEdge < 0 || std::int32_t(i) < tail.firstEdge) tail.firstEdge = std::int32_t(i), tail.edgeSide = std::int8_t(wall);
+      }
+      if (!summarize) continue;
+      // The guard's checks of the end state, the same tests as its sweeps.
+      tail.nonFinite += (nx[0] - nx[0]) + (nx[1] - nx[1]) + (nx[2] - nx[2]) + (nv[0] - nv[0]) + (nv[1] - nv[1]) + (nv[2] - nv[2]);
+      const float s2 = nv[0] * nv[0] + nv[1] * nv[1] + nv[2] * nv[2];
+      tail.fastest2 = s2 > tail.fastest2 ? s2 : tail.fastest2;
+      tail.inverted |= !(J > 0.0f);
+      tail.fast |= s2 > near2 && double(nv[0]) * nv[0] + double(nv[1]) * nv[1] + double(nv[2]) * nv[2] > vmax2;
+      const float m = parts_.mass[i], height = -(grx * nx[0] + gry * nx[1] + grz * nx[2]);
+      kinetic += m * s2;
+      potential += m * height;
+      mass += m;
+      lowest = std::min(lowest, height);
     }
+    tail.energy.kinetic = 0.5 * double(kinetic);
+    tail.energy.potential = double(potential);
+    tail.energy.mass = double(mass);
+    tail.energy.lowest = double(lowest);
   });
-  // Carried bodies move with their prescribed velocity (fixed ones have none).
+  // In block order (the lowest id and the sums do not depend on the threads).
+  const bool firstWithAny = firstEdge_.particle < 0;
+  StepSummary summary;
+  const float max2 = float(params_.maxSpeed * params_.maxSpeed);
+  float nonFinite = 0.0f, fastest2 = 0.0f;
+  for (const BlockTail& t : blockTails_) {
+    atEdge_ += t.atEdge;
+    if (firstWithAny && t.firstEdge >= 0 && (firstEdge_.particle < 0 || t.firstEdge < firstEdge_.particle))
+      firstEdge_ = {t.firstEdge, t.edgeSide, steps_, substep};
+    nonFinite += t.nonFinite;
+    fastest2 = std::max(fastest2, t.fastest2);
+    summary.inverted |= t.inverted;
+    summary.fast |= t.fast;
+    summary.energy.add(t.energy);
+  }
+  // Carried bodies move with their prescribed velocity (fixed ones have none); the summary's
+  // pre-check covers them too (fixed particles never change).
   for (std::size_t b = 0; b < members_.size(); ++b) {
     if (mode_[b] != BodyMode::kKinematic) continue;
     for (std::int32_t id : members_[b]) {
@@ -555,8 +652,15 @@ void MpmWorld::g2p(float h) {
       parts_.x[i] = std::clamp(parts_.x[i] + h * parts_.vx[i], lo_[0], hi_[0]);
       parts_.y[i] = std::clamp(parts_.y[i] + h * parts_.vy[i], lo_[1], hi_[1]);
       parts_.z[i] = std::clamp(parts_.z[i] + h * parts_.vz[i], lo_[2], hi_[2]);
+      const float vx = parts_.vx[i], vy = parts_.vy[i], vz = parts_.vz[i];
+      nonFinite += (parts_.x[i] - parts_.x[i]) + (parts_.y[i] - parts_.y[i]) + (parts_.z[i] - parts_.z[i]) + (vx - vx) +
+                   (vy - vy) + (vz - vz);
+      fastest2 = std::max(fastest2, vx * vx + vy * vy + vz * vz);
     }
   }
+  summary.suspect = nonFinite != 0.0f || !(fastest2 <= max2 * 0.999f);  // as checkParticles' pre-check
+  summary.valid = summarize;
+  summary_ = summary;
 }
 
 // A particle the grid let past a wall or the ground is put back on it and loses its velocity
@@ -564,62 +668,15 @@ void MpmWorld::g2p(float h) {
 // Particles at the domain's edge -- within 1.5 dx of one of its six walls, where the wall's
 // nodes are in their stencil and the wall, not the scene, shapes their motion -- are counted
 // (the ground is not an edge: it is a boundary the scene asks for), and the first (the lowest
-// id in the first substep with any) is kept for the run's report.
-void MpmWorld::projection(int substep) {
-  const std::size_t chunks = (order_.size() + kChunk - 1) / kChunk;
-  // Per chunk: particles at the edge, the first and its wall (kept between substeps: no
-  // allocation per substep once they have grown).
-  std::vector<std::int64_t>& counts = edgeCounts_;
-  std::vector<std::int32_t>& first = edgeFirst_;
-  std::vector<std::int8_t>& firstSide = edgeSide_;
-  counts.assign(chunks, 0);
-  first.assign(chunks, -1);
-  firstSide.assign(chunks, -1);
-  const float margin = 1.5f * float(dx_);
-  float edgeLo[3], edgeHi[3];
-  for (int a = 0; a < 3; ++a) {
-    edgeLo[a] = lo_[a] + margin;
-    edgeHi[a] = hi_[a] - margin;
-  }
-  if (groundNode_ >= 0 || params_.groundY >= double(lo_[1])) edgeLo[1] = -std::numeric_limits<float>::infinity();
+// id in the first substep with any) is kept for the run's report. The walls' part runs in g2p's
+// particle loop, on the values it has just written (a pass of its own over the particles cost
+// 3 % of a fluid cube's step); this pass pushes particles out of the colliders after it, in the
+// same order per particle as when both were here.
+void MpmWorld::projection() {
+  if (colliders_.empty()) return;
   forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
-    std::int64_t atEdge = 0;
-    std::int32_t firstHere = -1;
-    std::int8_t sideHere = -1;
-    for (std::size_t o = lo; o < hi; ++o) {
-      const auto i = std::size_t(order_[o]);
-      float* x[3] = {&parts_.x[i], &parts_.y[i], &parts_.z[i]};
-      float* v[3] = {&parts_.vx[i], &parts_.vy[i], &parts_.vz[i]};
-      int wall = -1;  // 0..5: x-, x+, y-, y+, z-, z+
-      for (int a = 0; a < 3; ++a) {
-        if (*x[a] < lo_[a]) {
-          *x[a] = lo_[a];
-          *v[a] = std::max(*v[a], 0.0f);
-        } else if (*x[a] > hi_[a]) {
-          *x[a] = hi_[a];
-          *v[a] = std::min(*v[a], 0.0f);
-        }  // NaN compares false both ways: left for the guard to report
-        if (*x[a] < edgeLo[a]) wall = 2 * a;
-        else if (*x[a] > edgeHi[a]) wall = 2 * a + 1;
-      }
-      if (!colliders_.empty()) pushOutOfColliders(i, double(lastH_));
-      if (wall < 0) continue;
-      ++atEdge;
-      if (firstHere < 0 || std::int32_t(i) < firstHere) {  // block order, not id order
-        firstHere = std::int32_t(i);
-        sideHere = std::int8_t(wall);
-      }
-    }
-    counts[lo / kChunk] = atEdge;
-    first[lo / kChunk] = firstHere;
-    firstSide[lo / kChunk] = sideHere;
+    for (std::size_t o = lo; o < hi; ++o) pushOutOfColliders(std::size_t(order_[o]), double(lastH_));
   });
-  const bool firstWithAny = firstEdge_.particle < 0;
-  for (std::size_t c = 0; c < chunks; ++c) {
-    atEdge_ += counts[c];
-    if (firstWithAny && first[c] >= 0 && (firstEdge_.particle < 0 || first[c] < firstEdge_.particle))
-      firstEdge_ = {first[c], firstSide[c], steps_, substep};
-  }
 }
 
 // A particle inside a collider goes back to its surface along the normal and loses its

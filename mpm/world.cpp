@@ -562,8 +562,8 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
                       collidersText()
                 : "no dynamic particle";
     case MpmPass::kProjection:
-      return on ? std::string("walls and ground") +
-                      collidersText()
+      return on ? std::string("walls and ground (in g2p's particle loop: their time is g2p's)") +
+                      (colliders_.empty() ? std::string() : "; then" + collidersText().substr(1))
                 : "no dynamic particle";
     case MpmPass::kPlasticity:
       return on ? "plastic materials " + list : "no dynamic particle of a plastic kind (sand, snow, plasticine)";
@@ -717,7 +717,7 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
     }
     case MpmPass::kG2P: return heldBytes(C_, F_, plastic_, fluidJ_);
     case MpmPass::kPlasticity: return heldBytes(svdU_, svdS_);
-    case MpmPass::kProjection: return heldBytes(edgeCounts_, edgeFirst_, edgeSide_);
+    case MpmPass::kProjection: return heldBytes(blockTails_);
     default: return 0;
   }
 }
@@ -776,13 +776,19 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
          "The deformation gradient inverted (J <= 0).");
     return r;
   }
-  if (const std::int64_t i = lowest(firstCfl); i >= 0) {
-    const auto k = std::size_t(i);
-    const double v2 = double(parts_.vx[k]) * parts_.vx[k] + double(parts_.vy[k]) * parts_.vy[k] +
-                      double(parts_.vz[k]) * parts_.vz[k];
-    fill(k, GuardKind::kCfl, std::sqrt(v2), vmax,
-         "A particle moves more than one grid cell per substep (speed above dx/h, Hu et al. 2018 §5).");
+  std::int64_t cfl = lowest(firstCfl);
+  double cflV2 = 0.0;
+  if (cfl >= 0) {
+    const auto k = std::size_t(cfl);
+    cflV2 = double(parts_.vx[k]) * parts_.vx[k] + double(parts_.vy[k]) * parts_.vy[k] + double(parts_.vz[k]) * parts_.vz[k];
   }
+  // After g2p: also a particle the walls stopped in g2p's own loop (its speed before they did).
+  if (pass == MpmPass::kG2P && checkCfl)
+    for (const BlockTail& t : blockTails_)
+      if (t.cflFirst >= 0 && (cfl < 0 || t.cflFirst <= cfl)) cfl = t.cflFirst, cflV2 = t.cflSpeed2;
+  if (cfl >= 0)
+    fill(std::size_t(cfl), GuardKind::kCfl, std::sqrt(cflV2), vmax,
+         "A particle moves more than one grid cell per substep (speed above dx/h, Hu et al. 2018 §5).");
   return r;
 }
 
@@ -806,14 +812,20 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
   const float h = float(params_.dt / substeps);
   const auto runs = [&](MpmPass p) { return bool(work_[std::size_t(p)]); };
   svdCached_ = polarCached_ = false;  // see svdU_, polarQ_
+  // The end-of-step guard's checks are summed by the last g2p where nothing moves a particle or
+  // changes its F after it (StepSummary).
+  const bool summarize = runs(MpmPass::kGuard) && colliders_.empty() && !runs(MpmPass::kPlasticity);
+  summary_.valid = false;
   for (int s = 0; s < substeps; ++s) {
     lastH_ = h;
     if (!colliders_.empty()) poseColliders(double(steps_) * params_.dt + double(s) * double(h), double(h));
     if (runs(MpmPass::kP2G) && !runPass(MpmPass::kP2G, s, checkEachPass, [&] { p2g(h); })) return false;
     if (runs(MpmPass::kGridUpdate) && !runPass(MpmPass::kGridUpdate, s, checkEachPass, [&] { gridUpdate(h); }))
       return false;
-    if (runs(MpmPass::kG2P) && !runPass(MpmPass::kG2P, s, checkEachPass, [&] { g2p(h); })) return false;
-    if (runs(MpmPass::kProjection) && !runPass(MpmPass::kProjection, s, checkEachPass, [&] { projection(s); }))
+    const bool last = s + 1 == substeps;
+    if (runs(MpmPass::kG2P) && !runPass(MpmPass::kG2P, s, checkEachPass, [&] { g2p(h, s, summarize && last); }))
+      return false;
+    if (runs(MpmPass::kProjection) && !runPass(MpmPass::kProjection, s, checkEachPass, [&] { projection(); }))
       return false;
     if (runs(MpmPass::kPlasticity) && !runPass(MpmPass::kPlasticity, s, checkEachPass, [&] { plasticity(); }))
       return false;
@@ -887,8 +899,12 @@ bool MpmWorld::step() {
   const bool checks = work_[std::size_t(MpmPass::kGuard)];
   const auto endChecks = [&] {
     ScopedPass t(profile_, MpmPass::kGuard);
-    GuardRecord r = check(MpmPass::kGuard);
-    if (!r.tripped()) r = checkEnergy();
+    // From the last g2p's summary where it has one and it flags nothing; else (and to name the
+    // particle) the sweeps.
+    const StepSummary& sum = summary_;
+    const bool clean = sum.valid && !sum.suspect && !sum.inverted && !sum.fast;
+    GuardRecord r = clean ? GuardRecord{} : check(MpmPass::kGuard);
+    if (!r.tripped()) r = checkEnergy(sum.valid ? &sum.energy : nullptr);
     return r;
   };
   // A carried body moved to its target: it stays there until given the next one.
@@ -924,8 +940,10 @@ bool MpmWorld::energyClosed() const {
   return closed;
 }
 
-GuardRecord MpmWorld::checkEnergy() {
-  GuardRecord r = energy_.check(parts_, params_.gravity, params_.spacing, energyClosed());
+GuardRecord MpmWorld::checkEnergy(const EnergySums* sums) {
+  const bool closed = energyClosed();
+  GuardRecord r = sums && closed ? energy_.check(*sums, parts_, params_.gravity, params_.spacing, true)
+                                 : energy_.check(parts_, params_.gravity, params_.spacing, closed);
   if (r.tripped()) r.hint = "Energy grew in a closed system (nothing moved it from outside).";
   return r;
 }

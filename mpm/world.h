@@ -115,6 +115,10 @@ class MpmWorld final : public Solver {
   std::int64_t stepCount() const override { return steps_; }
   double dt() const override { return params_.dt; }
   std::uint64_t stateHash() const override;
+  // The energy sums of the dynamic particles the last step's guard read (summed in the step's
+  // last g2p, StepSummary), or nullptr where that step's guard swept them itself (colliders,
+  // plasticity) or no step ran.
+  const EnergySums* lastStepEnergy() const { return summary_.valid ? &summary_.energy : nullptr; }
 
   int addBody(const ParticleArrays& particles, const BodyRange& shape, bool kinematic) override;
   void setMode(int body, BodyMode mode) override;
@@ -210,14 +214,16 @@ class MpmWorld final : public Solver {
   template <class F>
   bool runPass(MpmPass pass, int substep, bool check, F&& f);
   GuardRecord check(MpmPass pass) const;
-  GuardRecord checkEnergy();
+  GuardRecord checkEnergy(const EnergySums* sums = nullptr);
   bool energyClosed() const;
 
   void sortByBlock();
   void p2g(float h);
   void gridUpdate(float h);
-  void g2p(float h);
-  void projection(int substep);
+  // g2p also puts particles past a wall or the ground back on it (the projection's walls: see
+  // projection()), and, with `summarize`, sums the end-of-step guard's checks (StepSummary).
+  void g2p(float h, int substep, bool summarize);
+  void projection();
   void plasticity();
   Eigen::Matrix3f kirchhoff(std::size_t i);
   std::size_t passBytes(MpmPass pass) const;
@@ -371,9 +377,36 @@ class MpmWorld final : public Solver {
   std::int64_t steps_ = 0;
   std::int64_t atEdge_ = 0;
   EdgeHit firstEdge_;
-  std::vector<std::int64_t> edgeCounts_;  // projection's per-chunk scratch
-  std::vector<std::int32_t> edgeFirst_;
-  std::vector<std::int8_t> edgeSide_;
+  // Per block of g2p's loop (particleBlocks_ order): the walls' projection there (particles at
+  // the domain's edge, the lowest id among them and its wall) and, on a summarized substep, the
+  // guard's per-particle checks: any non-finite position or velocity and the fastest particle
+  // (checkParticles' pre-check), an inversion (J <= 0) and a speed past the CFL bound (check's),
+  // and the energy sums (checkEnergy's).
+  struct BlockTail {
+    std::int64_t atEdge = 0;
+    std::int32_t firstEdge = -1;
+    std::int8_t edgeSide = -1;
+    float nonFinite = 0.0f, fastest2 = 0.0f;
+    bool inverted = false, fast = false;
+    EnergySums energy;
+    // Every substep: the lowest id faster than the CFL bound before the walls stopped it, and
+    // its speed squared (check(kG2P) reads it: the transfer's locality broke, wall or not).
+    std::int32_t cflFirst = -1;
+    double cflSpeed2 = 0.0;
+  };
+  std::vector<BlockTail> blockTails_;
+  // The end-of-step guard's checks as the step's last g2p summed them, while the particles were in
+  // registers (the guard's three sweeps over every particle cost 6 % of a fluid cube's step). Valid
+  // only where nothing moves a particle or changes its F after that g2p: no collider's push-out
+  // and no plasticity (their scenes keep the sweeps). Where it flags anything, the sweeps run
+  // (and the step's replay names the pass) as they always did.
+  struct StepSummary {
+    bool valid = false;
+    bool suspect = false;  // a non-finite value, or a speed near or above maxSpeed
+    bool inverted = false, fast = false;
+    EnergySums energy;
+  };
+  StepSummary summary_;
   int lastSubsteps_ = 0;
   bool validate_ = false;
   bool avx2_ = avx2Supported();

@@ -704,6 +704,77 @@ TEST(MpmWorld, AStepTheGuardStoppedUnderWarnEndsAsTheValidatedStepDoes) {
   }
 }
 
+// The guard's end-of-step checks read what the step's last g2p summed while it wrote the
+// particles, not sweeps of their own (StepSummary); where the summary flags anything the sweeps
+// run and the step is replayed to name the pass. Oracle: the same run validated after every
+// pass, whose checks sweep the particles. Two blocks of water, then of jelly, colliding at 1 m/s
+// each in zero gravity (2 substeps, CFL bound 2.4 m/s: they invert), and a jelly block thrown at
+// 5 m/s through the middle of the domain (the CFL bound): both runs stop in the same step with
+// the same record (kind, particle, pass, substep, value). Ignoring the summary's speed flag fails
+// it (the thrown block runs on). Its J and non-finite flags mirror the sweeps' tests, but no end
+// state failing only them could be built: an inversion needs a velocity jump of about dx/h
+// across a cell, and the stress that follows passes the CFL bound in the same substep (the
+// colliding blocks trip both), and a NaN comes only from such a blow-up. And the energy the
+// summary gives the energy check is the particles' own, summed here in double: within 1e-5 of
+// it (float sums over blocks of 512, as the guard's sweeps take them; a kinetic sum of 0 fails).
+TEST(MpmWorld, TheGuardsEndOfStepSummaryTripsAsItsSweepsDo) {
+  const double h = 0.01;
+  struct Case {
+    bool water;
+    double v;
+    bool collide;
+  };
+  for (const Case& c : {Case{true, 1.0, true}, Case{false, 1.0, true}, Case{false, 5.0, false}}) {
+    GuardRecord record[2];
+    for (int validate = 0; validate < 2; ++validate) {
+      ParticleArrays p;
+      std::vector<BodyRange> bodies;
+      BodyInit a, b;
+      a.velocity = Vec3(c.v, 0.0, 0.0), b.velocity = Vec3(-c.v, 0.0, 0.0);
+      addBox(p, bodies, Vec3(0.3, 0.4, 0.4), 8, 8, 8, h, 0, a);
+      if (c.collide) addBox(p, bodies, Vec3(0.3 + 8 * h, 0.4, 0.4), 8, 8, 8, h, 0, b);
+      MpmParams q = unitDomain(h, 2);
+      q.gravity = Vec3::Zero();
+      MpmWorld w(p, bodies, {c.water ? makeMaterial(MaterialKind::kFluid, "water") : elastic(5e4)}, q);
+      w.setValidate(validate == 1);
+      for (int s = 0; s < 10 && w.step(); ++s) {
+      }
+      record[validate] = w.guard();
+    }
+    const std::string what = std::string(c.water ? "water" : "jelly") + (c.collide ? " colliding" : " thrown");
+    ASSERT_TRUE(record[1].tripped()) << what;
+    EXPECT_EQ(record[1].kind, c.collide ? GuardKind::kInverted : GuardKind::kCfl) << what << ": " << record[1].message();
+    EXPECT_EQ(record[0].kind, record[1].kind) << what << ": " << record[0].message();
+    EXPECT_EQ(record[0].particle, record[1].particle) << what;
+    EXPECT_EQ(record[0].pass, record[1].pass) << what;
+    EXPECT_EQ(record[0].step, record[1].step) << what;
+    EXPECT_EQ(record[0].substep, record[1].substep) << what;
+    EXPECT_EQ(record[0].value, record[1].value) << what;
+  }
+  // The energy: a jelly block falling and spinning, 5 steps.
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  BodyInit spin;
+  spin.velocity = Vec3(0.3, -0.5, 0.1), spin.spin = Vec3(0.0, 2.0, 1.0);
+  addBox(p, bodies, Vec3(0.4, 0.5, 0.4), 8, 8, 8, h, 0, spin);
+  MpmWorld w(p, bodies, {elastic(5e4)}, unitDomain(h, 0));  // substeps auto
+  EXPECT_EQ(w.lastStepEnergy(), nullptr);  // no step yet
+  for (int s = 0; s < 5; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  const EnergySums* e = w.lastStepEnergy();
+  ASSERT_NE(e, nullptr);
+  double kinetic = 0.0, potential = 0.0, mass = 0.0;
+  const ParticleArrays& q = w.particles();
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    const double m = q.mass[i];
+    kinetic += 0.5 * m * (double(q.vx[i]) * q.vx[i] + double(q.vy[i]) * q.vy[i] + double(q.vz[i]) * q.vz[i]);
+    potential += m * 9.81 * double(q.y[i]);
+    mass += m;
+  }
+  EXPECT_NEAR(e->kinetic / kinetic, 1.0, 1e-5);
+  EXPECT_NEAR(e->potential / potential, 1.0, 1e-5);
+  EXPECT_NEAR(e->mass / mass, 1.0, 1e-6);
+}
+
 // Walls and ground take their friction from the materials touching them (static_friction,
 // dynamic_friction, mass-weighted per node). A block sliding at 2 m/s on the ground: without
 // friction it keeps its speed; with mu = 0.5 Coulomb's law slows it by mu g t (0.98 m/s in
