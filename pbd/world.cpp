@@ -556,10 +556,12 @@ PbdWorld::Census PbdWorld::census() const {
 std::vector<bool> PbdWorld::work() const {
   std::vector<bool> on(static_cast<std::size_t>(PbdPass::kCount), false);
   const Census c = census();
-  // Sleepers count as moving only where a carried body may wake one within the step (which then
-  // needs every rigid pass from that substep on); otherwise a pile asleep runs no rigid pass.
+  // Sleepers count as moving only where a carried body or particle-level material may wake one
+  // within the step (which then needs every rigid pass from that substep on); otherwise a pile
+  // asleep runs no rigid pass.
   const bool kinematic = c.kinematic > 0;
-  const bool rigid = c.rigidDynamic > 0 || (c.asleep > 0 && kinematic), loose = c.looseDynamic > 0;
+  const bool loose = c.looseDynamic > 0;
+  const bool rigid = c.rigidDynamic > 0 || (c.asleep > 0 && (kinematic || loose));
   on[int(PbdPass::kIntegrate)] = rigid;
   on[int(PbdPass::kPredict)] = loose;
   on[int(PbdPass::kKinematic)] = kinematic;
@@ -944,6 +946,13 @@ bool PbdWorld::step() {
   // growth within the step is caught (loose_ is current: rebuilt above).
   if (work_[std::size_t(PbdPass::kGuard)] && !energy_.armed() && energyClosed())
     energy_.arm(energyNow(), params_.gravity, 2.0 * params_.particleRadius);
+  // Bodies a rope or cloth is tied to never sleep (touchedByLoose wakes one that does, here, before
+  // the start is kept); the particle pairs mark the others during the step.
+  const auto markTied = [&] {
+    looseTouch_.assign(members_.size(), 0);
+    for (const Attachment& a : attachments_) touchedByLoose(std::size_t(a.body));
+  };
+  markTied();
   // The start of the step: to replay it with a check after every pass (naming the pass that
   // produced a bad value), and under policy warn to complete a step the guard stopped midway.
   // Members, copied into: they keep their capacity, so a step allocates nothing (a fresh
@@ -970,6 +979,7 @@ bool PbdWorld::step() {
     stillFor_ = startStill_;
     stillRef_ = startStillRef_;
     fluidSoundSpeed_ = startSoundSpeed_;
+    markTied();
     std::size_t at = 0;
     for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
       for (std::int32_t i : loose_) (*a)[std::size_t(i)] = looseStart[at++];
@@ -1411,11 +1421,9 @@ void PbdWorld::findBodyPairs(bool mayWake) {
 // findBodyPairs when something moving touches them, and all wake on any outside change (a
 // body added, cut, moved, set moving or held; colliders set).
 bool PbdWorld::sleepPossible() const {
-  // Only rigid bodies are simulated at body level, where a touch can wake a sleeper; particle-level
-  // contacts (soft, rope, cloth, fluid, a carried soft body) and colliders moving along keyframes
-  // do not look for sleepers, so their scenes keep every body awake.
-  for (std::size_t b = 0; b < members_.size(); ++b)
-    if (mode_[b] != BodyMode::kEmpty && !isRigid(b)) return false;
+  // Only rigid bodies sleep. A touch at body level wakes a sleeper (findBodyPairs), as does a
+  // particle-level one (findNeighbors, touchedByLoose); colliders moving along keyframes do not
+  // look for sleepers, so their scenes keep every body awake.
   if (colliders_)
     for (std::size_t c = 0; c < colliders_->size(); ++c)
       if (colliders_->moving(c)) return false;
@@ -1431,6 +1439,14 @@ void PbdWorld::wake(std::size_t b) {
   mo.qPrev = mo.q;
   groundCache_.resize(members_.size());
   groundCache_[b].valid = false;
+}
+
+void PbdWorld::touchedByLoose(std::size_t b) {
+  looseTouch_[b] = 1;
+  if (!asleep(int(b))) return;
+  wake(b);
+  const auto id = std::int32_t(b);
+  active_.insert(std::upper_bound(active_.begin(), active_.end(), id), id);
 }
 
 void PbdWorld::wakeAll() {
@@ -1485,7 +1501,7 @@ void PbdWorld::updateSleep() {
     if (asleep_[b] && restless[a]) wake(b);
   }
   for (std::size_t b = 0; b < n; ++b) {
-    if (!ready[b] || held[b]) continue;
+    if (!ready[b] || held[b] || (b < looseTouch_.size() && looseTouch_[b])) continue;
     asleep_[b] = 1;
     Motion& mo = motion_[b];
     mo.v = mo.w = Vec3::Zero();

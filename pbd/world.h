@@ -22,7 +22,8 @@
 // stayed within sleepSpeed x sleepTime of one pose for sleepTime falls asleep: v = w = 0, its
 // particles at rest, and every pass treats it as fixed (moving() is false) until find_contacts
 // finds something moving touching it (a carried body, or an awake one faster than 4 x sleepSpeed)
-// or an awake body touching it leaves its still ball; any outside change wakes all.
+// or an awake body touching it leaves its still ball, or find_neighbors finds a particle-level one
+// touching it (looseTouch_); any outside change wakes all.
 //
 // Soft bodies, ropes and cloth (and fluids) are simulated particle by particle, in the
 // same substeps (Macklin et al. 2014, Alg. 1, with XPBD compliance, Macklin et al. 2016):
@@ -350,9 +351,15 @@ class PbdWorld final : public Solver {
   std::vector<std::int32_t> active_;        // dynamic bodies awake this substep, ascending
   // Sleeping (PbdParams::sleepSpeed). Per body: asleep (its v and w are 0, its particles' velocities
   // 0; the passes treat it as fixed) and how long it has been slower than the sleep speed (s).
-  // sleepAllowed_: this step, whether any body may sleep (a scene of rigid bodies only, no collider
-  // moving along keyframes: particle-level contacts and moving colliders do not wake sleepers).
+  // sleepAllowed_: this step, whether any body may sleep (no collider moving along keyframes:
+  // moving colliders do not wake sleepers).
   std::vector<char> asleep_;
+  // Per rigid body, this step: particle-level material (soft, rope, cloth, fluid) touched it (a
+  // particle pair in find_neighbors) or is tied to it. Such a body does not fall asleep, and a
+  // sleeper found so wakes before the contacts are solved: the particle-level passes never meet a
+  // sleeper, and a sleeper meets them only as the fixed solid it is at rest (a fluid's density).
+  std::vector<char> looseTouch_;
+  void touchedByLoose(std::size_t b);
   std::vector<double> stillFor_;
   // Per body: the pose its still time is measured from (Jolt's sleep test, by displacement): a body
   // counts as still while every point stays within sleepSpeed x sleepTime of where it was then, so

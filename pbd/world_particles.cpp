@@ -748,6 +748,12 @@ void PbdWorld::findNeighbors() {
     pairs.i.insert(pairs.i.end(), c.i.begin(), c.i.end());
     pairs.j.insert(pairs.j.end(), c.j.begin(), c.j.end());
   }
+  // A rigid body particle-level material touches does not sleep; a sleeper wakes now, before the
+  // pairs are solved (in pair order: the same for any thread count).
+  for (std::int32_t j : pairs.j) {
+    const auto b = std::size_t(parts_.group(std::size_t(j)));
+    if (isRigid(b) && mode_[b] == BodyMode::kDynamic && !looseTouch_[b]) touchedByLoose(b);
+  }
 }
 
 // One sweep over the particle pairs, then the ground. A pair closer than one spacing is
@@ -1321,7 +1327,7 @@ void PbdWorld::fluidNeighbors() {
     const bool rigid = isRigid(b);
     put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(px_, py_, pz_, i));
     fflag_[k] = k < fluidCount_ ? 1 : 0;
-    fw_[k] = rigid ? (mode_[b] == BodyMode::kDynamic ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i];
+    fw_[k] = rigid ? (moving(b) ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i];  // a sleeper: at rest, fixed
     frho_[k] = static_cast<float>(materials_[std::size_t(parts_.material[i])].density);
   }
   if (fluidMixed_) {  // each fluid particle its material's parameters (solids' entries unread)

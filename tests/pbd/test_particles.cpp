@@ -1413,3 +1413,65 @@ TEST(Fluid, AStoneSinksThroughHoneyAtStokesSpeedBetweenTheWalls) {
 }
 
 }  // namespace physketch::pbd
+
+// Sleeping beside particle-level material (PbdParams::sleepSpeed): a rigid body that no soft, rope,
+// cloth or fluid particle touches (a particle pair) and no strand is tied to sleeps as it would
+// alone; one they touch or are tied to stays awake; a sleeper they come to touch wakes before the
+// contact is solved. Until 2026-11-28 any particle-level material in a scene kept every body awake.
+// Oracles: the sleep rule (a box at rest alone sleeps within 1.5 s) and the same run without sleep.
+TEST(SleepBeside, ABodyNothingParticleLevelTouchesSleepsAndOneTouchedOrTiedStaysAwake) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("wood", MaterialKind::kRigid), makeKind("jelly", MaterialKind::kSoft),
+                                makeKind("rope", MaterialKind::kRope, 100.0)};
+  mats[1].elastic.youngs = 5e4;
+  std::vector<BodyRange> bodies;
+  bodies.push_back(addBox(p, Vec3(0.0, kRadius, 0.0), 6, 4, 6, 0, 0));     // 0: alone
+  bodies.push_back(addBox(p, Vec3(0.3, kRadius, 0.0), 6, 4, 6, 0, 0));     // 1: a jelly on it
+  bodies.push_back(addBox(p, Vec3(0.31, kRadius + 4 * kSpacing, 0.01), 4, 4, 4, 0, 1));  // 2: that jelly
+  bodies.push_back(addBox(p, Vec3(-0.3, kRadius, 0.0), 6, 4, 6, 0, 0));    // 3: a rope tied to it
+  bodies.push_back(addChain(p, Vec3(-0.3 - kSpacing, kRadius, 0.02), Vec3(-1, 0, 0), 20, 2));  // 4: that rope, on the ground
+  bodies.push_back(addBox(p, Vec3(0.6, kRadius, 0.3), 4, 4, 4, 0, 1));     // 5: a jelly alone
+  for (std::size_t b = 0; b < bodies.size(); ++b) bodies[b].stroke = int(b);
+  PbdParams prm = params(8, 4);
+  prm.sleepSpeed = 0.02, prm.sleepTime = 0.5;
+  PbdWorld w(p, bodies, mats, prm);
+  for (int s = 0; s < 90; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  EXPECT_TRUE(w.asleep(0)) << "nothing particle-level touches it";
+  EXPECT_FALSE(w.asleep(1)) << "a jelly rests on it";
+  EXPECT_FALSE(w.asleep(3)) << "a rope is tied to it";
+  EXPECT_EQ(w.sleepingCount(), 1);
+}
+
+// A jelly thrown in zero gravity at a box asleep (alone and still for 0.5 s) wakes it on contact,
+// and both then move as in the same run without sleep: the box had no motion to lose, and it wakes
+// in the substep the contact is found, before it is solved, so the runs agree to round-off (1e-9
+// m). With the sleeper not woken the box stays put and the jelly bounces off a wall.
+TEST(SleepBeside, AJellyThrownAtASleepingBoxWakesItAndBothMoveAsWithoutSleep) {
+  const auto run = [](bool sleep, bool& wasAsleep) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("wood", MaterialKind::kRigid), makeKind("jelly", MaterialKind::kSoft)};
+    mats[1].elastic.youngs = 5e4;
+    std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), 4, 4, 4, 0, 0), addBox(p, Vec3(0.8, 0.5, 0.0), 4, 4, 4, 1, 1)};
+    // The gap of 0.76 m closes after 0.76 s; at 1 m/s the jelly crosses the pairs' search margin
+    // (half a spacing) within the step that finds the pair, so the box is pushed in the step it wakes.
+    bodies[1].init.velocity = Vec3(-1.0, 0.0, 0.0);
+    PbdParams prm = params(8, 4, Vec3::Zero());
+    if (sleep) prm.sleepSpeed = 0.02, prm.sleepTime = 0.5;
+    PbdWorld w(p, bodies, mats, prm);
+    wasAsleep = false;
+    for (int s = 0; s < 120; ++s) {
+      EXPECT_TRUE(w.step()) << w.guard().message();
+      wasAsleep = wasAsleep || w.asleep(0);
+    }
+    return std::pair{w.pose(0).centre, w.velocity(0)};
+  };
+  bool asleepA = false, asleepB = false;
+  const auto [withSleep, vWith] = run(true, asleepA);
+  const auto [without, vWithout] = run(false, asleepB);
+  EXPECT_TRUE(asleepA) << "the box never slept";
+  EXPECT_FALSE(asleepB);
+  std::printf("box after the blow: %.6f m/s with sleep, %.6f without\n", vWith.x(), vWithout.x());
+  EXPECT_LT(vWithout.x(), -0.01) << "the jelly should push the box";
+  EXPECT_NEAR((withSleep - without).norm(), 0.0, 1e-9);
+  EXPECT_NEAR((vWith - vWithout).norm(), 0.0, 1e-9);
+}
