@@ -302,7 +302,7 @@ void MpmWorld::p2g(float h) {
       const float mp = parts_.mass[i];
       const MatModel& mat = models_[std::size_t(parts_.material[i])];
       Eigen::Matrix3f A;
-      if (mat.kind == MaterialKind::kFluid) {
+      if (fluidInline_ && mat.kind == MaterialKind::kFluid) {
         // fluidKirchhoff written out here, with the same operations in the same order (the same
         // bits), and for an inviscid fluid without its viscous term, whose zeros change no sum:
         // tau = J (-p I + mu (C + C^T)), p = K / gamma (J^-gamma - 1). Through kirchhoff() (a

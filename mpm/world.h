@@ -96,6 +96,9 @@ class MpmWorld final : public Solver {
   // P2G's and G2P's node loops in AVX2 where the CPU has it (the default), else SSE; both give
   // bit-identical results. False forces SSE (tests compare the two).
   void setAvx2(bool on) { avx2_ = on && avx2Supported(); }
+  // P2G computes a fluid's stress in its own loop (the default) or through kirchhoff(), as every
+  // other material's: the same bits either way (a test holds them to it).
+  void setFluidStressInline(bool on) { fluidInline_ = on; }
   // P2G's stress for plastic materials from the return map's SVD of the substep before, and
   // for fixed-corotated ones from their rotation of the substep before (the default; see svdU_
   // and polarQ_), or from an SVD of its own (false: tests compare the two).
@@ -410,6 +413,7 @@ class MpmWorld final : public Solver {
   int lastSubsteps_ = 0;
   bool validate_ = false;
   bool avx2_ = avx2Supported();
+  bool fluidInline_ = true;
   GuardLog guardLog_;  // the events a run continued past (policy warn)
   std::vector<bool> work_;
   std::vector<std::string> warnings_;
