@@ -303,20 +303,16 @@ void MpmWorld::p2g(float h) {
       const MatModel& mat = models_[std::size_t(parts_.material[i])];
       Eigen::Matrix3f A;
       if (fluidInline_ && mat.kind == MaterialKind::kFluid) {
-        // fluidKirchhoff written out here, with the same operations in the same order (the same
-        // bits), and for an inviscid fluid without its viscous term, whose zeros change no sum:
-        // tau = J (-p I + mu (C + C^T)), p = K / gamma (J^-gamma - 1). Through kirchhoff() (a
-        // call, a switch, matrices returned) it cost P2G 15 % of a fluid cube's (bench_mpm).
-        const float J = fluidJ_[i], pressure = mat.bulk / mat.gamma * (invPow(J, mat.gamma) - 1.0f);
+        // A fluid's stress here, not through kirchhoff() (a call and a switch per particle: 15 %
+        // of a fluid cube's P2G, bench_mpm), and for an inviscid fluid as the pressure alone:
+        // tau = -J p I, the viscous term's zeros changing no sum (the same bits).
+        const float J = fluidJ_[i];
         const Eigen::Matrix3f& C = C_[i];
         if (mat.viscosity == 0.0f) {
           A = mp * C;
-          A.diagonal().array() += stressScale * (J * -pressure);
+          A.diagonal().array() += stressScale * (J * -taitPressure(J, mat.bulk, mat.gamma));
         } else {
-          for (int c = 0; c < 3; ++c)
-            for (int r = 0; r < 3; ++r)
-              A(r, c) = stressScale * (J * (-pressure * (r == c ? 1.0f : 0.0f) + mat.viscosity * (C(r, c) + C(c, r)))) +
-                        mp * C(r, c);
+          A = stressScale * fluidKirchhoff<float>(J, C, mat.bulk, mat.gamma, mat.viscosity) + mp * C;
         }
       } else {
         A = stressScale * kirchhoff(i) + mp * C_[i];

@@ -111,9 +111,15 @@ S invPow(S J, S gamma) {
   return S(1) / r;
 }
 
+// Tait's pressure p = K / gamma (J^-gamma - 1) (Pa).
+template <class S>
+S taitPressure(S J, S bulk, S gamma) {
+  return bulk / gamma * (invPow(J, gamma) - S(1));
+}
+
 template <class S>
 Eigen::Matrix<S, 3, 3> fluidKirchhoff(S J, const Eigen::Matrix<S, 3, 3>& C, S bulk, S gamma, S viscosity) {
-  const S p = bulk / gamma * (invPow(J, gamma) - S(1));
+  const S p = taitPressure(J, bulk, gamma);
   return J * (-p * Eigen::Matrix<S, 3, 3>::Identity() + viscosity * (C + C.transpose()));
 }
 

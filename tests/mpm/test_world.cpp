@@ -303,8 +303,8 @@ TEST(MpmWorld, Avx2AndSseTransfersGiveBitIdenticalStates) {
 // viscous term's zeros for an inviscid fluid. Oracle: the kirchhoff() path (fluidKirchhoff, as
 // every other material's stress), which must give the same bits: inviscid water (mu = 0), water
 // (1e-3 Pa s) and a viscous fluid (50 Pa s), each a block thrown spinning at the floor and one
-// dropped on it, 12 steps, state hashes after every step. A flipped sign of the pressure, or C
-// for C + C^T in the viscous term, changes them.
+// dropped on it, 12 steps, state hashes after every step. A flipped sign of the inline pressure
+// changes them (the viscous term itself: AViscousFluidResistsShearButNotRotation).
 TEST(MpmWorld, TheInlineFluidStressGivesTheSameBitsAsKirchhoff) {
   const double h = 0.01;
   for (const double mu : {0.0, 1e-3, 50.0}) {
