@@ -8,6 +8,9 @@
 //   fluid_cube / elastic_cube / sand_cube: 262,144 particles (64^3) on a 128^3 grid (the fluid as
 //     above; the solids E = 1e3, nu = 0.2, rho = 1: the peers' solid; the earlier E = 1e4 broke
 //     the explicit bound 5-fold and inverted at step 12).
+//   svd3: the 3x3 SVD alone on one thread, 131,072 trial F of a deforming solid (the identity
+//     plus uniform noise of +-0.05 per entry, as in a return map), ns per matrix: svd3 one at a
+//     time against svd3Many (the return maps' batches) on the same matrices.
 // Prints CSV rows `bench,case,particles,threads,metric,value,unit`: particle_steps_per_s (the
 // median of --repeats timed runs of --steps steps, after one warm-up step), ms_<pass> per
 // step, and the process's peak resident memory after the case.
@@ -15,6 +18,8 @@
 //   bench_mpm [--threads N] [--steps S] [--repeats R] [--only SUBSTRING]
 #include <sys/resource.h>
 
+#include <algorithm>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -26,6 +31,7 @@
 #include "bench/bench_common.h"
 #include "core/material_table.h"
 #include "core/profile.h"
+#include "mpm/svd3.h"
 #include "mpm/world.h"
 
 using namespace physketch;
@@ -105,6 +111,37 @@ void runCase(const Case& c, int threads, int steps, int repeats) {
   row("mpm", c.name, p.size(), threads, "peak_rss", peakRssMiB(), "MiB");
 }
 
+void runSvd(int repeats) {
+  const std::size_t n = 131072;
+  std::vector<Eigen::Matrix3f> F(n);
+  std::uint32_t seed = 12345;
+  const auto noise = [&] {  // a fixed LCG: the same matrices on every run
+    seed = seed * 1664525u + 1013904223u;
+    return 0.05f * (float(seed >> 8) / float(1u << 24) * 2.0f - 1.0f);
+  };
+  for (auto& f : F) f = Eigen::Matrix3f::Identity() + Eigen::Matrix3f::NullaryExpr([&](Eigen::Index, Eigen::Index) {
+                          return noise();
+                        });
+  std::vector<const Eigen::Matrix3f*> ptr(n);
+  for (std::size_t k = 0; k < n; ++k) ptr[k] = &F[k];
+  std::vector<mpm::Svd3<float>> out(n);
+  std::vector<double> one, many;
+  float sink = 0.0f;
+  for (int r = 0; r < repeats; ++r) {
+    double t0 = nowSeconds();
+    for (std::size_t k = 0; k < n; ++k) out[k] = mpm::svd3<float>(F[k]);
+    one.push_back(1e9 * (nowSeconds() - t0) / double(n));
+    sink += out[n / 2].sigma(0);
+    t0 = nowSeconds();
+    mpm::svd3Many(ptr.data(), n, out.data());
+    many.push_back(1e9 * (nowSeconds() - t0) / double(n));
+    sink += out[n / 2].sigma(0);
+  }
+  if (!(sink > 0.0f)) std::fprintf(stderr, "bench_mpm svd3: unexpected result\n");
+  row("mpm", "svd3", n, 1, "ns_per_svd_one_at_a_time", median(one), "ns");
+  row("mpm", "svd3", n, 1, "ns_per_svd_many", median(many), "ns");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -136,5 +173,6 @@ int main(int argc, char** argv) {
   };
   for (const Case& c : cases)
     if (only.empty() || std::string(c.name).find(only) != std::string::npos) runCase(c, threads, steps, repeats);
+  if (only.empty() || std::string("svd3").find(only) != std::string::npos) runSvd(std::max(repeats, 5));
   return 0;
 }

@@ -705,35 +705,52 @@ void MpmWorld::plasticity() {
     svdU_.resize(parts_.size());
     svdS_.resize(parts_.size());
   }
+  // The trial F's decompositions are taken a batch at a time (svd3Many: four lanes at once),
+  // then each particle's return map.
+  const auto finish = [&](std::size_t i, const Svd3<float>& d) {
+    const MatModel& m = models_[std::size_t(parts_.material[i])];
+    Eigen::Vector3f s;
+    if (m.kind == MaterialKind::kSand) {
+      float alpha = m.alpha;
+      if (m.hardeningDeg > 0.0f) {
+        const float deg = std::min(80.0f, m.frictionDeg + m.hardeningDeg * plastic_[i]);
+        alpha = float(druckerPragerAlpha(double(deg) * kPi / 180.0));
+      }
+      float dq = 0.0f;
+      s = druckerPragerReturn<float>(d.sigma, m.mu, m.lambda, alpha, m.shift, dq);
+      plastic_[i] += dq;
+    } else if (m.kind == MaterialKind::kPlasticine) {
+      s = vonMisesReturn<float>(d.sigma, m.mu, m.yield);
+    } else {
+      s = snowClamp<float>(d.sigma, m.thetaC, m.thetaS, m.xi, plastic_[i]);
+    }
+    F_[i] = d.U * s.asDiagonal() * d.V.transpose();
+    if (m.kind == MaterialKind::kSnow) {
+      svdU_[i] = d.U * d.V.transpose();
+    } else {
+      svdU_[i] = d.U;
+      svdS_[i] = s;
+    }
+  };
   forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
+    constexpr std::size_t kBatch = 64;
+    std::size_t idx[kBatch];
+    const Eigen::Matrix3f* trial[kBatch];
+    Svd3<float> d[kBatch];
+    std::size_t nb = 0;
+    const auto flush = [&] {
+      svd3Many(trial, nb, d, avx2_);
+      for (std::size_t k = 0; k < nb; ++k) finish(idx[k], d[k]);
+      nb = 0;
+    };
     for (std::size_t o = lo; o < hi; ++o) {
       const auto i = std::size_t(order_[o]);
-      const MatModel& m = models_[std::size_t(parts_.material[i])];
-      if (!m.plastic) continue;
-      const Svd3<float> d = svd3<float>(F_[i]);
-      Eigen::Vector3f s;
-      if (m.kind == MaterialKind::kSand) {
-        float alpha = m.alpha;
-        if (m.hardeningDeg > 0.0f) {
-          const float deg = std::min(80.0f, m.frictionDeg + m.hardeningDeg * plastic_[i]);
-          alpha = float(druckerPragerAlpha(double(deg) * kPi / 180.0));
-        }
-        float dq = 0.0f;
-        s = druckerPragerReturn<float>(d.sigma, m.mu, m.lambda, alpha, m.shift, dq);
-        plastic_[i] += dq;
-      } else if (m.kind == MaterialKind::kPlasticine) {
-        s = vonMisesReturn<float>(d.sigma, m.mu, m.yield);
-      } else {
-        s = snowClamp<float>(d.sigma, m.thetaC, m.thetaS, m.xi, plastic_[i]);
-      }
-      F_[i] = d.U * s.asDiagonal() * d.V.transpose();
-      if (m.kind == MaterialKind::kSnow) {
-        svdU_[i] = d.U * d.V.transpose();
-      } else {
-        svdU_[i] = d.U;
-        svdS_[i] = s;
-      }
+      if (!models_[std::size_t(parts_.material[i])].plastic) continue;
+      idx[nb] = i;
+      trial[nb] = &F_[i];
+      if (++nb == kBatch) flush();
     }
+    flush();
   });
   svdCached_ = svdCacheOn_;
 }

@@ -93,8 +93,9 @@ class MpmWorld final : public Solver {
   const Profile& profile() const override { return profile_; }
   const GuardRecord& guard() const override { return guard_; }
   void setValidate(bool on) override { validate_ = on; }
-  // P2G's and G2P's node loops in AVX2 where the CPU has it (the default), else SSE; both give
-  // bit-identical results. False forces SSE (tests compare the two).
+  // P2G's and G2P's node loops and the return maps' SVDs (svd3Many) in AVX2 where the CPU has
+  // it (the default), else SSE; both give bit-identical results. False forces SSE (tests
+  // compare the two).
   void setAvx2(bool on) { avx2_ = on && avx2Supported(); }
   // P2G computes a fluid's stress in its own loop (the default) or through kirchhoff(), as every
   // other material's: the same bits either way (a test holds them to it).

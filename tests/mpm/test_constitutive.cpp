@@ -5,13 +5,17 @@
 
 #include <cmath>
 #include <algorithm>
+#include <cstdint>
+#include <cstring>
 #include <random>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
 
 #include "mpm/constitutive.h"
 #include "mpm/plasticity.h"
+#include "mpm/svd3.h"
 
 using namespace physketch::mpm;
 using M3 = Eigen::Matrix3d;
@@ -263,6 +267,52 @@ TEST(MpmSvd3, MatchesEigensJacobiSvdOnHardMatricesInDouble) {
 
 TEST(MpmSvd3, MatchesEigensJacobiSvdOnHardMatricesInFloat) {
   for (const M3& A : hardMatrices()) expectSvd<float>(A, 2e-6);
+}
+
+// svd3Many (the return maps' batches, four matrices at a time in vector lanes) must give each
+// matrix exactly the bits svd3<float> gives it alone (the oracle, itself held to Eigen's SVD
+// above), whatever its batch-mates, its lane and the batch's length: the hard matrices in
+// float, random ones, near-diagonal ones (svd3Many's shortcut) and NaN, shuffled, in batches
+// of every length from 1 to 9, on the AVX2 path (where the CPU has it) and the SSE2 one.
+TEST(MpmSvd3, ManyAtOnceGivesEachMatrixTheBitsItGetsAlone) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<Eigen::Matrix3f> As;
+  for (const M3& A : hardMatrices()) As.push_back(A.cast<float>());
+  for (int k = 0; k < 200; ++k) {
+    As.push_back(Eigen::Matrix3f::NullaryExpr([&](Eigen::Index, Eigen::Index) { return u(rng); }));
+    As.push_back(Eigen::Matrix3f::Identity() + 1e-9f * Eigen::Matrix3f::NullaryExpr([&](Eigen::Index, Eigen::Index) {
+                   return u(rng);
+                 }));
+  }
+  As.push_back(Eigen::Matrix3f::Constant(std::nanf("")));
+  std::shuffle(As.begin(), As.end(), rng);
+  const auto bits = [](const Svd3<float>& d) {
+    std::vector<float> b(d.U.data(), d.U.data() + 9);
+    b.insert(b.end(), d.V.data(), d.V.data() + 9);
+    b.insert(b.end(), d.sigma.data(), d.sigma.data() + 3);
+    std::vector<std::uint32_t> w(b.size());
+    std::memcpy(w.data(), b.data(), b.size() * sizeof(float));
+    return w;
+  };
+  int swept = 0;
+  for (bool avx2 : {true, false}) {
+    for (std::size_t len = 1; len <= 9; ++len) {
+      for (std::size_t first = 0; first < As.size(); first += len) {
+        const std::size_t n = std::min(len, As.size() - first);
+        std::vector<const Eigen::Matrix3f*> ptr;
+        for (std::size_t k = 0; k < n; ++k) ptr.push_back(&As[first + k]);
+        std::vector<Svd3<float>> out(n);
+        svd3Many(ptr.data(), n, out.data(), avx2);
+        for (std::size_t k = 0; k < n; ++k) {
+          const Svd3<float> alone = svd3<float>(As[first + k]);
+          ASSERT_EQ(bits(out[k]), bits(alone)) << "batch of " << len << ", avx2 " << avx2 << ":\n" << As[first + k];
+          if (!alone.U.isIdentity(0.0f)) ++swept;
+        }
+      }
+    }
+  }
+  EXPECT_GT(swept, 1000);  // most went through the lanes, not the near-diagonal shortcut
 }
 
 // polarFrom (P2G's fixed-corotated rotation by Newton's method from the substep before's):
