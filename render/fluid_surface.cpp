@@ -57,6 +57,10 @@ struct Gathered {
   double fullness = 0.0;
 };
 
+// Count(lo, hi, out) writes the counts of the nodes of the box [lo, hi] into out, z fastest
+// (at most 9^3 of them: reach <= 4).
+constexpr int kMaxGatherBox = 9 * 9 * 9;
+
 template <class Count>
 Gathered gather(const Vec3& X, double reach, const Count& count) {
   Gathered g;
@@ -64,19 +68,42 @@ Gathered gather(const Vec3& X, double reach, const Count& count) {
   Mat3 second = Mat3::Zero();
   double kernelSum = 0.0;
   const Vec3i lo = (X.array() - reach).ceil().cast<int>(), hi = (X.array() + reach).floor().cast<int>();
+  float counts[kMaxGatherBox];
+  count(lo, hi, counts);
+  // Only the nodes of each row within the ball are visited: the row's z range from its
+  // squared distance (widened by a node each side; a squared distance clearly beyond the ball,
+  // by a margin far above rounding, is skipped before the root and the division, and the test
+  // r >= 1 decides at the ends). The nodes, their order and their operations are those of the
+  // whole box: outside the ball nothing is added.
+  const double beyond = reach * reach * (1.0 + 1e-9);
+  const int ny = hi.y() - lo.y() + 1, nz = hi.z() - lo.z() + 1;
   for (int a = lo.x(); a <= hi.x(); ++a)
-    for (int b = lo.y(); b <= hi.y(); ++b)
-      for (int c = lo.z(); c <= hi.z(); ++c) {
+    for (int b = lo.y(); b <= hi.y(); ++b) {
+      const double ex = double(a) - X.x(), ey = double(b) - X.y(), left = beyond - (ex * ex + ey * ey);
+      if (left < 0.0) continue;
+      const double half = std::sqrt(left);
+      const int c0 = std::max(lo.z(), int(std::floor(X.z() - half)) - 1);
+      const int c1 = std::min(hi.z(), int(std::ceil(X.z() + half)) + 1);
+      const float* row = counts + (std::ptrdiff_t(a - lo.x()) * ny + (b - lo.y())) * nz - lo.z();
+      for (int c = c0; c <= c1; ++c) {
         const Vec3 d = Vec3(a, b, c) - X;
+        if ((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z() > beyond) continue;
         const double r = d.norm() / reach;
         if (r >= 1.0) continue;
         const double k = 1.0 - r * r * r;
-        const double wt = count(Vec3i(a, b, c)) * k;
+        // An empty node's terms are +-0, which change no sum (they start at +0 and never
+        // become -0): added anyway, without a branch.
+        const double wt = double(row[c]) * k;
         kernelSum += k;
         g.weightSum += wt;
         sum += wt * d;
-        second += wt * d * d.transpose();
+        // The lower triangle of (wt d) d^T: all the eigensolver below reads.
+        const Vec3 wd = wt * d;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j <= i; ++j) second(i, j) += wd(i) * d(j);
       }
+    }
+  second = second.selfadjointView<Eigen::Lower>();
   if (g.weightSum > 0.0) {
     g.meanOffset = sum / g.weightSum;
     // About the weighted mean, as Yu & Turk take it: about X a half-empty neighbourhood would
@@ -169,7 +196,9 @@ FluidKernels fluidKernels(const std::vector<Vec3>& positions, double spacing, co
 
   // The covariance a particle deep inside sees (every cell holding one particle), on a node:
   // the scale the singular values are measured against.
-  const Gathered inside = gather(Vec3(8.0, 8.0, 8.0), options.reach, [](const Vec3i&) { return 1.0; });
+  const Gathered inside = gather(Vec3(8.0, 8.0, 8.0), options.reach, [](const Vec3i& a, const Vec3i& b, float* out) {
+    std::fill_n(out, (b - a + Vec3i::Ones()).prod(), 1.0f);
+  });
   const double sigmaInside = inside.covariance(0, 0);
 
   // 3. Each particle's kernel from its own neighbourhood: independent, so in parallel; the
@@ -178,8 +207,24 @@ FluidKernels fluidKernels(const std::vector<Vec3>& positions, double spacing, co
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const tbb::blocked_range<std::size_t>& range) {
     openvdb::FloatGrid::ConstAccessor countAcc = count->getConstAccessor();
     openvdb::BoolGrid::ConstAccessor deepAcc = deep->getConstAccessor();
-    auto countAt = [&countAcc](const Vec3i& node) -> double {
-      return countAcc.getValue(openvdb::Coord(node.x(), node.y(), node.z()));
+    // The box's counts a run along z at a time, from each leaf's buffer (the accessor's
+    // getValue per node cost more than the gather's arithmetic).
+    auto countAt = [&countAcc](const Vec3i& a, const Vec3i& b, float* out) {
+      using Leaf = openvdb::FloatGrid::TreeType::LeafNodeType;
+      for (int x = a.x(); x <= b.x(); ++x)
+        for (int y = a.y(); y <= b.y(); ++y)
+          for (int z = a.z(); z <= b.z();) {
+            const openvdb::Coord ijk(x, y, z);
+            const int end = std::min(b.z(), (z & ~int(Leaf::DIM - 1)) + int(Leaf::DIM) - 1);  // this leaf's last z
+            if (const Leaf* leaf = countAcc.probeConstLeaf(ijk)) {
+              const float* v = leaf->buffer().data() + Leaf::coordToOffset(ijk);
+              for (int m = 0; m <= end - z; ++m) *out++ = v[m];
+            } else {
+              const float v = countAcc.getValue(ijk);  // a tile or the background
+              for (int m = 0; m <= end - z; ++m) *out++ = v;
+            }
+            z = end + 1;
+          }
     };
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Vec3 X = cellUnits(positions[i]);

@@ -380,6 +380,7 @@ TriangleMesh meshKernelField(const FluidKernels& kernels, double voxelSize, doub
     // reversal expects.
     openvdb::FloatGrid::Ptr part = openvdb::FloatGrid::create(0.0f);
     openvdb::FloatGrid::Accessor acc = part->getAccessor();
+    using Leaf = openvdb::FloatGrid::TreeType::LeafNodeType;
     for (const auto& o : order) {
       const std::size_t i = static_cast<std::size_t>(o[3]);
       const Box& b = boxes[i];
@@ -389,15 +390,29 @@ TriangleMesh meshKernelField(const FluidKernels& kernels, double voxelSize, doub
       const double w = kernels.weight[i];
       const int za = std::max(b.lo.z(), z0), zb = std::min(b.hi.z(), z1);
       const Vec3 step = M.col(2) * voxelSize;
+      const double sx = step.x(), sy = step.y(), sz = step.z();
       for (int x = b.lo.x(); x <= b.hi.x(); ++x)
         for (int y = b.lo.y(); y <= b.hi.y(); ++y) {
-          Vec3 u = M * (voxelSize * Vec3(x, y, za) - c);
-          for (int z = za; z <= zb; ++z, u += step) {
-            const double r2 = u.squaredNorm();
+          const Vec3 u0 = M * (voxelSize * Vec3(x, y, za) - c);
+          // u in three scalars (as a Vec3 it lived on the stack), the same operations.
+          double ux = u0.x(), uy = u0.y(), uz = u0.z();
+          // The run's voxels straight in their leaf's buffer (what acc.setValue does, without
+          // finding the leaf again for every voxel); a leaf is made only where a voxel is hit.
+          Leaf* leaf = nullptr;
+          int leafZ = 0;
+          for (int z = za; z <= zb; ++z, ux += sx, uy += sy, uz += sz) {
+            const double r2 = (ux * ux + uy * uy) + uz * uz;
             if (r2 >= 1.0) continue;
             const double t = 1.0 - r2;
             const openvdb::Coord ijk(x, y, z);
-            acc.setValue(ijk, acc.getValue(ijk) + static_cast<float>(w * t * t * t));
+            if (!leaf || (z & ~int(Leaf::DIM - 1)) != leafZ) {
+              leaf = acc.touchLeaf(ijk);
+              leafZ = z & ~int(Leaf::DIM - 1);
+            }
+            const openvdb::Index offset = Leaf::coordToOffset(ijk);
+            float* value = leaf->buffer().data() + offset;
+            *value = *value + static_cast<float>(w * t * t * t);
+            leaf->setValueOn(offset);
           }
         }
     }
