@@ -269,11 +269,12 @@ TEST(MpmSvd3, MatchesEigensJacobiSvdOnHardMatricesInFloat) {
   for (const M3& A : hardMatrices()) expectSvd<float>(A, 2e-6);
 }
 
-// svd3Many (the return maps' batches, four matrices at a time in vector lanes) must give each
-// matrix exactly the bits svd3<float> gives it alone (the oracle, itself held to Eigen's SVD
-// above), whatever its batch-mates, its lane and the batch's length: the hard matrices in
-// float, random ones, near-diagonal ones (svd3Many's shortcut) and NaN, shuffled, in batches
-// of every length from 1 to 9, on the AVX2 path (where the CPU has it) and the SSE2 one.
+// svd3Many (the return maps' batches, sixteen matrices at a time in vector lanes) must give
+// each matrix exactly the bits svd3<float> gives it alone (the oracle, itself held to Eigen's
+// SVD above), whatever its batch-mates, its lane and the batch's length: the hard matrices in
+// float, random ones, near-diagonal ones (svd3Many's shortcut) and NaN, shuffled, in calls of
+// every length from 1 to 9 and of 15, 16, 17 and 40 (every lane filled), on the AVX2 path
+// (where the CPU has it) and the SSE2 one.
 TEST(MpmSvd3, ManyAtOnceGivesEachMatrixTheBitsItGetsAlone) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
@@ -297,7 +298,7 @@ TEST(MpmSvd3, ManyAtOnceGivesEachMatrixTheBitsItGetsAlone) {
   };
   int swept = 0;
   for (bool avx2 : {true, false}) {
-    for (std::size_t len = 1; len <= 9; ++len) {
+    for (std::size_t len : {1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 16, 17, 40}) {
       for (std::size_t first = 0; first < As.size(); first += len) {
         const std::size_t n = std::min(len, As.size() - first);
         std::vector<const Eigen::Matrix3f*> ptr;
