@@ -250,6 +250,9 @@ Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) {
 
 void MpmWorld::p2g(float h) {
   sortByBlock();
+  // A step's first P2G: its plastic particles' decompositions in batches (kirchhoff() then reads
+  // them as it reads the return map's on later substeps).
+  if (svdCacheOn_ && !svdCached_ && work_[std::size_t(MpmPass::kPlasticity)]) decomposePlastic();
   forEach(activeNodeBlocks_.size(), [&](std::size_t k) {
     const std::size_t first = std::size_t(activeNodeBlocks_[k]) * 64;
     std::fill_n(grid_.begin() + std::ptrdiff_t(first), 64, Node{0.0f, 0.0f, 0.0f, 0.0f});
@@ -700,12 +703,58 @@ void MpmWorld::pushOutOfColliders(std::size_t i, double h) {
   }
 }
 
+// fn(i, d) for every plastic particle i of order_, d = svd3(F_i) bit for bit, the
+// decompositions taken a batch of 64 at a time by svd3Many (sixteen in vector lanes at once);
+// in parallel ranges, each particle once.
+template <class Fn>
+void MpmWorld::forPlasticSvds(const Fn& fn) {
+  forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
+    constexpr std::size_t kBatch = 64;
+    std::size_t idx[kBatch];
+    const Eigen::Matrix3f* trial[kBatch] = {};
+    Svd3<float> d[kBatch];
+    std::size_t nb = 0;
+    const auto flush = [&] {
+      svd3Many(trial, nb, d, avx2_);
+      for (std::size_t k = 0; k < nb; ++k) fn(idx[k], d[k]);
+      nb = 0;
+    };
+    for (std::size_t o = lo; o < hi; ++o) {
+      const auto i = std::size_t(order_[o]);
+      if (!models_[std::size_t(parts_.material[i])].plastic) continue;
+      idx[nb] = i;
+      trial[nb] = &F_[i];
+      if (++nb == kBatch) flush();
+    }
+    flush();
+  });
+}
+
+// The decompositions a step's first P2G needs for its plastic particles' stresses, taken as
+// the return maps take theirs (svd3Many: the same bits as svd3 one at a time): U and sigma for
+// the Hencky models, R = U V^T for snow, in svdU_ and svdS_ as the return map leaves them.
+void MpmWorld::decomposePlastic() {
+  if (svdU_.size() != parts_.size()) {
+    svdU_.resize(parts_.size());
+    svdS_.resize(parts_.size());
+  }
+  forPlasticSvds([&](std::size_t i, const Svd3<float>& d) {
+    if (models_[std::size_t(parts_.material[i])].kind == MaterialKind::kSnow) {
+      svdU_[i] = d.U * d.V.transpose();
+    } else {
+      svdU_[i] = d.U;
+      svdS_[i] = d.sigma;
+    }
+  });
+  svdCached_ = true;
+}
+
 void MpmWorld::plasticity() {
   if (svdU_.size() != parts_.size()) {
     svdU_.resize(parts_.size());
     svdS_.resize(parts_.size());
   }
-  // The trial F's decompositions are taken a batch at a time (svd3Many: four lanes at once),
+  // The trial F's decompositions are taken a batch at a time (forPlasticSvds: svd3Many),
   // then each particle's return map.
   const auto finish = [&](std::size_t i, const Svd3<float>& d) {
     const MatModel& m = models_[std::size_t(parts_.material[i])];
@@ -732,26 +781,7 @@ void MpmWorld::plasticity() {
       svdS_[i] = s;
     }
   };
-  forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
-    constexpr std::size_t kBatch = 64;
-    std::size_t idx[kBatch];
-    const Eigen::Matrix3f* trial[kBatch];
-    Svd3<float> d[kBatch];
-    std::size_t nb = 0;
-    const auto flush = [&] {
-      svd3Many(trial, nb, d, avx2_);
-      for (std::size_t k = 0; k < nb; ++k) finish(idx[k], d[k]);
-      nb = 0;
-    };
-    for (std::size_t o = lo; o < hi; ++o) {
-      const auto i = std::size_t(order_[o]);
-      if (!models_[std::size_t(parts_.material[i])].plastic) continue;
-      idx[nb] = i;
-      trial[nb] = &F_[i];
-      if (++nb == kBatch) flush();
-    }
-    flush();
-  });
+  forPlasticSvds(finish);
   svdCached_ = svdCacheOn_;
 }
 

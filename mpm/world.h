@@ -229,6 +229,9 @@ class MpmWorld final : public Solver {
   void g2p(float h, int substep, bool summarize);
   void projection();
   void plasticity();
+  template <class Fn>
+  void forPlasticSvds(const Fn& fn);
+  void decomposePlastic();
   Eigen::Matrix3f kirchhoff(std::size_t i);
   std::size_t passBytes(MpmPass pass) const;
 
@@ -240,10 +243,11 @@ class MpmWorld final : public Solver {
   std::vector<Eigen::Matrix3f> C_, F_;
   // Plastic materials: the SVD the return map made of each particle's F in the last substep
   // (F = U diag(s) V^T is what it wrote), which the next substep's P2G stress needs again: U and
-  // s for the Hencky models (sand, plasticine), R = U V^T in svdU_ for snow. Valid from a
-  // step's first plasticity pass to the step's end (svdCached_): a step's first P2G takes its
-  // own SVD, so a step depends on its start state alone (the guard's replays repeat it bit for
-  // bit). Sized to the particles when a plastic material exists.
+  // s for the Hencky models (sand, plasticine), R = U V^T in svdU_ for snow. Valid within a
+  // step (svdCached_): a step's first P2G fills them from the step's start state
+  // (decomposePlastic, the same bits as an SVD of its own), so a step depends on its start state
+  // alone (the guard's replays repeat it bit for bit). Sized to the particles when a plastic
+  // material exists.
   std::vector<Eigen::Matrix3f> svdU_;
   std::vector<Eigen::Vector3f> svdS_;
   bool svdCached_ = false;
