@@ -84,7 +84,7 @@ Gathered gather(const Vec3& X, double reach, const Count& count) {
       const double half = std::sqrt(left);
       const int c0 = std::max(lo.z(), int(std::floor(X.z() - half)) - 1);
       const int c1 = std::min(hi.z(), int(std::ceil(X.z() + half)) + 1);
-      const float* row = counts + (std::ptrdiff_t(a - lo.x()) * ny + (b - lo.y())) * nz - lo.z();
+      const float* row = counts + (std::ptrdiff_t(a - lo.x()) * ny + (b - lo.y())) * nz;  // node (a, b, lo.z)
       for (int c = c0; c <= c1; ++c) {
         const Vec3 d = Vec3(a, b, c) - X;
         if ((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z() > beyond) continue;
@@ -93,7 +93,7 @@ Gathered gather(const Vec3& X, double reach, const Count& count) {
         const double k = 1.0 - r * r * r;
         // An empty node's terms are +-0, which change no sum (they start at +0 and never
         // become -0): added anyway, without a branch.
-        const double wt = double(row[c]) * k;
+        const double wt = double(row[c - lo.z()]) * k;
         kernelSum += k;
         g.weightSum += wt;
         sum += wt * d;
