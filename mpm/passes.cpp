@@ -703,7 +703,7 @@ void MpmWorld::pushOutOfColliders(std::size_t i, double h) {
   }
 }
 
-// fn(i, d) for every plastic particle i of order_, d = svd3(F_i) bit for bit, the
+// fn(i, d) for every plastic particle i of order_, d = svd3(F_i) bit for bit (a finite F_i), the
 // decompositions taken a batch of 64 at a time by svd3Many (sixteen in vector lanes at once);
 // in parallel ranges, each particle once.
 template <class Fn>

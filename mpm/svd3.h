@@ -218,7 +218,8 @@ Svd3<S> svd3(const Eigen::Matrix<S, 3, 3>& A) {
   return detail::svd3Impl<S>(A, tol);
 }
 
-// The SVDs of n float matrices, out[k] bit for bit svd3<float>(*A[k]): those that need Jacobi
+// The SVDs of n float matrices, out[k] bit for bit svd3<float>(*A[k]) (for a matrix with an
+// infinite or NaN entry: NaNs in the same places, their sign bits may differ): those that need Jacobi
 // sweeps are decomposed sixteen at a time, one per lane of AVX2 registers where the CPU has them
 // (avx2 false: SSE2's, for tests; the same bits either way). For a pass over many particles
 // (the return maps) this is about 5x faster than svd3 one at a time (docs/mpm.md).

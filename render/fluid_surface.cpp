@@ -69,6 +69,8 @@ Gathered gather(const Vec3& X, double reach, const Count& count) {
   double kernelSum = 0.0;
   const Vec3i lo = (X.array() - reach).ceil().cast<int>(), hi = (X.array() + reach).floor().cast<int>();
   float counts[kMaxGatherBox];
+  if ((hi - lo + Vec3i::Ones()).prod() > kMaxGatherBox)  // reach <= 4 (checkOptions) keeps it within
+    throw RuntimeError("meshFluid: the gather box exceeds 9^3 nodes (reach above 4)");
   count(lo, hi, counts);
   // Only the nodes of each row within the ball are visited: the row's z range from its
   // squared distance (widened by a node each side; a squared distance clearly beyond the ball,

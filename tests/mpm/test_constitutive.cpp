@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -272,7 +273,8 @@ TEST(MpmSvd3, MatchesEigensJacobiSvdOnHardMatricesInFloat) {
 // svd3Many (the return maps' batches, sixteen matrices at a time in vector lanes) must give
 // each matrix exactly the bits svd3<float> gives it alone (the oracle, itself held to Eigen's
 // SVD above), whatever its batch-mates, its lane and the batch's length: the hard matrices in
-// float, random ones, near-diagonal ones (svd3Many's shortcut) and NaN, shuffled, in calls of
+// float, random ones, near-diagonal ones (svd3Many's shortcut), all-NaN ones and ones with an
+// infinite or NaN entry (there only where the NaNs are, not their sign bits), shuffled, in calls of
 // every length from 1 to 9 and of 15, 16, 17 and 40 (every lane filled), on the AVX2 path
 // (where the CPU has it) and the SSE2 one.
 TEST(MpmSvd3, ManyAtOnceGivesEachMatrixTheBitsItGetsAlone) {
@@ -287,13 +289,24 @@ TEST(MpmSvd3, ManyAtOnceGivesEachMatrixTheBitsItGetsAlone) {
                  }));
   }
   As.push_back(Eigen::Matrix3f::Constant(std::nanf("")));
+  for (int k = 0; k < 9; ++k) {  // one entry infinite or NaN (of either sign)
+    Eigen::Matrix3f A = Eigen::Matrix3f::Identity() + 0.05f * Eigen::Matrix3f::NullaryExpr([&](Eigen::Index, Eigen::Index) {
+                          return u(rng);
+                        });
+    A(k / 3, k % 3) = k % 3 == 0 ? std::numeric_limits<float>::infinity() : k % 3 == 1 ? -std::nanf("") : std::nanf("");
+    As.push_back(A);
+  }
   std::shuffle(As.begin(), As.end(), rng);
+  // Every bit of U, V and sigma; where a value is NaN only that it is (a NaN's sign bit follows
+  // the order the compiler gave an operation's operands, which differs between registers).
   const auto bits = [](const Svd3<float>& d) {
     std::vector<float> b(d.U.data(), d.U.data() + 9);
     b.insert(b.end(), d.V.data(), d.V.data() + 9);
     b.insert(b.end(), d.sigma.data(), d.sigma.data() + 3);
     std::vector<std::uint32_t> w(b.size());
     std::memcpy(w.data(), b.data(), b.size() * sizeof(float));
+    for (std::size_t k = 0; k < b.size(); ++k)
+      if (std::isnan(b[k])) w[k] = 0x7fc00000u;
     return w;
   };
   int swept = 0;
