@@ -401,18 +401,29 @@ TEST(MpmWorld, AViscousFluidResistsShearButNotRotation) {
 // steps of four boxes thrown at the floor (positions within 1e-4 m, 1 % of the spacing; a
 // wrong U, s or R in the cache moves them by centimetres), and not the same bits (so the
 // caches were used).
-TEST(MpmWorld, StressFromTheSubstepBeforesDecompositionsMatchesItsOwnSvd) {
-  const double h = 0.01;
-  ParticleArrays p;
-  std::vector<BodyRange> bodies;
+namespace {
+// Sand, snow and plasticine (and, with `elastic`, a jelly) at E = 5e4 Pa, one 10 x 8 x 10 box
+// of each thrown spinning at the floor from height y (the cache tests below).
+std::vector<Material> throwPlasticBoxes(ParticleArrays& p, std::vector<BodyRange>& bodies, double h, double y,
+                                        bool withElastic) {
   std::vector<Material> mats = {makeMaterial(MaterialKind::kSand, "grit"), makeMaterial(MaterialKind::kSnow, "snow"),
-                                makeMaterial(MaterialKind::kPlasticine, "clay"), elastic(5e4)};
+                                makeMaterial(MaterialKind::kPlasticine, "clay")};
+  if (withElastic) mats.push_back(elastic(5e4));
   for (auto& m : mats) m.elastic.youngs = 5e4;
   BodyInit thrown;
   thrown.velocity = Vec3(0.5, -2.0, 0.2);
   thrown.spin = Vec3(0, 3, 1);
-  for (int k = 0; k < 4; ++k)
-    addBox(p, bodies, Vec3(0.1 + 0.22 * k, 0.04, 0.3), 10, 8, 10, h, std::int16_t(k), thrown);
+  for (std::size_t k = 0; k < mats.size(); ++k)
+    addBox(p, bodies, Vec3(0.1 + 0.22 * double(k), y, 0.3), 10, 8, 10, h, std::int16_t(k), thrown);
+  return mats;
+}
+}  // namespace
+
+TEST(MpmWorld, StressFromTheSubstepBeforesDecompositionsMatchesItsOwnSvd) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  const std::vector<Material> mats = throwPlasticBoxes(p, bodies, h, 0.04, true);
   const auto run = [&](bool cache) {
     MpmWorld w(p, bodies, mats, unitDomain(h, 0));
     w.setSvdCache(cache);
@@ -443,14 +454,7 @@ TEST(MpmWorld, AStepsFirstDecompositionsAreTheBitsOfItsOwnSvd) {
   const double h = 0.01;
   ParticleArrays p;
   std::vector<BodyRange> bodies;
-  std::vector<Material> mats = {makeMaterial(MaterialKind::kSand, "grit"), makeMaterial(MaterialKind::kSnow, "snow"),
-                                makeMaterial(MaterialKind::kPlasticine, "clay")};
-  for (auto& m : mats) m.elastic.youngs = 5e4;
-  BodyInit thrown;
-  thrown.velocity = Vec3(0.5, -2.0, 0.2);
-  thrown.spin = Vec3(0, 3, 1);
-  for (int k = 0; k < 3; ++k)
-    addBox(p, bodies, Vec3(0.1 + 0.22 * k, 0.012, 0.3), 10, 8, 10, h, std::int16_t(k), thrown);
+  const std::vector<Material> mats = throwPlasticBoxes(p, bodies, h, 0.012, false);
   const auto run = [&](bool cache) {
     MpmWorld w(p, bodies, mats, unitDomain(h, 1, 1.0 / 2400.0));
     w.setSvdCache(cache);
