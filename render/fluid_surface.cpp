@@ -121,7 +121,9 @@ void checkOptions(double spacing, const FluidSurfaceOptions& o) {
   if (!(spacing > 0.0) || !std::isfinite(spacing)) fail("particle spacing must be finite and > 0 m");
   if (!(o.kernelRadius >= 1.0 && o.kernelRadius <= 4.0)) fail("kernelRadius must be in [1, 4] spacings");
   if (!(o.voxelFraction >= 0.1 && o.voxelFraction <= 1.0)) fail("voxelFraction must be in [0.1, 1]");
-  if (!(o.reach >= 1.0 && o.reach <= 4.0)) fail("reach must be in [1, 4] spacings");
+  // Below 1.5 spacings a full neighbourhood is the particle's node and its six face neighbours
+  // at small weights (at 1 exactly they weigh 0, the covariance vanishes and every kernel is NaN).
+  if (!(o.reach >= 1.5 && o.reach <= 4.0)) fail("reach must be in [1.5, 4] spacings");
   if (!(o.ka >= 0.0 && o.ka <= 10.0)) fail("ka must be in [0, 10]");
   if (!(o.lambda >= 0.0 && o.lambda <= 1.0)) fail("lambda must be in [0, 1]");
   if (!(o.sigmaMin > 0.0 && o.sigmaMin <= 1.0 && o.sigmaMax >= 1.0 && o.sigmaMax <= 10.0))

@@ -233,6 +233,18 @@ TEST(FluidSurface, BadInputIsAClearError) {
   FluidSurfaceOptions o;
   o.lambda = 1.5;
   EXPECT_THROW(meshFluid(p, kH, o), RuntimeError);
+  // A reach of one spacing weighs every neighbour node 0: a clear error, not NaN kernels; the
+  // smallest reach allowed meshes (a jittered slab: nodes are not all at one distance).
+  FluidSurfaceOptions near;
+  near.reach = 1.0;
+  try {
+    meshFluid(p, kH, near);
+    FAIL() << "reach 1 was accepted";
+  } catch (const RuntimeError& e) {
+    EXPECT_NE(std::string(e.what()).find("reach"), std::string::npos) << e.what();
+  }
+  near.reach = 1.5;
+  EXPECT_FALSE(meshFluid(jitteredSlab(6, 4, 6, 0.25, 2), kH, near).empty());
   EXPECT_TRUE(meshFluid({}, kH).empty());
 }
 
