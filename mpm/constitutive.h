@@ -104,13 +104,14 @@ Eigen::Matrix<S, 3, 3> neoHookeanKirchhoff(const Eigen::Matrix<S, 3, 3>& F, S mu
   return mu * (F * F.transpose() - I) + (lambda * std::log(J)) * I;
 }
 
-// StVK-Hencky Kirchhoff stress from F's SVD (singular values > 0).
+// StVK-Hencky Kirchhoff stress tau = U (2 mu eps + lambda tr(eps) I) U^T from F's left
+// singular vectors U and its Hencky strain eps = ln(sigma) (singular values > 0).
 template <class S>
-Eigen::Matrix<S, 3, 3> henckyKirchhoff(const Svd3<S>& d, S mu, S lambda) {
-  const Eigen::Matrix<S, 3, 1> eps = d.sigma.array().log().matrix();
+Eigen::Matrix<S, 3, 3> henckyKirchhoff(const Eigen::Matrix<S, 3, 3>& U, const Eigen::Matrix<S, 3, 1>& eps, S mu,
+                                       S lambda) {
   const S tr = eps.sum();
   const Eigen::Matrix<S, 3, 1> t = (S(2) * mu) * eps + Eigen::Matrix<S, 3, 1>::Constant(lambda * tr);
-  return d.U * t.asDiagonal() * d.U.transpose();
+  return U * t.asDiagonal() * U.transpose();
 }
 
 }  // namespace physketch::mpm

@@ -10,6 +10,7 @@
 
 #include "mpm/constitutive.h"
 #include "mpm/kernels.h"
+#include "mpm/logexp.h"
 #include "mpm/plasticity.h"
 #include "mpm/world.h"
 
@@ -222,11 +223,10 @@ Eigen::Matrix3f MpmWorld::kirchhoff(std::size_t i) {
     case MaterialKind::kFluid: return fluidKirchhoff<float>(fluidJ_[i], C_[i], m.bulk, m.gamma, m.viscosity);
     case MaterialKind::kSand:
     case MaterialKind::kPlasticine: {
-      if (!svdCached_) return henckyKirchhoff<float>(svd3<float>(F), m.mu, m.lambda);
-      Svd3<float> d;  // the return map's: V is not needed
-      d.U = svdU_[i];
-      d.sigma = svdS_[i];
-      return henckyKirchhoff<float>(d, m.mu, m.lambda);
+      if (svdCached_) return henckyKirchhoff<float>(svdU_[i], svdLnS_[i], m.mu, m.lambda);
+      const Svd3<float> d = svd3<float>(F);
+      const Eigen::Vector3f eps(logLane(d.sigma(0)), logLane(d.sigma(1)), logLane(d.sigma(2)));
+      return henckyKirchhoff<float>(d.U, eps, m.mu, m.lambda);
     }
     case MaterialKind::kSnow: {
       const float s = snowHardening(m.xi, plastic_[i]);
@@ -703,20 +703,20 @@ void MpmWorld::pushOutOfColliders(std::size_t i, double h) {
   }
 }
 
-// fn(i, d) for every plastic particle i of order_, d = svd3(F_i) bit for bit (a finite F_i), the
-// decompositions taken a batch of 64 at a time by svd3Many (sixteen in vector lanes at once);
-// in parallel ranges, each particle once.
+// fn(idx, d, n) for every plastic particle of order_, in batches of up to kPlasticBatch: particle
+// idx[k] with d[k] = svd3(F_idx[k]) bit for bit (a finite F), the decompositions taken by
+// svd3Many (sixteen in vector lanes at once); in parallel ranges, each particle once.
 template <class Fn>
 void MpmWorld::forPlasticSvds(const Fn& fn) {
   forRange(order_.size(), [&](std::size_t lo, std::size_t hi) {
-    constexpr std::size_t kBatch = 64;
-    std::size_t idx[kBatch];
-    const Eigen::Matrix3f* trial[kBatch] = {};
-    Svd3<float> d[kBatch];
+    std::size_t idx[kPlasticBatch];
+    const Eigen::Matrix3f* trial[kPlasticBatch] = {};
+    Svd3<float> d[kPlasticBatch];
     std::size_t nb = 0;
     const auto flush = [&] {
+      if (nb == 0) return;
       svd3Many(trial, nb, d, avx2_);
-      for (std::size_t k = 0; k < nb; ++k) fn(idx[k], d[k]);
+      fn(idx, d, nb);
       nb = 0;
     };
     for (std::size_t o = lo; o < hi; ++o) {
@@ -724,65 +724,100 @@ void MpmWorld::forPlasticSvds(const Fn& fn) {
       if (!models_[std::size_t(parts_.material[i])].plastic) continue;
       idx[nb] = i;
       trial[nb] = &F_[i];
-      if (++nb == kBatch) flush();
+      if (++nb == kPlasticBatch) flush();
     }
     flush();
   });
 }
 
+// The batches' arrays are filled to 3 nb before logMany and expMany read that far; GCC cannot
+// see that through the calls and warns of uninitialized reads (zeroing them cost 3 % of a
+// falling sand cube's plasticity pass).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+
 // The decompositions a step's first P2G needs for its plastic particles' stresses, taken as
-// the return maps take theirs (svd3Many: the same bits as svd3 one at a time): U and sigma for
-// the Hencky models, R = U V^T for snow, in svdU_ and svdS_ as the return map leaves them.
+// the return maps take theirs (svd3Many and logMany: the same bits as svd3 and logLane one at
+// a time): U and ln(sigma) for the Hencky models, R = U V^T for snow, in svdU_ and svdLnS_ as
+// the return map leaves them.
 void MpmWorld::decomposePlastic() {
   if (svdU_.size() != parts_.size()) {
     svdU_.resize(parts_.size());
-    svdS_.resize(parts_.size());
+    svdLnS_.resize(parts_.size());
   }
-  forPlasticSvds([&](std::size_t i, const Svd3<float>& d) {
-    if (models_[std::size_t(parts_.material[i])].kind == MaterialKind::kSnow) {
-      svdU_[i] = d.U * d.V.transpose();
-    } else {
-      svdU_[i] = d.U;
-      svdS_[i] = d.sigma;
+  forPlasticSvds([&](const std::size_t* idx, const Svd3<float>* d, std::size_t nb) {
+    float sigma[3 * kPlasticBatch], ln[3 * kPlasticBatch];
+    for (std::size_t k = 0; k < nb; ++k) std::copy_n(d[k].sigma.data(), 3, sigma + 3 * k);
+    logMany(sigma, ln, 3 * nb, avx2_);
+    for (std::size_t k = 0; k < nb; ++k) {
+      const std::size_t i = idx[k];
+      if (models_[std::size_t(parts_.material[i])].kind == MaterialKind::kSnow) {
+        svdU_[i] = d[k].U * d[k].V.transpose();
+      } else {
+        svdU_[i] = d[k].U;
+        svdLnS_[i] = Eigen::Vector3f(ln + 3 * k);
+      }
     }
   });
   svdCached_ = true;
 }
 
+// The return maps, a batch at a time: the trial F's decompositions (forPlasticSvds: svd3Many),
+// the Hencky models' strains ln(sigma) (logMany), each particle's map in strain space
+// (druckerPragerStrain, vonMisesStrain) or snow's clamp, and the projected strains'
+// exponentials (expMany): the batch's logs and exponentials in vector lanes, each value the bits
+// logLane and expLane give it alone. The next P2G's strain is the projected one itself (not
+// ln(exp(strain)), a rounding away).
 void MpmWorld::plasticity() {
   if (svdU_.size() != parts_.size()) {
     svdU_.resize(parts_.size());
-    svdS_.resize(parts_.size());
+    svdLnS_.resize(parts_.size());
   }
-  // The trial F's decompositions are taken a batch at a time (forPlasticSvds: svd3Many),
-  // then each particle's return map.
-  const auto finish = [&](std::size_t i, const Svd3<float>& d) {
-    const MatModel& m = models_[std::size_t(parts_.material[i])];
-    Eigen::Vector3f s;
-    if (m.kind == MaterialKind::kSand) {
-      float alpha = m.alpha;
-      if (m.hardeningDeg > 0.0f) {
-        const float deg = std::min(80.0f, m.frictionDeg + m.hardeningDeg * plastic_[i]);
-        alpha = float(druckerPragerAlpha(double(deg) * kPi / 180.0));
+  forPlasticSvds([&](const std::size_t* idx, const Svd3<float>* d, std::size_t nb) {
+    float sigma[3 * kPlasticBatch], lnS[3 * kPlasticBatch], lnOut[3 * kPlasticBatch], s[3 * kPlasticBatch];
+    bool projected[kPlasticBatch];
+    bool anyProjected = false;
+    for (std::size_t k = 0; k < nb; ++k) std::copy_n(d[k].sigma.data(), 3, sigma + 3 * k);
+    logMany(sigma, lnS, 3 * nb, avx2_);
+    for (std::size_t k = 0; k < nb; ++k) {
+      const std::size_t i = idx[k];
+      const MatModel& m = models_[std::size_t(parts_.material[i])];
+      const Eigen::Map<const Eigen::Vector3f> ln(lnS + 3 * k);
+      Eigen::Vector3f out = Eigen::Vector3f::Zero();  // exponentiated whatever is projected
+      projected[k] = false;
+      if (m.kind == MaterialKind::kSand) {
+        float alpha = m.alpha;
+        if (m.hardeningDeg > 0.0f) {
+          const float deg = std::min(80.0f, m.frictionDeg + m.hardeningDeg * plastic_[i]);
+          alpha = float(druckerPragerAlpha(double(deg) * kPi / 180.0));
+        }
+        float dq = 0.0f;
+        projected[k] = druckerPragerStrain<float>(ln, m.mu, m.lambda, alpha, m.shift, out, dq);
+        plastic_[i] += dq;
+      } else if (m.kind == MaterialKind::kPlasticine) {
+        projected[k] = vonMisesStrain<float>(ln, m.mu, m.yield, out);
       }
-      float dq = 0.0f;
-      s = druckerPragerReturn<float>(d.sigma, m.mu, m.lambda, alpha, m.shift, dq);
-      plastic_[i] += dq;
-    } else if (m.kind == MaterialKind::kPlasticine) {
-      s = vonMisesReturn<float>(d.sigma, m.mu, m.yield);
-    } else {
-      s = snowClamp<float>(d.sigma, m.thetaC, m.thetaS, m.xi, plastic_[i]);
+      std::copy_n(out.data(), 3, lnOut + 3 * k);
+      anyProjected = anyProjected || projected[k];
     }
-    F_[i] = d.U * s.asDiagonal() * d.V.transpose();
-    if (m.kind == MaterialKind::kSnow) {
-      svdU_[i] = d.U * d.V.transpose();
-    } else {
-      svdU_[i] = d.U;
-      svdS_[i] = s;
+    if (anyProjected) expMany(lnOut, s, 3 * nb, avx2_);  // at rest, often none
+    for (std::size_t k = 0; k < nb; ++k) {
+      const std::size_t i = idx[k];
+      const MatModel& m = models_[std::size_t(parts_.material[i])];
+      Eigen::Vector3f sk;
+      if (m.kind == MaterialKind::kSnow) {
+        sk = snowClamp<float>(d[k].sigma, m.thetaC, m.thetaS, m.xi, plastic_[i]);
+        svdU_[i] = d[k].U * d[k].V.transpose();
+      } else {
+        sk = projected[k] ? Eigen::Vector3f(s + 3 * k) : d[k].sigma;
+        svdU_[i] = d[k].U;
+        svdLnS_[i] = Eigen::Vector3f(projected[k] ? lnOut + 3 * k : lnS + 3 * k);
+      }
+      F_[i] = d[k].U * sk.asDiagonal() * d[k].V.transpose();
     }
-  };
-  forPlasticSvds(finish);
+  });
   svdCached_ = svdCacheOn_;
 }
+#pragma GCC diagnostic pop
 
 }  // namespace physketch::mpm

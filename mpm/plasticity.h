@@ -33,40 +33,61 @@ inline double cohesionStrain(double cohesion, double mu, double lambda) { return
 //  - else: eps' = eps - delta_gamma eps_hat / |eps_hat|, plastic strain delta_gamma.
 // `shift` is cohesionStrain(): the return is done on eps - shift and shift added back.
 // `plastic` receives the plastic strain increment delta_q (for hardening).
+//
+// The map in strain space: given lnSigma = ln(sigma), false where sigma stays (plastic 0);
+// else true with lnOut the projected ln(sigma') (the batched pass, MpmWorld::plasticity, takes
+// the logs and exponentials of many particles at once around it).
 template <class S>
-Eigen::Matrix<S, 3, 1> druckerPragerReturn(const Eigen::Matrix<S, 3, 1>& sigma, S mu, S lambda, S alpha, S shift,
-                                           S& plastic) {
+bool druckerPragerStrain(const Eigen::Matrix<S, 3, 1>& lnSigma, S mu, S lambda, S alpha, S shift,
+                         Eigen::Matrix<S, 3, 1>& lnOut, S& plastic) {
   using V = Eigen::Matrix<S, 3, 1>;
-  const V eps = sigma.array().log().matrix() - V::Constant(shift);
+  const V eps = lnSigma - V::Constant(shift);
   const S tr = eps.sum();
   const V dev = eps - V::Constant(tr / S(3));
   const S devNorm = dev.norm();
   const S dgamma = devNorm + (S(3) * lambda + S(2) * mu) / (S(2) * mu) * tr * alpha;
   if (dgamma <= S(0)) {  // Case I first: pure compression (eps_hat = 0, tr < 0) stays elastic
     plastic = S(0);
-    return sigma;
+    return false;
   }
   if (tr > S(0) || devNorm == S(0)) {
     plastic = eps.norm();
-    return V::Constant(std::exp(shift));
+    lnOut = V::Constant(shift);
+    return true;
   }
   plastic = dgamma;
-  const V h = eps - (dgamma / devNorm) * dev;
-  return (h.array() + shift).exp().matrix();
+  lnOut = (eps - (dgamma / devNorm) * dev).array() + shift;
+  return true;
+}
+
+template <class S>
+Eigen::Matrix<S, 3, 1> druckerPragerReturn(const Eigen::Matrix<S, 3, 1>& sigma, S mu, S lambda, S alpha, S shift,
+                                           S& plastic) {
+  Eigen::Matrix<S, 3, 1> lnOut;
+  if (!druckerPragerStrain<S>(sigma.array().log().matrix(), mu, lambda, alpha, shift, lnOut, plastic)) return sigma;
+  return lnOut.array().exp().matrix();
 }
 
 // von Mises return map in Hencky strain (VR-Doh supplement Eq. 11-12; Mises' criterion on
 // the deviatoric Kirchhoff stress 2 mu eps_hat of StVK-Hencky): delta_gamma = |eps_hat| -
 // tau_Y / (2 mu); when positive, eps' = eps - delta_gamma eps_hat / |eps_hat| (volume kept).
+// In strain space as druckerPragerStrain: false where sigma stays, else lnOut = ln(sigma').
 template <class S>
-Eigen::Matrix<S, 3, 1> vonMisesReturn(const Eigen::Matrix<S, 3, 1>& sigma, S mu, S yieldStress) {
+bool vonMisesStrain(const Eigen::Matrix<S, 3, 1>& lnSigma, S mu, S yieldStress, Eigen::Matrix<S, 3, 1>& lnOut) {
   using V = Eigen::Matrix<S, 3, 1>;
-  const V eps = sigma.array().log().matrix();
-  const V dev = eps - V::Constant(eps.sum() / S(3));
+  const V dev = lnSigma - V::Constant(lnSigma.sum() / S(3));
   const S devNorm = dev.norm();
   const S dgamma = devNorm - yieldStress / (S(2) * mu);
-  if (dgamma <= S(0)) return sigma;
-  return (eps - (dgamma / devNorm) * dev).array().exp().matrix();
+  if (dgamma <= S(0)) return false;
+  lnOut = lnSigma - (dgamma / devNorm) * dev;
+  return true;
+}
+
+template <class S>
+Eigen::Matrix<S, 3, 1> vonMisesReturn(const Eigen::Matrix<S, 3, 1>& sigma, S mu, S yieldStress) {
+  Eigen::Matrix<S, 3, 1> lnOut;
+  if (!vonMisesStrain<S>(sigma.array().log().matrix(), mu, yieldStress, lnOut)) return sigma;
+  return lnOut.array().exp().matrix();
 }
 
 // Snow (Stomakhin et al. 2013, §5 and Eq. 1): the elastic singular values are clamped to

@@ -716,7 +716,7 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
       return b;
     }
     case MpmPass::kG2P: return heldBytes(C_, F_, plastic_, fluidJ_);
-    case MpmPass::kPlasticity: return heldBytes(svdU_, svdS_);
+    case MpmPass::kPlasticity: return heldBytes(svdU_, svdLnS_);
     case MpmPass::kProjection: return heldBytes(blockTails_);
     default: return 0;
   }

@@ -231,6 +231,7 @@ class MpmWorld final : public Solver {
   void plasticity();
   template <class Fn>
   void forPlasticSvds(const Fn& fn);
+  static constexpr std::size_t kPlasticBatch = 64;
   void decomposePlastic();
   Eigen::Matrix3f kirchhoff(std::size_t i);
   std::size_t passBytes(MpmPass pass) const;
@@ -243,13 +244,15 @@ class MpmWorld final : public Solver {
   std::vector<Eigen::Matrix3f> C_, F_;
   // Plastic materials: the SVD the return map made of each particle's F in the last substep
   // (F = U diag(s) V^T is what it wrote), which the next substep's P2G stress needs again: U and
-  // s for the Hencky models (sand, plasticine), R = U V^T in svdU_ for snow. Valid within a
+  // the Hencky strain ln(s) for the Hencky models (sand, plasticine: the return map's projected
+  // strain, or logLane's bits of s where it kept sigma), R = U V^T
+  // in svdU_ for snow. Valid within a
   // step (svdCached_): a step's first P2G fills them from the step's start state
   // (decomposePlastic, the same bits as an SVD of its own), so a step depends on its start state
   // alone (the guard's replays repeat it bit for bit). Sized to the particles when a plastic
   // material exists.
   std::vector<Eigen::Matrix3f> svdU_;
-  std::vector<Eigen::Vector3f> svdS_;
+  std::vector<Eigen::Vector3f> svdLnS_;
   bool svdCached_ = false;
   bool svdCacheOn_ = true;
   // Fixed-corotated elastic materials: each particle's polar rotation of the substep before, as

@@ -13,6 +13,8 @@
 #include <string>
 #include <random>
 
+#include <Eigen/SVD>
+
 #include "core/error.h"
 #include "mpm/kernels.h"
 #include "mpm_test_util.h"
@@ -462,6 +464,51 @@ TEST(MpmWorld, AStepsFirstDecompositionsAreTheBitsOfItsOwnSvd) {
     return w.stateHash();
   };
   EXPECT_EQ(run(true), run(false));
+}
+
+// The return maps leave every sand and plasticine particle on or inside its yield surface, by
+// the criteria themselves (Klar et al. 2016's cone, Mises' cylinder in Hencky strain) taken from
+// each particle's F through Eigen's SVD in double; and the load is enough that many sit on the
+// surface (the maps did act). Four boxes thrown at the floor, 12 steps. Tolerance 2e-5 in strain:
+// F is stored in float (1.2e-7 relative per entry), so its recomputed strains are a few 1e-7
+// off; a return map skipped or undone leaves strains 1e-2 past the surface.
+TEST(MpmWorld, ReturnMapsLeaveEveryParticleOnOrInsideItsYieldSurface) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  std::vector<Material> mats = throwPlasticBoxes(p, bodies, h, 0.04, false);
+  mats[2].plasticine.yieldStress = 1e3;  // a bound of 0.026 in deviatoric strain: the impact passes it
+  MpmWorld w(p, bodies, mats, unitDomain(h, 0));
+  const double E = 5e4, nu = mats[0].elastic.poisson;
+  const double mu = E / (2.0 * (1.0 + nu)), lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+  const double sinPhi = std::sin(mats[0].sand.frictionAngleDeg * 3.14159265358979323846 / 180.0);
+  const double alpha = std::sqrt(2.0 / 3.0) * 2.0 * sinPhi / (3.0 - sinPhi);
+  const double misesBound = mats[2].plasticine.yieldStress / (2.0 * mu);
+  constexpr double kTol = 2e-5;
+  std::size_t onCone = 0, onCylinder = 0;
+  for (int step = 0; step < 12; ++step) {
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    for (std::int32_t i = 0; i < std::int32_t(w.particles().size()); ++i) {
+      const int m = w.particles().material[std::size_t(i)];
+      if (m == 1) continue;  // snow: its clamp has its own test (test_constitutive.cpp)
+      const Eigen::Matrix3d F = w.deformation(i).cast<double>();
+      const Eigen::Vector3d sigma = Eigen::JacobiSVD<Eigen::Matrix3d>(F).singularValues();
+      const Eigen::Vector3d eps = sigma.array().log().matrix();
+      const Eigen::Vector3d dev = eps - Eigen::Vector3d::Constant(eps.sum() / 3.0);
+      if (m == 0) {  // sand, no cohesion: inside the cone, never pulled apart
+        const double dgamma = dev.norm() + (3.0 * lambda + 2.0 * mu) / (2.0 * mu) * eps.sum() * alpha;
+        ASSERT_LE(dgamma, kTol) << "sand particle " << i << " outside the cone in step " << step;
+        ASSERT_LE(eps.sum(), kTol) << "sand particle " << i << " in tension in step " << step;
+        if (dgamma > -1e-4 && dev.norm() > 1e-3) ++onCone;
+      } else {
+        ASSERT_LE(dev.norm(), misesBound + kTol) << "clay particle " << i << " outside Mises' cylinder, step " << step;
+        if (dev.norm() > misesBound - 1e-4) ++onCylinder;
+      }
+    }
+  }
+  std::printf("particle-steps on the cone %zu, on the cylinder %zu\n", onCone, onCylinder);
+  EXPECT_GT(onCone, 1000u);
+  EXPECT_GT(onCylinder, 1000u);
 }
 
 TEST(MpmWorld, ParticlesNeverLeaveTheDomain) {
