@@ -11,6 +11,9 @@
 //   svd3: the 3x3 SVD alone on one thread, 131,072 trial F of a deforming solid (the identity
 //     plus uniform noise of +-0.05 per entry, as in a return map), ns per matrix: svd3 one at a
 //     time against svd3Many (the return maps' batches) on the same matrices.
+//   logexp: the return maps' ln and exp alone on one thread, 192 values a call (a batch of 64
+//     particles' singular values, in [0.5, 1.5]; strains in [-0.7, 0.4]), ns per value: the C
+//     library's logf / expf one at a time against logMany / expMany (mpm/logexp.h).
 // Prints CSV rows `bench,case,particles,threads,metric,value,unit`: particle_steps_per_s (the
 // median of --repeats timed runs of --steps steps, after one warm-up step), ms_<pass> per
 // step, and the process's peak resident memory after the case.
@@ -19,6 +22,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -31,6 +35,7 @@
 #include "bench/bench_common.h"
 #include "core/material_table.h"
 #include "core/profile.h"
+#include "mpm/logexp.h"
 #include "mpm/svd3.h"
 #include "mpm/world.h"
 
@@ -142,6 +147,36 @@ void runSvd(int repeats) {
   row("mpm", "svd3", n, 1, "ns_per_svd_many", median(many), "ns");
 }
 
+void runLogExp(int repeats) {
+  constexpr std::size_t kN = 192, kCalls = 20000;
+  std::vector<float> x(kN), e(kN), y(kN);
+  for (std::size_t k = 0; k < kN; ++k) {
+    x[k] = 0.5f + float(k) / float(kN);
+    e[k] = -0.7f + 1.1f * float(k) / float(kN);
+  }
+  std::vector<double> libLog, lanesLog, libExp, lanesExp;
+  float sink = 0.0f;
+  const auto time = [&](std::vector<double>& into, auto&& body) {
+    const double t0 = nowSeconds();
+    for (std::size_t c = 0; c < kCalls; ++c) {
+      body();
+      sink += y[c % kN];
+    }
+    into.push_back(1e9 * (nowSeconds() - t0) / double(kCalls * kN));
+  };
+  for (int r = 0; r < repeats; ++r) {
+    time(libLog, [&] { for (std::size_t k = 0; k < kN; ++k) y[k] = std::log(x[k]); });
+    time(lanesLog, [&] { mpm::logMany(x.data(), y.data(), kN); });
+    time(libExp, [&] { for (std::size_t k = 0; k < kN; ++k) y[k] = std::exp(e[k]); });
+    time(lanesExp, [&] { mpm::expMany(e.data(), y.data(), kN); });
+  }
+  if (!std::isfinite(sink)) std::fprintf(stderr, "bench_mpm logexp: unexpected result\n");
+  row("mpm", "logexp", kN, 1, "ns_per_logf", median(libLog), "ns");
+  row("mpm", "logexp", kN, 1, "ns_per_log_many", median(lanesLog), "ns");
+  row("mpm", "logexp", kN, 1, "ns_per_expf", median(libExp), "ns");
+  row("mpm", "logexp", kN, 1, "ns_per_exp_many", median(lanesExp), "ns");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -174,5 +209,6 @@ int main(int argc, char** argv) {
   for (const Case& c : cases)
     if (only.empty() || std::string(c.name).find(only) != std::string::npos) runCase(c, threads, steps, repeats);
   if (only.empty() || std::string("svd3").find(only) != std::string::npos) runSvd(std::max(repeats, 5));
+  if (only.empty() || std::string("logexp").find(only) != std::string::npos) runLogExp(std::max(repeats, 5));
   return 0;
 }
