@@ -114,6 +114,7 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   ry_.assign(n, 0.0f);
   rz_.assign(n, 0.0f);
   design_.assign(n, 0);
+  surfaceNormal_.assign(n, Eigen::Vector3f::Zero());
   const double spacing = 2.0 * params_.particleRadius;
   for (std::size_t i = 0; i < n; ++i) {
     const auto m = static_cast<std::size_t>(parts_.material[i]);
@@ -274,6 +275,38 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
   box.min().array() -= params_.particleRadius;
   box.max().array() += params_.particleRadius;
   restBox_[b] = box;
+  refreshSurfaceNormals(b);
+}
+
+// surfaceNormal_ for a rigid body's particles from its rest lattice: the direction of the one
+// face neighbour a particle lacks. Edges and corners (two or more) keep none: there the line of
+// centres is the body's rounded surface, and a face's normal would push water resting beside
+// the edge off it.
+void PbdWorld::refreshSurfaceNormals(std::size_t b) {
+  const auto& mem = members_[b];
+  for (std::int32_t i : mem) surfaceNormal_[std::size_t(i)].setZero();
+  if (!isRigid(b) || mem.empty()) return;
+  const std::vector<Vec3i> cells = restCells(b);
+  Vec3i lo = cells.front(), hi = cells.front();
+  for (const Vec3i& c : cells) lo = lo.cwiseMin(c), hi = hi.cwiseMax(c);
+  const Vec3i size = hi - lo + Vec3i::Ones();
+  std::vector<std::uint8_t> filled(std::size_t(size.prod()), 0);
+  const auto index = [&](const Vec3i& c) {
+    return (std::size_t(c.x() - lo.x()) * std::size_t(size.y()) + std::size_t(c.y() - lo.y())) * std::size_t(size.z()) +
+           std::size_t(c.z() - lo.z());
+  };
+  for (const Vec3i& c : cells) filled[index(c)] = 1;
+  const auto has = [&](const Vec3i& c) {
+    return (c.array() >= lo.array()).all() && (c.array() <= hi.array()).all() && filled[index(c)] != 0;
+  };
+  const Vec3i faces[6] = {Vec3i(1, 0, 0), Vec3i(-1, 0, 0), Vec3i(0, 1, 0), Vec3i(0, -1, 0), Vec3i(0, 0, 1), Vec3i(0, 0, -1)};
+  for (std::size_t k = 0; k < cells.size(); ++k) {
+    int missing = 0;
+    Vec3i face = Vec3i::Zero();
+    for (const Vec3i& f : faces)
+      if (!has(cells[k] + f)) ++missing, face = f;
+    if (missing == 1) surfaceNormal_[std::size_t(mem[k])] = face.cast<float>();
+  }
 }
 
 double PbdWorld::bodyMass(int body) const {
@@ -315,6 +348,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
     ry_.push_back(0.0f);
     rz_.push_back(0.0f);
     design_.push_back(0);
+    surfaceNormal_.emplace_back(Eigen::Vector3f::Zero());
     if (particleLevel_) {
       px_.push_back(p.x[i]), py_.push_back(p.y[i]), pz_.push_back(p.z[i]);
       invMassP_.push_back(0.0f);

@@ -333,6 +333,14 @@ class PbdWorld final : public Solver {
   std::vector<float> rx_, ry_, rz_;
   // Per particle: its design piece within its body (the connected part it was made in).
   std::vector<std::int32_t> design_;
+  // Per particle of a rigid body (refreshSurfaceNormals): the outward unit normal of its body's
+  // face there, in the rest frame, where it lacks exactly one face neighbour (zero inside, on
+  // edges and corners, and in a sheet one particle thick). Fluid particles touching such a
+  // particle from outside are pushed along it (the signed-distance gradient FleX keeps on rigid particles,
+  // Macklin et al. 2014 §5.1), so a wall's lattice acts as its face, not as spheres with gaps
+  // between them that pressure squeezes water through.
+  std::vector<Eigen::Vector3f> surfaceNormal_;
+  void refreshSurfaceNormals(std::size_t b);
   // Per body.
   std::vector<std::vector<std::int32_t>> members_;  // particle ids, ascending
   std::vector<Motion> motion_;

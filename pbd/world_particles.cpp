@@ -788,7 +788,13 @@ void PbdWorld::particleContact() {
     Vec3 n;
     double pen;
     const Vec3 s = startI - startJ, path = d - s;
-    if (s.squaredNorm() >= reach * reach && path.squaredNorm() > 0.0) {
+    // Fluid on a rigid body's surface particle that started the substep outside it:
+    // held reach off the surface layer along the body's normal there (surfaceNormal_).
+    const Vec3 face = fluidPair && rigidJ ? Vec3(mj->q * surfaceNormal_[j].cast<double>()) : Vec3::Zero();
+    if (!face.isZero() && s.dot(face) >= 0.0) {
+      n = face;
+      pen = reach - d.dot(n);
+    } else if (s.squaredNorm() >= reach * reach && path.squaredNorm() > 0.0) {
       // |s + t path|^2 = reach^2: qa t^2 + 2 qb t + qc = 0, the smaller root.
       const double qa = path.squaredNorm(), qb = s.dot(path), qc = s.squaredNorm() - reach * reach;
       const double t = std::clamp((-qb - std::sqrt(std::max(qb * qb - qa * qc, 0.0))) / qa, 0.0, 1.0);
