@@ -261,6 +261,7 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
   }
   if (mem.empty() || !(m > 0.0)) {
     mode_[b] = BodyMode::kEmpty;
+    for (std::int32_t i : mem) surfaceNormal_[std::size_t(i)].setZero();
     return;
   }
   BodyView v{static_cast<std::int32_t>(mem.size()), mem.data(), parts_.x.data(), parts_.y.data(), parts_.z.data(),
@@ -289,15 +290,19 @@ void PbdWorld::refreshSurfaceNormals(std::size_t b) {
   const std::vector<Vec3i> cells = restCells(b);
   Vec3i lo = cells.front(), hi = cells.front();
   for (const Vec3i& c : cells) lo = lo.cwiseMin(c), hi = hi.cwiseMax(c);
+  // The body's cells as sorted keys (21 bits an axis; a body of the API may reach beyond the
+  // sketch grid, where a dense box could be huge). One beyond 2^21 cells across keeps no normals.
   const Vec3i size = hi - lo + Vec3i::Ones();
-  std::vector<std::uint8_t> filled(std::size_t(size.prod()), 0);
-  const auto index = [&](const Vec3i& c) {
-    return (std::size_t(c.x() - lo.x()) * std::size_t(size.y()) + std::size_t(c.y() - lo.y())) * std::size_t(size.z()) +
-           std::size_t(c.z() - lo.z());
+  if (size.maxCoeff() >= (1 << 21)) return;
+  const auto key = [&](const Vec3i& c) {
+    return (std::uint64_t(c.x() - lo.x()) << 42) | (std::uint64_t(c.y() - lo.y()) << 21) | std::uint64_t(c.z() - lo.z());
   };
-  for (const Vec3i& c : cells) filled[index(c)] = 1;
+  std::vector<std::uint64_t> keys(cells.size());
+  for (std::size_t k = 0; k < cells.size(); ++k) keys[k] = key(cells[k]);
+  std::sort(keys.begin(), keys.end());
   const auto has = [&](const Vec3i& c) {
-    return (c.array() >= lo.array()).all() && (c.array() <= hi.array()).all() && filled[index(c)] != 0;
+    return (c.array() >= lo.array()).all() && (c.array() <= hi.array()).all() &&
+           std::binary_search(keys.begin(), keys.end(), key(c));
   };
   const Vec3i faces[6] = {Vec3i(1, 0, 0), Vec3i(-1, 0, 0), Vec3i(0, 1, 0), Vec3i(0, -1, 0), Vec3i(0, 0, 1), Vec3i(0, 0, -1)};
   for (std::size_t k = 0; k < cells.size(); ++k) {
@@ -478,6 +483,7 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
     const int b = parts_.group(k);
     parts_.phase[k] = phase::make(-1, phase::kRemoved | phase::kPrescribed);
     parts_.vx[k] = parts_.vy[k] = parts_.vz[k] = 0.0f;
+    surfaceNormal_[k].setZero();
     if (b >= 0 && std::find(changed.begin(), changed.end(), b) == changed.end()) changed.push_back(b);
   }
   std::sort(changed.begin(), changed.end());

@@ -788,11 +788,12 @@ void PbdWorld::particleContact() {
     Vec3 n;
     double pen;
     const Vec3 s = startI - startJ, path = d - s;
-    // Fluid on a rigid body's surface particle that started the substep outside it:
-    // held reach off the surface layer along the body's normal there (surfaceNormal_).
-    const Vec3 face = fluidPair && rigidJ ? Vec3(mj->q * surfaceNormal_[j].cast<double>()) : Vec3::Zero();
-    if (!face.isZero() && s.dot(face) >= 0.0) {
-      n = face;
+    // Fluid on a rigid body's surface particle that started the substep outside it (s and
+    // the normal at the substep's start pose): held reach off the surface layer along the
+    // body's normal there now (surfaceNormal_).
+    const bool onFace = fluidPair && rigidJ && !surfaceNormal_[j].isZero();
+    if (onFace && s.dot(mj->qPrev * surfaceNormal_[j].cast<double>()) >= 0.0) {
+      n = mj->q * surfaceNormal_[j].cast<double>();
       pen = reach - d.dot(n);
     } else if (s.squaredNorm() >= reach * reach && path.squaredNorm() > 0.0) {
       // |s + t path|^2 = reach^2: qa t^2 + 2 qb t + qc = 0, the smaller root.
