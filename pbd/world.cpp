@@ -177,6 +177,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
                                    BodyMode mode, MaterialKind kind) {
   ++bodyEdits_;
   members_.push_back(std::move(members));
+  normalsStale_.push_back(1);
   kind_.push_back(kind);
   strandRadius_.push_back(0.0f);
   lattice_.push_back({0, 0, 0});
@@ -259,9 +260,9 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
     reach = std::max(reach, Vec3(rx_[k], ry_[k], rz_[k]).norm());
     box.extend(Vec3(rx_[k], ry_[k], rz_[k]));
   }
+  normalsStale_[b] = 1;
   if (mem.empty() || !(m > 0.0)) {
     mode_[b] = BodyMode::kEmpty;
-    for (std::int32_t i : mem) surfaceNormal_[std::size_t(i)].setZero();
     return;
   }
   BodyView v{static_cast<std::int32_t>(mem.size()), mem.data(), parts_.x.data(), parts_.y.data(), parts_.z.data(),
@@ -276,7 +277,6 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
   box.min().array() -= params_.particleRadius;
   box.max().array() += params_.particleRadius;
   restBox_[b] = box;
-  refreshSurfaceNormals(b);
 }
 
 // surfaceNormal_ for a rigid body's particles from its rest lattice: the direction of the one
@@ -284,9 +284,10 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
 // centres is the body's rounded surface, and a face's normal would push water resting beside
 // the edge off it.
 void PbdWorld::refreshSurfaceNormals(std::size_t b) {
+  normalsStale_[b] = 0;
   const auto& mem = members_[b];
   for (std::int32_t i : mem) surfaceNormal_[std::size_t(i)].setZero();
-  if (!isRigid(b) || mem.empty()) return;
+  if (!isRigid(b) || mem.empty() || mode_[b] == BodyMode::kEmpty) return;
   const std::vector<Vec3i> cells = restCells(b);
   Vec3i lo = cells.front(), hi = cells.front();
   for (const Vec3i& c : cells) lo = lo.cwiseMin(c), hi = hi.cwiseMax(c);

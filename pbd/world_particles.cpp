@@ -654,6 +654,9 @@ double PbdWorld::largestContactRadius() const {
 void PbdWorld::findNeighbors() {
   ParticlePairContacts& pairs = contacts_.particlePair;
   pairs.clear();
+  if (fluid_)  // particleContact reads rigid bodies' face normals for fluid pairs
+    for (std::size_t b = 0; b < members_.size(); ++b)
+      if (normalsStale_[b]) refreshSurfaceNormals(b);
   const double r = params_.particleRadius, largest = largestContactRadius();
   // Touching (the two largest radii: 2 r without thick strands) plus half a spacing of travel.
   const float radius = static_cast<float>(2.0 * largest + r);
