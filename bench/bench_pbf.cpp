@@ -15,8 +15,12 @@
 // threshold where the pass runs); its cost shows in the velocity pass's row, and the last
 // substep's CG iterations in `viscosity_cg_iterations`.
 //
+// --warm F carries F of each substep's density multipliers into the next (FluidParams::
+// warmStart, averaged --warm-smoothing times over neighbours; 0 by default); its pass is the
+// `warm` row.
+//
 //   bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--relaxation E]
-//             [--kernel scalar|avx2] [--n NX NY NZ] [--viscosity MU]
+//             [--kernel scalar|avx2] [--n NX NY NZ] [--viscosity MU] [--warm F] [--warm-smoothing N]
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -50,6 +54,8 @@ int main(int argc, char** argv) {
   auto kernel = pbd::FluidSolver::Kernel::kAuto;
   float relaxation = pbd::FluidParams().relaxation;
   float viscosity = 0.0f;
+  float warm = 0.0f;
+  int warmSmoothing = pbd::FluidParams().warmSmoothing;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
@@ -58,6 +64,8 @@ int main(int argc, char** argv) {
     else if (a == "--substeps" && i + 1 < argc) substeps = std::atoi(argv[++i]);
     else if (a == "--relaxation" && i + 1 < argc) relaxation = float(std::atof(argv[++i]));
     else if (a == "--viscosity" && i + 1 < argc) viscosity = float(std::atof(argv[++i]));
+    else if (a == "--warm" && i + 1 < argc) warm = float(std::atof(argv[++i]));
+    else if (a == "--warm-smoothing" && i + 1 < argc) warmSmoothing = std::atoi(argv[++i]);
     else if (a == "--n" && i + 3 < argc) nx = std::atoi(argv[++i]), ny = std::atoi(argv[++i]), nz = std::atoi(argv[++i]);
     else if (a == "--kernel" && i + 1 < argc) {
       const std::string k = argv[++i];
@@ -65,12 +73,14 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr,
                    "usage: bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--relaxation E]\n"
-                   "                 [--kernel scalar|avx2] [--n NX NY NZ] [--viscosity MU]\n");
+                   "                 [--kernel scalar|avx2] [--n NX NY NZ] [--viscosity MU]\n"
+                   "                 [--warm F] [--warm-smoothing N]\n");
       return 2;
     }
   }
-  if (threads < 1 || steps < 1 || substeps < 1 || warmup < 0 || nx < 1 || ny < 1 || nz < 1 || !(viscosity >= 0.0f)) {
-    std::fprintf(stderr, "bench_pbf: counts must be positive\n");
+  if (threads < 1 || steps < 1 || substeps < 1 || warmup < 0 || nx < 1 || ny < 1 || nz < 1 || !(viscosity >= 0.0f) ||
+      !(warm >= 0.0f && warm < 1.0f) || warmSmoothing < 0 || warmSmoothing > 8) {
+    std::fprintf(stderr, "bench_pbf: counts must be positive, --warm in [0, 1), --warm-smoothing in 0..8\n");
     return 2;
   }
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
@@ -83,6 +93,8 @@ int main(int argc, char** argv) {
   p.xsph = 0.01f;
   p.vorticity = 0.01f;
   p.viscosity = viscosity;
+  p.warmStart = warm;
+  p.warmSmoothing = warmSmoothing;
   p.wallLo[0] = 0.0f, p.wallLo[1] = 0.0f, p.wallLo[2] = 0.0f;
   p.wallHi[0] = 5.0f * float(nx + 1) * d, p.wallHi[1] = 4.0f, p.wallHi[2] = float(nz + 1) * d;
   pbd::testing::FluidSim sim(p);
@@ -133,6 +145,8 @@ int main(int argc, char** argv) {
       }()),
       "1");
   row("pbd", "dam_break", n, threads, "substeps", substeps, "1");
+  row("pbd", "dam_break", n, threads, "warm_start", warm, "1");
+  if (warm > 0.0f) row("pbd", "dam_break", n, threads, "warm_smoothing", warmSmoothing, "1");
   if (viscosity > 0.0f) {
     row("pbd", "dam_break", n, threads, "viscosity", viscosity, "Pa_s");
     row("pbd", "dam_break", n, threads, "viscosity_cg_iterations", sim.solver().lastViscosityIterations(), "1");

@@ -51,6 +51,8 @@ FluidSolver::FluidSolver(const FluidParams& p) : params_(p) {
   require(nonNegative(p.cohesion), "cohesion must be >= 0 and finite");
   require(nonNegative(p.viscosity), "viscosity must be >= 0 and finite");
   require(nonNegative(p.solidScale), "solidScale must be >= 0 and finite");
+  require(nonNegative(p.warmStart) && p.warmStart < 1.0f, "warmStart must be in [0, 1)");
+  require(p.warmSmoothing >= 0 && p.warmSmoothing <= 8, "warmSmoothing must be in 0..8");
   for (int k = 0; k < 3; ++k)
     require(!std::isnan(p.wallLo[k]) && !std::isnan(p.wallHi[k]) &&
                 p.wallHi[k] - p.wallLo[k] > 2.0f * p.particleRadius,
@@ -244,6 +246,11 @@ void FluidSolver::checkInput(const FluidInput& in) const {
   require(in.soundSpeed == 0.0f || in.substep > 0.0f, "a soundSpeed needs the substep");
   require(in.x && in.y && in.z && in.invMass && in.fluid && in.restDensity, "an input array is null");
   require(!in.soundSpeeds || in.substep > 0.0f, "per-particle soundSpeeds need the substep");
+  if (in.carried)
+    for (std::size_t i = 0; i < in.count; ++i)
+      if (in.fluid && in.fluid[i] && !(std::isfinite(in.carried[i]) && in.carried[i] <= 0.0f))
+        require(false, "fluid particle " + std::to_string(i) + ": carried multiplier " + std::to_string(in.carried[i]) +
+                           " must be finite and <= 0");
   struct PerParticle {
     const float* v;
     const char* name;
@@ -290,6 +297,17 @@ void FluidSolver::begin(const FluidInput& in) {
   buildBlockedLists();
   computeSolidVolumes();
   loadParticleParams(in);
+  // The carried multipliers of fluid particles with a compliance (the others keep no sum).
+  carried_.clear();
+  const bool compliance = soundSpeed_ > 0.0f || in.soundSpeeds;
+  if (params_.warmStart > 0.0f && in.carried && compliance && substep_ > 0.0f) {
+    carried_.assign(std::size_t(ghost_), 0.0f);
+    const std::int32_t* order = grid_.order().data();
+    for (std::size_t r = 0; r < n_; ++r) {
+      const bool on = rec_[r * kRecord + kFluid] != 0.0f && (alphaR_.empty() || alphaR_[r] > 0.0f);
+      if (on) carried_[r] = params_.warmStart * in.carried[order[r]];
+    }
+  }
 }
 
 namespace {
@@ -524,6 +542,7 @@ void FluidSolver::correctionPass() {
   PairArgs a =
       pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   a.scorrBeta = scorrBeta_;
+  if (scorrOff_) a.scorrK = 0.0f;
   if (substep_ > 0.0f && iterations_ > 0) {  // s_corr as a force below kScorrStep (FluidParams::scorrK)
     const float r = substep_ / kScorrStep;
     a.scorrK *= std::min(1.0f, (r * r) * (float(kScorrIterations) / float(iterations_)));
@@ -532,6 +551,35 @@ void FluidSolver::correctionPass() {
   forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
     simd ? correctionBlocksAvx2(a, b0, b1) : correctionBlocksScalar(a, b0, b1);
   });
+}
+
+bool FluidSolver::warmStart() {
+  if (carried_.empty() || !n_) return false;
+  for (std::size_t r = 0; r < n_; ++r) rec_[r * kRecord + kLambda] = carried_[r];
+  // Shepard averages over fluid neighbours, Jacobi (each pass reads the last pass's values
+  // from the records), the same bits for any threads and either kernel.
+  PairArgs a = pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
+  const bool simd = useSimd();
+  for (int pass = 0; pass < params_.warmSmoothing; ++pass) {
+    forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
+      simd ? smoothLambdaBlocksAvx2(a, b0, b1, carried_.data()) : smoothLambdaBlocksScalar(a, b0, b1, carried_.data());
+    });
+    for (std::size_t r = 0; r < n_; ++r) {
+      // A fluid particle without a compliance keeps no multiplier sum: it carries 0.
+      if (!alphaR_.empty() && !(alphaR_[r] > 0.0f)) carried_[r] = 0.0f;
+      rec_[r * kRecord + kLambda] = carried_[r];
+    }
+  }
+  std::copy(carried_.begin(), carried_.begin() + std::ptrdiff_t(n_), lambdaSum_.begin());
+  scorrOff_ = true;
+  correctionPass();
+  scorrOff_ = false;
+  return true;
+}
+
+void FluidSolver::multipliers(float* lambda) const {
+  const std::int32_t* order = grid_.order().data();
+  for (std::size_t r = 0; r < n_; ++r) lambda[order[r]] = lambdaSum_[r];
 }
 
 void FluidSolver::densityIteration() {

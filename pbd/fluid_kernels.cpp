@@ -281,6 +281,30 @@ void lambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
   }
 }
 
+void smoothLambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1, float* out) {
+  for (std::size_t b = b0; b < b1; ++b) {
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (int l = 0; l < kLanes; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      if (i >= a.n) break;
+      const float* ri = a.rec + i * kRecord;
+      const float self = ri[kNu] * a.h6;
+      float num = self * ri[kLambda], den = self;
+      for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+        const float* rj = a.rec + std::size_t(ids[k * kLanes + l]) * kRecord;
+        const float dx = ri[kX] - rj[kX], dy = ri[kY] - rj[kY], dz = ri[kZ] - rj[kZ];
+        const float r2 = (dx * dx + dy * dy) + dz * dz;
+        const float s = a.h2 - r2;
+        const float w = r2 < a.h2 ? (s * s) * s : 0.0f;
+        const float wf = w * (rj[kNu] * rj[kFluid]);
+        num = num + wf * rj[kLambda];
+        den = den + wf;
+      }
+      out[i] = ri[kFluid] != 0.0f ? num / den : 0.0f;
+    }
+  }
+}
+
 void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1) {
   for (std::size_t b = b0; b < b1; ++b) {
     const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
@@ -666,6 +690,40 @@ __attribute__((target("avx2"))) void lambdaBlocksAvx2(const PairArgs& a, std::si
       den = _mm256_add_ps(den, _mm256_mul_ps(rj[kW], _mm256_mul_ps(_mm256_mul_ps(gn, gn), p.r2)));
     }
     finishLambda8(a, b, ri, rho, gx, gy, gz, den);
+  }
+}
+
+__attribute__((target("avx2"))) void smoothLambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1,
+                                                               float* out) {
+  const __m256 h2 = _mm256_set1_ps(a.h2), h6 = _mm256_set1_ps(a.h6), zero = _mm256_setzero_ps();
+  std::int32_t self[8];
+  for (std::size_t b = b0; b < b1; ++b) {
+    for (int l = 0; l < 8; ++l) self[l] = std::int32_t(b * kLanes) + l;
+    __m256 ri[8];
+    loadTransposed(a.rec, self, ri);
+    const __m256 own = _mm256_mul_ps(ri[kNu], h6);
+    __m256 num = _mm256_mul_ps(own, ri[kLambda]), den = own;
+    const std::int32_t* ids = a.bidx + std::size_t(a.boff[b]) * kLanes;
+    for (std::int32_t k = 0; k < a.bk[b]; ++k) {
+      __m256 rj[8];
+      loadTransposed(a.rec, ids + k * kLanes, rj);
+      const __m256 dx = _mm256_sub_ps(ri[kX], rj[kX]), dy = _mm256_sub_ps(ri[kY], rj[kY]), dz = _mm256_sub_ps(ri[kZ], rj[kZ]);
+      const __m256 r2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
+      const __m256 s = _mm256_sub_ps(h2, r2);
+      const __m256 w = _mm256_and_ps(_mm256_cmp_ps(r2, h2, _CMP_LT_OQ), _mm256_mul_ps(_mm256_mul_ps(s, s), s));
+      const __m256 wf = _mm256_mul_ps(w, _mm256_mul_ps(rj[kNu], rj[kFluid]));
+      num = _mm256_add_ps(num, _mm256_mul_ps(wf, rj[kLambda]));
+      den = _mm256_add_ps(den, wf);
+    }
+    // Solid lanes and padding (nu 0: 0 / 0) are masked out before the store.
+    const __m256 fluid = _mm256_cmp_ps(ri[kFluid], zero, _CMP_NEQ_UQ);
+    alignas(32) float v[8];
+    _mm256_store_ps(v, _mm256_and_ps(fluid, _mm256_div_ps(num, den)));
+    for (int l = 0; l < 8; ++l) {
+      const std::size_t i = b * kLanes + std::size_t(l);
+      if (i >= a.n) break;
+      out[i] = v[l];
+    }
   }
 }
 

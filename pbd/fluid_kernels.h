@@ -100,6 +100,11 @@ void confinementBlocksAvx2(const VelocityArgs& a, std::size_t b0, std::size_t b1
 void lambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1);
 void correctionBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1);
 void lambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1);
+// The warm start's average (FluidSolver::warmStart) of the records' lambda over each fluid
+// particle's fluid neighbours and itself, Shepard weights nu_j W_ij: out[i] by rank (0 for
+// solids), ranks of blocks b0..b1 below a.n. Scalar and AVX2 give the same bits.
+void smoothLambdaBlocksScalar(const PairArgs& a, std::size_t b0, std::size_t b1, float* out);
+void smoothLambdaBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1, float* out);
 void correctionBlocksAvx2(const PairArgs& a, std::size_t b0, std::size_t b1);
 
 // The walls' density term at a fluid particle: sum of B over the walls within h, and its

@@ -20,8 +20,8 @@ struct FluidSim {
   // Time per part of the substep, summed over steps (ms), for the benchmark only: wall
   // time, and the process's CPU time (all threads), which on a loaded machine excludes
   // the waits for a core.
-  enum Part { kPredict, kNeighbors, kLambda, kCorrection, kUpdate, kVelocity, kParts };
-  static constexpr const char* kPartNames[kParts] = {"predict", "neighbors", "lambda", "correction", "update", "velocity"};
+  enum Part { kPredict, kNeighbors, kWarm, kLambda, kCorrection, kUpdate, kVelocity, kParts };
+  static constexpr const char* kPartNames[kParts] = {"predict", "neighbors", "warm", "lambda", "correction", "update", "velocity"};
   struct Timing {
     double wall[kParts] = {};
     double cpu[kParts] = {};
@@ -84,8 +84,11 @@ struct FluidSim {
         autoC_ = std::max(autoC_, FluidSolver::autoSoundSpeed(gravity, std::max(hi - lo, 0.0f) + 2.0f * params.particleRadius,
                                                               std::sqrt(v2)));
       in.soundSpeed = soundSpeed < 0.0f ? autoC_ : soundSpeed;
+      if (solver_.params().warmStart > 0.0f && carried_.size() == n) in.carried = carried_.data();
       solver_.begin(in);
       lap(t, kNeighbors);
+      if (solver_.warmStart()) solver_.applyCorrections();
+      lap(t, kWarm);
       for (int it = 0; it < iterations; ++it) {
         solver_.lambdaPass();
         lap(t, kLambda);
@@ -93,6 +96,7 @@ struct FluidSim {
         solver_.applyCorrections();
         lap(t, kCorrection);
       }
+      if (solver_.params().warmStart > 0.0f) carried_.resize(n), solver_.multipliers(carried_.data());
       solver_.positions(px_.data(), py_.data(), pz_.data());
       for (std::size_t i = 0; i < n; ++i) {  // v = (p - x) / h (Alg. 1 line 21)
         vx[i] = (px_[i] - x[i]) / h, vy[i] = (py_[i] - y[i]) / h, vz[i] = (pz_[i] - z[i]) / h;
@@ -125,6 +129,7 @@ struct FluidSim {
   }
   FluidSolver solver_;
   std::vector<float> px_, py_, pz_;
+  std::vector<float> carried_;  // the last substep's multipliers (FluidParams::warmStart)
   float autoC_ = 0.0f;
 };
 
