@@ -285,6 +285,12 @@ SceneDesc build(const RecordFile& file) {
         s.sleepSpeed = f.word(0) == "auto" ? 0.0 : f.inRange(0, 1e-6, 10.0);
         if (f.count() > 1) s.sleepTime = f.inRange(1, 1e-3, 3600.0);
       }
+    } else if (kw == "warm_start") {
+      // warm_start F [AVERAGES]: F in [0, 0.9] (0 = off), AVERAGES 0..8 (default 2)
+      FieldReader f(file, r, {"fraction", "averages"}, 1);
+      s.warmStartLine = r.line;
+      s.warmStart = f.inRange(0, 0.0, 0.9);
+      if (f.count() > 1) s.warmSmoothing = static_cast<int>(f.integer(1, 0, 8));
     } else if (kw == "ground") {
       FieldReader f(file, r, {"y"});
       s.groundY = f.number(0);
@@ -336,7 +342,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "walls grid_dx cfl scale sleep ground duration fps material collider keyframe expect camera image output)");
+                                                  "walls grid_dx cfl scale sleep warm_start ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");

@@ -103,6 +103,12 @@ struct SceneDesc {
   double sleepSpeed = 0.0;   // m/s
   double sleepTime = 0.5;    // s
   int sleepLine = 0;
+  // solver pbd: fluids' warm start (`warm_start F [AVERAGES]`, pbd/fluid.h FluidSolver::
+  // warmStart): each substep's density solve starts from F of the last one's multipliers,
+  // averaged AVERAGES times over neighbours. 0 = off (the default).
+  double warmStart = 0.0;
+  int warmSmoothing = 4;
+  int warmStartLine = 0;
   double groundY = 0.0;      // m, height of the ground plane (y up)
   double duration = 2.0;     // s of simulated time
   double fps = 30.0;         // frames per simulated second; 1/fps is a whole number of steps

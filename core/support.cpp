@@ -95,6 +95,10 @@ void checkSupport(const SceneDesc& scene, const SketchUses& uses, const SolverSu
   if (!support.sleeping && scene.sleepLine > 0)
     throw InputError(scene.path, scene.sleepLine, "record",
                      "sleep: " + solverText(scene) + " has no bodies to put to sleep (the record is for solver pbd)");
+  if (!support.fluidWarmStart && scene.warmStartLine > 0)
+    throw InputError(scene.path, scene.warmStartLine, "record",
+                     "warm_start: " + solverText(scene) +
+                         " has no density multipliers to carry (the record is for solver pbd's fluids)");
   checkFeature(uses.toolStroke, support.toolStrokes, scene, "tool strokes");
   checkFeature(uses.velocity, support.initialMotion, scene, "initial velocities (vel=, spin=)");
   checkFeature(uses.fixedBody, support.fixedBodies, scene, "fixed bodies");

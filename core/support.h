@@ -44,6 +44,7 @@ struct SolverSupport {
   bool fixedBodies = false;         // the `fixed` flag
   bool domainGrid = false;          // scene `walls` and `grid_dx` (a background grid in a walled domain)
   bool sleeping = false;            // scene `sleep` (rigid bodies at rest stop being simulated)
+  bool fluidWarmStart = false;      // scene `warm_start` (PBF's multipliers carried between substeps)
   // Material parameters the solver's kinds have in the table but the solver does not
   // simulate yet: setting one is an error naming it, never silently ignored.
   std::vector<std::string> paramsNotYet;

@@ -88,7 +88,7 @@ struct FluidParams {
   // f of the last substep's multipliers (FluidInput::carried), each first averaged over its
   // fluid neighbours warmSmoothing times; f = 0 (the default) starts from zero, in [0, 1).
   float warmStart = 0.0f;
-  int warmSmoothing = 2;         // 0..8
+  int warmSmoothing = 4;         // 0..8
   // Axis-aligned box the fluid particles stay in (their centres stay r inside), m. The
   // ground is lo[1]; +-infinity leaves a side open.
   float wallLo[3] = {-1e30f, 0.0f, -1e30f};
@@ -230,9 +230,9 @@ class FluidSolver {
   // from zero every substep (bench_pbf: 5.3 % mean compression at one substep). Carried, the
   // iterations only correct its change. Why averaged: carried as they are, the multipliers
   // also carry the packing's particle-scale rearrangements from substep to substep, which
-  // the iterations would otherwise damp, and a resting column never came to rest (0.13 m/s
-  // at f = 0.6 against 0.006 without; 0.009 with two averages); the hydrostatic part is
-  // smooth and passes the average (docs/benchmarks.md).
+  // the iterations would otherwise damp, and a resting column never comes to rest (at 2
+  // substeps, f = 0.6: 0.04 m/s unaveraged, 0.0014 with the default 4 averages, 0.0018
+  // cold); the hydrostatic part is smooth and passes the averages (docs/benchmarks.md).
   bool warmStart();
   // By id: each particle's multiplier summed over this substep's iterations (0 without a
   // compliance, and for solids), for the next substep's FluidInput::carried.

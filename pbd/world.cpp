@@ -101,6 +101,8 @@ PbdParams paramsFromScene(const SceneDesc& scene, double particleRadius) {
   p.particleRadius = particleRadius;
   p.sleepSpeed = !scene.sleep ? 0.0 : scene.sleepSpeed > 0.0 ? scene.sleepSpeed : 4.0 * particleRadius;  // auto: 2 spacings / s
   p.sleepTime = scene.sleepTime;
+  p.warmStart = scene.warmStart;
+  p.warmSmoothing = scene.warmSmoothing;
   return p;
 }
 
@@ -709,7 +711,14 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
     case PbdPass::kFluidNeighbors: return on ? n(c.fluid, "dynamic fluid bodies") : "no fluid in the scene (or all of it fixed)";
     case PbdPass::kDensity: {
       if (!on) return "no fluid in the scene (or all of it fixed)";
-      return n(c.fluid, "dynamic fluid bodies") + fluidSoundText();  // the compliance's sound speed (pbd/fluid.h)
+      std::string why = n(c.fluid, "dynamic fluid bodies") + fluidSoundText();  // the compliance's sound speed (pbd/fluid.h)
+      if (params_.warmStart > 0.0) {
+        char w[96];
+        std::snprintf(w, sizeof w, "; warm start %.2g of the last substep's multipliers, averaged %d times",
+                      params_.warmStart, params_.warmSmoothing);
+        why += w;
+      }
+      return why;
     }
     case PbdPass::kFluidVelocity: {
       if (!on)
@@ -1008,6 +1017,8 @@ bool PbdWorld::step() {
     startStill_ = stillFor_;
     startStillRef_ = stillRef_;
     startSoundSpeed_ = fluidSoundSpeed_;
+    startCarry_ = fluidCarry_;
+    startCarryIds_ = fluidCarryIds_;
     looseStart.resize(6 * loose_.size());
     std::size_t at = 0;
     for (const auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})
@@ -1020,6 +1031,8 @@ bool PbdWorld::step() {
     stillFor_ = startStill_;
     stillRef_ = startStillRef_;
     fluidSoundSpeed_ = startSoundSpeed_;
+    fluidCarry_ = startCarry_;
+    fluidCarryIds_ = startCarryIds_;
     markTied();
     std::size_t at = 0;
     for (auto* a : {&parts_.x, &parts_.y, &parts_.z, &parts_.vx, &parts_.vy, &parts_.vz})

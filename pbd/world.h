@@ -85,6 +85,11 @@ struct PbdParams {
   // scene file's default is on, paramsFromScene).
   double sleepSpeed = 0.0;
   double sleepTime = 0.5;     // s
+  // Fluids' warm start (docs/formats.md `warm_start`, FluidParams::warmStart): the fraction
+  // of each substep's density multipliers the next substep starts from, and how often they
+  // are averaged over neighbours first. 0 = off (the default).
+  double warmStart = 0.0;
+  int warmSmoothing = 4;
 };
 
 // The solver settings a scene file asks for; the radius is half the sketch's voxel size.
@@ -553,6 +558,14 @@ class PbdWorld final : public Solver {
   float fluidSoundOf(const Material& m) const;
   std::string fluidSoundText() const;
   std::vector<float> fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_;
+  // The warm start (PbdParams::warmStart): the fluid particles' multipliers at the end of the
+  // last substep, with their ids (the first fluidCount_ of fluidIds_ then), kept at the start
+  // of a step for the guard's replay; carried only while the fluid's particles are the same.
+  std::vector<float> fluidCarry_, startCarry_, fcarried_;
+  std::vector<std::int32_t> fluidCarryIds_, startCarryIds_;
+  int densityIteration_ = 0;  // density passes run this substep
+  void loadFluidPositions();
+  void applyFluidCorrections();
   std::vector<float> frelax_, fxsph_, fvort_, fcoh_, fsound_, fmu_;  // per kernel particle, fluidMixed_ only
   std::vector<std::uint8_t> fflag_;
   void makeFluidSolver();

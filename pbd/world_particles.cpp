@@ -1249,6 +1249,8 @@ void PbdWorld::makeFluidSolver() {
     fp.vorticity = static_cast<float>(first.vorticity);
     fp.cohesion = static_cast<float>(first.cohesion);
     fp.viscosity = static_cast<float>(first.viscosity);
+    fp.warmStart = static_cast<float>(params_.warmStart);
+    fp.warmSmoothing = params_.warmSmoothing;
     fp.wallLo[1] = static_cast<float>(params_.groundY);
     fluid_ = std::make_unique<FluidSolver>(fp);
   }
@@ -1366,6 +1368,15 @@ void PbdWorld::fluidNeighbors() {
     in.relaxation = frelax_.data(), in.xsph = fxsph_.data(), in.vorticity = fvort_.data(), in.cohesion = fcoh_.data();
     in.soundSpeeds = fsound_.data(), in.viscosity = fmu_.data();
   }
+  // The last substep's multipliers, while the fluid's particles are the same ones (a sketch
+  // edit, a cut or a particle fixed starts the solve from zero once).
+  densityIteration_ = 0;
+  if (params_.warmStart > 0.0 && fluidCarryIds_.size() == fluidCount_ &&
+      std::equal(fluidCarryIds_.begin(), fluidCarryIds_.end(), fluidIds_.begin())) {
+    fcarried_.assign(n, 0.0f);
+    std::copy(fluidCarry_.begin(), fluidCarry_.end(), fcarried_.begin());
+    in.carried = fcarried_.data();
+  }
   fluid_->begin(in);
 }
 
@@ -1374,14 +1385,38 @@ void PbdWorld::fluidNeighbors() {
 // the impulse sum m dp of its particles, at body level: dc = sum m dp / M and the rotation
 // by I^-1 sum r x m dp (momentum is conserved: the kernel's sum of m dp is zero).
 void PbdWorld::density() {
-  const std::size_t n = fluidIds_.size();
   if (fluidCount_ == 0) return;
+  // The warm start's correction first, on the first iteration of a substep (FluidSolver::warmStart).
+  if (densityIteration_++ == 0 && params_.warmStart > 0.0) {
+    loadFluidPositions();
+    if (fluid_->warmStart()) applyFluidCorrections();
+  }
+  loadFluidPositions();
+  fluid_->densityIteration();
+  applyFluidCorrections();
+  if (densityIteration_ == params_.iterations && params_.warmStart > 0.0) {
+    fcarried_.resize(fluidIds_.size());
+    fluid_->multipliers(fcarried_.data());
+    fluidCarry_.assign(fcarried_.begin(), fcarried_.begin() + std::ptrdiff_t(fluidCount_));
+    fluidCarryIds_.assign(fluidIds_.begin(), fluidIds_.begin() + std::ptrdiff_t(fluidCount_));
+  }
+}
+
+// The kernel's particles where the other passes left them: loose ones at their predicted
+// positions, rigid ones at their body's pose.
+void PbdWorld::loadFluidPositions() {
+  const std::size_t n = fluidIds_.size();
   for (std::size_t k = 0; k < n; ++k) {
     const auto i = std::size_t(fluidIds_[k]);
     put(fx_, fy_, fz_, k, isRigid(std::size_t(parts_.group(i))) ? rigidPoint(i) : at(px_, py_, pz_, i));
   }
   fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
-  fluid_->densityIteration();
+}
+
+// The kernel's corrections: fluid and particle-level solids take their dp, a rigid body the
+// impulse sum m dp of its particles.
+void PbdWorld::applyFluidCorrections() {
+  const std::size_t n = fluidIds_.size();
   fluid_->corrections(fdx_.data(), fdy_.data(), fdz_.data());
   std::map<std::size_t, std::pair<Vec3, Vec3>> impulse;  // body -> (sum m dp, sum r x m dp)
   for (std::size_t k = 0; k < n; ++k) {

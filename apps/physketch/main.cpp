@@ -167,7 +167,8 @@ int main(int argc, char** argv) {
       "measure each run's error and wall time per frame; write DIR/study.csv, study.md, study.png and study.json\n"
       "(error against time per frame, log-log, the Pareto front marked). Knobs: iterations, substeps,\n"
       "dt (s), voxel (m: the voxel size; the workspace edge becomes 151 voxels), grid_dx and cfl (solver\n"
-      "mpm), sleep (solver pbd: the sleep speed in m/s, 0 = off), smoothing and mesh_resolution (meshing:\n"
+      "mpm), sleep (solver pbd: the sleep speed in m/s, 0 = off), warm_start (solver pbd: the fluids' carried\n"
+      "multipliers, 0 = off), smoothing and mesh_resolution (meshing:\n"
       "every frame is meshed and the last frame's surface measured, e.g. against 'expect sphere'). Error: against the\n"
       "scene's 'expect' records (--reference analytic, the default when it has one) or against a fine\n"
       "run (--reference fine: the finest value of each knob, or --reference-at). docs/accuracy.md.");

@@ -27,6 +27,7 @@ SolverSupport supportOf(SolverKind solver) {
       s.meshColliders = true;
       s.toolStrokes = true;  // kinematic bodies driven by the RuntimeDriver
       s.sleeping = true;
+      s.fluidWarmStart = true;
       break;
     case SolverKind::kMpm:
       // Kinds as run (solverModel): rigid and soft run as elastic.
@@ -55,6 +56,7 @@ SolverSupport eventualSupportOf(SolverKind solver) {
   s.meshColliders = s.toolStrokes = s.initialMotion = s.fixedBodies = true;
   s.domainGrid = solver == SolverKind::kMpm;  // PBD has neither walls nor a grid, now or later
   s.sleeping = solver == SolverKind::kPbd;    // MPM has no bodies to put to sleep
+  s.fluidWarmStart = solver == SolverKind::kPbd;  // MPM's fluid is explicit: nothing to carry
   return s;
 }
 

@@ -29,6 +29,9 @@ constexpr KnobSpec kKnobs[] = {
     {"grid_dx", 1.0, 4.0, false, "solver mpm: grid spacing in particle spacings (scene record 'grid_dx')"},
     {"cfl", 1e-3, 1.0, false, "solver mpm with 'substeps auto': the Courant number C (scene record 'cfl')"},
     {"sleep", 0, 10, false, "solver pbd: the sleep speed in m/s, 0 = off (scene record 'sleep'; its time stays the scene's)"},
+    {"warm_start", 0, 0.9, false,
+     "solver pbd: the fraction of the fluids' density multipliers carried between substeps, 0 = off (scene record "
+     "'warm_start'; its averages stay the scene's)"},
     {"smoothing", 0, 100, true, "mean-curvature smoothing iterations of deforming surfaces meshed from cells (run --smooth)",
      true},
     {"mesh_resolution", 0.1, 1.0, false,
@@ -200,6 +203,11 @@ void applySetting(const Setting& s, SceneDesc& scene, const std::string& option)
         throw InputError(where, 0, knob, std::string("knob 'sleep' is solver pbd's; the scene runs solver ") + toString(scene.solver));
       scene.sleep = v > 0.0;
       scene.sleepSpeed = v;
+    } else if (knob == "warm_start") {
+      if (scene.solver != SolverKind::kPbd)
+        throw InputError(where, 0, knob,
+                         std::string("knob 'warm_start' is solver pbd's; the scene runs solver ") + toString(scene.solver));
+      scene.warmStart = v;
     } else if (knob == "dt") {
       // Frames land on step boundaries (as the scene file checks for its own dt).
       const double ratio = 1.0 / (scene.fps * v);

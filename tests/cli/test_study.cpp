@@ -169,6 +169,17 @@ TEST(StudyKnobs, SleepSetsTheSleepSpeedAndZeroTurnsItOff) {
   EXPECT_THROW(applySetting({{"sleep", 0.05}}, sc, "--only"), InputError);
 }
 
+// The warm_start knob sets the scene's carried fraction and is solver pbd's alone.
+TEST(StudyKnobs, WarmStartSetsTheCarriedFraction) {
+  SceneDesc sc;
+  applySetting({{"warm_start", 0.6}}, sc, "--only");
+  EXPECT_DOUBLE_EQ(sc.warmStart, 0.6);
+  EXPECT_THROW(parseVary("warm_start=-0.1"), InputError);
+  EXPECT_THROW(parseVary("warm_start=0.95"), InputError);
+  sc.solver = SolverKind::kMpm;
+  EXPECT_THROW(applySetting({{"warm_start", 0.6}}, sc, "--only"), InputError);
+}
+
 TEST(StudyKnobs, VoxelSetsTheWorkspaceEdgeAndDtMustDivideAFrame) {
   SceneDesc sc;
   sc.fps = 30;

@@ -797,6 +797,45 @@ TEST(Scene, SleepIsOnByDefaultAndEveryBadValueNamesItsField) {
   EXPECT_EQ(sceneError("sleep off\nsleep on\n").field(), "record");
 }
 
+// warm_start F [AVERAGES]: off by default; F in [0, 0.9], AVERAGES 0..8 (4 by default).
+TEST(Scene, WarmStartIsOffByDefaultAndEveryBadValueNamesItsField) {
+  const SceneDesc d = parseScene(kGood, "dir/x.scene");
+  EXPECT_EQ(d.warmStart, 0.0);
+  EXPECT_EQ(d.warmSmoothing, 4);
+  EXPECT_EQ(d.warmStartLine, 0);
+  const SceneDesc set = parseScene(std::string(kGood) + "warm_start 0.6 3\n", "dir/x.scene");
+  EXPECT_DOUBLE_EQ(set.warmStart, 0.6);
+  EXPECT_EQ(set.warmSmoothing, 3);
+  EXPECT_EQ(set.warmStartLine, 10);
+  EXPECT_EQ(sceneError("warm_start 1\n").field(), "fraction");
+  EXPECT_EQ(sceneError("warm_start -0.1\n").field(), "fraction");
+  EXPECT_EQ(sceneError("warm_start nan\n").field(), "fraction");
+  EXPECT_EQ(sceneError("warm_start\n").field(), "fraction");
+  EXPECT_EQ(sceneError("warm_start 0.5 9\n").field(), "averages");
+  EXPECT_EQ(sceneError("warm_start 0.5 1.5\n").field(), "averages");
+  EXPECT_EQ(sceneError("warm_start 0.5 2 3\n").field(), "#3");
+  EXPECT_EQ(sceneError("warm_start 0.5\nwarm_start 0.6\n").field(), "record");
+}
+
+TEST(Support, WarmStartIsForSolverPbd) {
+  const SceneDesc scene = parseScene(std::string(kGood) + "solver mpm\nwarm_start 0.5\n", "dir/x.scene");
+  SolverSupport mpm;
+  mpm.solver = SolverKind::kMpm;
+  mpm.kinds = {MaterialKind::kElastic};
+  mpm.domainGrid = true;
+  const InputError e = supportError(scene, usesOfMaterials({{"wood", 2}}), mpm);
+  EXPECT_EQ(e.line(), 11);
+  EXPECT_NE(std::string(e.what()).find("warm_start: solver mpm (line 10) has no density multipliers"), std::string::npos)
+      << e.what();
+  SolverSupport pbd = mpm;
+  pbd.solver = SolverKind::kPbd;
+  pbd.kinds = {MaterialKind::kRigid};
+  pbd.domainGrid = false;
+  pbd.fluidWarmStart = true;
+  const SceneDesc p = parseScene(std::string(kGood) + "warm_start 0.5\n", "dir/x.scene");
+  EXPECT_NO_THROW(checkSupport(p, usesOfMaterials({{"wood", 2}}), pbd));
+}
+
 TEST(Support, SleepIsForSolverPbd) {
   const SceneDesc scene = parseScene(std::string(kGood) + "solver mpm\nsleep off\n", "dir/x.scene");
   SolverSupport mpm;

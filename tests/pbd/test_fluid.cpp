@@ -962,7 +962,8 @@ RestRun restColumn(float warm, int smoothing, int substeps) {
   return r;
 }
 TEST(FluidRest, AWarmStartHoldsAColumnAtFewerSubsteps) {
-  const RestRun cold = restColumn(0.0f, 2, 2), warm = restColumn(0.6f, 2, 2), raw = restColumn(0.6f, 0, 2);
+  const int averages = FluidParams().warmSmoothing;
+  const RestRun cold = restColumn(0.0f, averages, 2), warm = restColumn(0.6f, averages, 2), raw = restColumn(0.6f, 0, 2);
   std::printf("column at 2 substeps: cold %.5f m/s %.3f %%, warm %.5f m/s %.3f %%, warm unaveraged %.5f m/s %.3f %%\n",
               cold.speed, 100.0 * cold.compression, warm.speed, 100.0 * warm.compression, raw.speed,
               100.0 * raw.compression);
