@@ -7,17 +7,18 @@
 // Prints CSV rows `bench,case,particles,threads,metric,value,unit` (medians), one per pass,
 // and the worst mean density error of the timed steps; exits 1 when it exceeds 1 %, or when
 // the mean |rho/rho0 - 1| exceeds 10 % (a fluid come apart is not compressed either), so
-// speed is never bought with accuracy. Substeps default to 3: with 8 Jacobi iterations one
-// substep of 1/60 s leaves ~4 % mean compression in this dam break, two ~1.0 %, three ~0.5 %
-// (--substeps 1 prints the one-substep figures and fails the check).
+// speed is never bought with accuracy. By default 2 substeps with the warm start (--warm 0.6,
+// 4 averages: FluidParams::warmStart), the cheapest setting found that passes: 0.68 % mean
+// compression. Cold (--warm 0), 8 Jacobi iterations a substep of 1/60 s leave ~5 % in this
+// dam break, two ~1.3 % (fails), three ~0.6 % (`--substeps 3 --warm 0`, the default before
+// 2026-11-29); one warm substep passes at first but comes apart within 1 s (docs/benchmarks.md).
 //
 // --viscosity MU (Pa s) adds the implicit viscosity (0 by default: water's is below the
 // threshold where the pass runs); its cost shows in the velocity pass's row, and the last
 // substep's CG iterations in `viscosity_cg_iterations`.
 //
 // --warm F carries F of each substep's density multipliers into the next (FluidParams::
-// warmStart, averaged --warm-smoothing times over neighbours; 0 by default); its pass is the
-// `warm` row.
+// warmStart, averaged --warm-smoothing times over neighbours); its pass is the `warm` row.
 //
 //   bench_pbf [--threads N] [--steps S] [--warmup W] [--substeps K] [--relaxation E]
 //             [--kernel scalar|avx2] [--n NX NY NZ] [--viscosity MU] [--warm F] [--warm-smoothing N]
@@ -50,11 +51,11 @@ double cpuSeconds() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  int threads = 2, steps = 10, warmup = 20, substeps = 3, nx = 40, ny = 50, nz = 40;
+  int threads = 2, steps = 10, warmup = 20, substeps = 2, nx = 40, ny = 50, nz = 40;
   auto kernel = pbd::FluidSolver::Kernel::kAuto;
   float relaxation = pbd::FluidParams().relaxation;
   float viscosity = 0.0f;
-  float warm = 0.0f;
+  float warm = 0.6f;
   int warmSmoothing = pbd::FluidParams().warmSmoothing;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
