@@ -714,9 +714,8 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
       std::string why = n(c.fluid, "dynamic fluid bodies") + fluidSoundText();  // the compliance's sound speed (pbd/fluid.h)
       if (params_.warmStart > 0.0) {
         char w[96];
-        std::snprintf(w, sizeof w, "; warm start %.2g of the last substep's multipliers, averaged %d times",
-                      params_.warmStart, params_.warmSmoothing);
-        why += w;
+        std::snprintf(w, sizeof w, "; warm start %.2g of the last substep's multipliers, ", params_.warmStart);
+        why += w + (params_.warmSmoothing > 0 ? "averaged " + std::to_string(params_.warmSmoothing) + " times" : std::string("unaveraged"));
       }
       return why;
     }

@@ -923,6 +923,12 @@ TEST(Fluid, AWarmStartHoldsATankAtFewerSubsteps) {
     PbdParams pp = params(2, 8);
     pp.warmStart = warm;
     PbdWorld w(p, {tank, water}, mats, pp);
+    for (const PlanEntry& e : w.plan()) {  // the plan says what the density pass carries
+      if (e.name == std::string("density")) {
+        const bool said = e.reason.find("warm start 0.6 of the last substep's multipliers, averaged 4 times") != std::string::npos;
+        EXPECT_EQ(said, warm > 0.0) << e.reason;
+      }
+    }
     float vmax = 0.0f;
     for (int s = 0; s < 150; ++s) {
       EXPECT_TRUE(w.step()) << w.guard().message();
