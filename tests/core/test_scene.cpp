@@ -817,42 +817,35 @@ TEST(Scene, WarmStartIsOffByDefaultAndEveryBadValueNamesItsField) {
   EXPECT_EQ(sceneError("warm_start 0.5\nwarm_start 0.6\n").field(), "record");
 }
 
-TEST(Support, WarmStartIsForSolverPbd) {
-  const SceneDesc scene = parseScene(std::string(kGood) + "solver mpm\nwarm_start 0.5\n", "dir/x.scene");
+namespace {
+// A pbd-only record (at line 11, after `solver mpm` at line 10) is an error under mpm that
+// names the record and why, and fine under pbd.
+void expectPbdOnly(const std::string& record, const std::string& why, bool SolverSupport::*feature) {
+  const SceneDesc scene = parseScene(std::string(kGood) + "solver mpm\n" + record + "\n", "dir/x.scene");
   SolverSupport mpm;
   mpm.solver = SolverKind::kMpm;
   mpm.kinds = {MaterialKind::kElastic};
   mpm.domainGrid = true;
   const InputError e = supportError(scene, usesOfMaterials({{"wood", 2}}), mpm);
-  EXPECT_EQ(e.line(), 11);
-  EXPECT_NE(std::string(e.what()).find("warm_start: solver mpm (line 10) has no density multipliers"), std::string::npos)
-      << e.what();
+  EXPECT_EQ(e.line(), 11) << record;
+  EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
   SolverSupport pbd = mpm;
   pbd.solver = SolverKind::kPbd;
   pbd.kinds = {MaterialKind::kRigid};
   pbd.domainGrid = false;
-  pbd.fluidWarmStart = true;
-  const SceneDesc p = parseScene(std::string(kGood) + "warm_start 0.5\n", "dir/x.scene");
-  EXPECT_NO_THROW(checkSupport(p, usesOfMaterials({{"wood", 2}}), pbd));
+  pbd.*feature = true;
+  const SceneDesc p = parseScene(std::string(kGood) + record + "\n", "dir/x.scene");
+  EXPECT_NO_THROW(checkSupport(p, usesOfMaterials({{"wood", 2}}), pbd)) << record;
+}
+}  // namespace
+
+TEST(Support, WarmStartIsForSolverPbd) {
+  expectPbdOnly("warm_start 0.5", "warm_start: solver mpm (line 10) has no density multipliers",
+                &SolverSupport::fluidWarmStart);
 }
 
 TEST(Support, SleepIsForSolverPbd) {
-  const SceneDesc scene = parseScene(std::string(kGood) + "solver mpm\nsleep off\n", "dir/x.scene");
-  SolverSupport mpm;
-  mpm.solver = SolverKind::kMpm;
-  mpm.kinds = {MaterialKind::kElastic};
-  mpm.domainGrid = true;
-  const InputError e = supportError(scene, usesOfMaterials({{"wood", 2}}), mpm);
-  EXPECT_EQ(e.line(), 11);
-  EXPECT_NE(std::string(e.what()).find("sleep: solver mpm (line 10) has no bodies to put to sleep"), std::string::npos)
-      << e.what();
-  SolverSupport pbd = mpm;
-  pbd.solver = SolverKind::kPbd;
-  pbd.kinds = {MaterialKind::kRigid};
-  pbd.domainGrid = false;
-  pbd.sleeping = true;
-  const SceneDesc p = parseScene(std::string(kGood) + "sleep off\n", "dir/x.scene");
-  EXPECT_NO_THROW(checkSupport(p, usesOfMaterials({{"wood", 2}}), pbd));
+  expectPbdOnly("sleep off", "sleep: solver mpm (line 10) has no bodies to put to sleep", &SolverSupport::sleeping);
 }
 
 // scale k (PhysGen3D §A.4): g' = k g; mass held, so density' = density / k^3; E' = E / k (the
