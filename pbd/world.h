@@ -564,6 +564,13 @@ class PbdWorld final : public Solver {
   std::vector<float> fluidCarry_, startCarry_, fcarried_;
   std::vector<std::int32_t> fluidCarryIds_, startCarryIds_;
   int densityIteration_ = 0;  // density passes run this substep
+  // A thick rope's particle enters the fluid kernel as n x n solid samples filling its square
+  // cross-section (n = round(2 radius / spacing), the cross-section its mass is), each with its
+  // offset from the particle (m, in the plane across the rope's tangent) and its share of the
+  // particle's mass (1 / n^2); every other entry has offset 0 and share 1 (fluidNeighbors).
+  std::vector<float> foffx_, foffy_, foffz_, fshare_;
+  int strandSamples(std::size_t i) const;
+  Vec3 strandTangent(std::size_t i) const;
   void loadFluidPositions();
   void applyFluidCorrections();
   std::vector<float> frelax_, fxsph_, fvort_, fcoh_, fsound_, fmu_;  // per kernel particle, fluidMixed_ only

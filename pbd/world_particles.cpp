@@ -1225,6 +1225,33 @@ namespace physketch::pbd {
 
 // --- fluids (pbd/fluid.h) -------------------------------------------------------------
 
+// A rope particle thicker than a voxel fills n x n samples of the fluid kernel (fluidNeighbors):
+// n = round(2 radius / spacing), the side of the square cross-section its mass is (a rope
+// particle weighs density x spacing^3 x (2 radius / spacing)^2). Every other particle is one.
+int PbdWorld::strandSamples(std::size_t i) const {
+  const auto b = std::size_t(parts_.group(i));
+  if (kind_[b] != MaterialKind::kRope || !(strandRadius_[b] > 0.0f)) return 1;
+  return std::max(1, int(std::lround(double(strandRadius_[b]) / params_.particleRadius)));
+}
+
+// A rope particle's direction along the rope at its predicted position: from the particle
+// before it to the one after it on the chain (consecutive ids of its body within two
+// spacings; one side at an end), +x for a lone particle.
+Vec3 PbdWorld::strandTangent(std::size_t i) const {
+  const auto b = parts_.group(i);
+  const double reach = 4.0 * params_.particleRadius;
+  const Vec3 x = at(px_, py_, pz_, i);
+  const auto near = [&](std::size_t j, Vec3& out) {
+    if (j >= parts_.size() || parts_.group(j) != b) return false;
+    out = at(px_, py_, pz_, j);
+    return (out - x).norm() < reach;
+  };
+  Vec3 prev = x, next = x;
+  const bool hasPrev = i > 0 && near(i - 1, prev), hasNext = near(i + 1, next);
+  const Vec3 t = (hasNext ? next : x) - (hasPrev ? prev : x);
+  return t.norm() > 0.0 ? Vec3(t.normalized()) : Vec3::UnitX();
+}
+
 // One kernel for every fluid of the scene, kernel radius 2.1 spacings (~30 neighbours,
 // Macklin & Müller 2013). Each particle keeps its own rest density, so fluids of different
 // densities layer, and its own material's xsph_viscosity, vorticity, cohesion, relaxation
@@ -1320,15 +1347,38 @@ void PbdWorld::fluidNeighbors() {
   const double reachH = fluid_->params().kernelRadius;
   box.min().array() -= reachH;
   box.max().array() += reachH;
+  foffx_.assign(fluidCount_, 0.0f), foffy_.assign(fluidCount_, 0.0f), foffz_.assign(fluidCount_, 0.0f);
+  fshare_.assign(fluidCount_, 1.0f);
+  const auto entry = [&](std::int32_t i, const Vec3& off, float share) {
+    fluidIds_.push_back(i);
+    foffx_.push_back(float(off.x())), foffy_.push_back(float(off.y())), foffz_.push_back(float(off.z()));
+    fshare_.push_back(share);
+  };
   for (std::int32_t i : loose_) {
     const auto k = std::size_t(i);
     if (phase::has(parts_.phase[k], phase::kFluid)) continue;
-    if (box.contains(at(px_, py_, pz_, k))) fluidIds_.push_back(i);
+    const int ns = strandSamples(k);
+    const Vec3 x = at(px_, py_, pz_, k);
+    if (ns == 1) {
+      if (box.contains(x)) entry(i, Vec3::Zero(), 1.0f);
+      continue;
+    }
+    if (box.exteriorDistance(x) > radiusOf(k)) continue;
+    // A thick rope's cross-section, n x n samples at spacing s = 2 radius / n across the
+    // tangent, in a fixed order.
+    const Vec3 t = strandTangent(k);
+    int minor = 0;
+    t.cwiseAbs().minCoeff(&minor);
+    const Vec3 u = t.cross(Vec3::Unit(minor)).normalized(), v = t.cross(u);
+    const double radius = radiusOf(k), step = 2.0 * radius / ns;
+    for (int a = 0; a < ns; ++a)
+      for (int c = 0; c < ns; ++c)
+        entry(i, ((a + 0.5) * step - radius) * u + ((c + 0.5) * step - radius) * v, 1.0f / float(ns * ns));
   }
   for (std::size_t b = 0; b < members_.size(); ++b) {
     if (!isRigid(b) || mode_[b] == BodyMode::kEmpty || box.exteriorDistance(motion_[b].c) > reach_[b]) continue;
     for (std::int32_t i : members_[b])
-      if (box.contains(rigidPoint(std::size_t(i)))) fluidIds_.push_back(i);
+      if (box.contains(rigidPoint(std::size_t(i)))) entry(i, Vec3::Zero(), 1.0f);
   }
   const std::size_t n = fluidIds_.size();
   fx_.resize(n), fy_.resize(n), fz_.resize(n), fw_.resize(n), frho_.resize(n), fflag_.resize(n);
@@ -1337,9 +1387,10 @@ void PbdWorld::fluidNeighbors() {
     const auto i = std::size_t(fluidIds_[k]);
     const auto b = std::size_t(parts_.group(i));
     const bool rigid = isRigid(b);
-    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(px_, py_, pz_, i));
+    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(px_, py_, pz_, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
     fflag_[k] = k < fluidCount_ ? 1 : 0;
-    fw_[k] = rigid ? (moving(b) ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i];  // a sleeper: at rest, fixed
+    // A sleeper: at rest, fixed. A thick rope's sample: its share of the particle's mass.
+    fw_[k] = rigid ? (moving(b) ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i] / fshare_[k];
     frho_[k] = static_cast<float>(materials_[std::size_t(parts_.material[i])].density);
   }
   if (fluidMixed_) {  // each fluid particle its material's parameters (solids' entries unread)
@@ -1408,7 +1459,8 @@ void PbdWorld::loadFluidPositions() {
   const std::size_t n = fluidIds_.size();
   for (std::size_t k = 0; k < n; ++k) {
     const auto i = std::size_t(fluidIds_[k]);
-    put(fx_, fy_, fz_, k, isRigid(std::size_t(parts_.group(i))) ? rigidPoint(i) : at(px_, py_, pz_, i));
+    put(fx_, fy_, fz_, k,
+        isRigid(std::size_t(parts_.group(i))) ? rigidPoint(i) : at(px_, py_, pz_, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
   }
   fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
 }
@@ -1424,8 +1476,8 @@ void PbdWorld::applyFluidCorrections() {
     const auto i = std::size_t(fluidIds_[k]);
     const Vec3 d(fdx_[k], fdy_[k], fdz_[k]);
     const auto b = std::size_t(parts_.group(i));
-    if (!isRigid(b)) {
-      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + d);
+    if (!isRigid(b)) {  // a thick rope's sample moves its particle by its share: sum m dp / M
+      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + double(fshare_[k]) * d);
       continue;
     }
     auto it = impulse.find(b);
@@ -1461,9 +1513,11 @@ void PbdWorld::fluidVelocity(double h) {
     const auto i = std::size_t(fluidIds_[k]);
     const auto b = std::size_t(parts_.group(i));
     if (!isRigid(b)) {
-      put(fx_, fy_, fz_, k, at(parts_.x, parts_.y, parts_.z, i));
+      put(fx_, fy_, fz_, k, at(parts_.x, parts_.y, parts_.z, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
       vx[k] = parts_.vx[i], vy[k] = parts_.vy[i], vz[k] = parts_.vz[i];
-      if (k >= fluidCount_ && fw_[k] > 0.0f) role[k] = ViscousSolids::kFree;
+      // A thick rope's samples are fixed velocities to the viscosity (one way): n^2 rows of
+      // one particle would be n^2 unknowns of one velocity.
+      if (k >= fluidCount_ && fw_[k] > 0.0f && fshare_[k] == 1.0f) role[k] = ViscousSolids::kFree;
       continue;
     }
     const Vec3 p = rigidPoint(i), v = motion_[b].v + motion_[b].w.cross(p - motion_[b].c);
