@@ -286,7 +286,7 @@ SceneDesc build(const RecordFile& file) {
         if (f.count() > 1) s.sleepTime = f.inRange(1, 1e-3, 3600.0);
       }
     } else if (kw == "warm_start") {
-      // warm_start F [AVERAGES]: F in [0, 0.9] (0 = off), AVERAGES 0..8 (default 2)
+      // warm_start F [AVERAGES]: F in [0, 0.9] (0 = off), AVERAGES 0..8 (default 4)
       FieldReader f(file, r, {"fraction", "averages"}, 1);
       s.warmStartLine = r.line;
       s.warmStart = f.inRange(0, 0.0, 0.9);

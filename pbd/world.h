@@ -563,6 +563,7 @@ class PbdWorld final : public Solver {
   // of a step for the guard's replay; carried only while the fluid's particles are the same.
   std::vector<float> fluidCarry_, startCarry_, fcarried_;
   std::vector<std::int32_t> fluidCarryIds_, startCarryIds_;
+  std::uint64_t fluidCarryEdits_ = 0;  // bodyEdits_ when the carry was kept (bodyEdits_ is not replayed)
   int densityIteration_ = 0;  // density passes run this substep
   // A thick rope's particle enters the fluid kernel as n x n solid samples filling its square
   // cross-section (n = round(2 radius / spacing), the cross-section its mass is), each with its

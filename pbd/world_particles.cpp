@@ -1338,7 +1338,10 @@ void PbdWorld::fluidNeighbors() {
     v2 = std::max(v2, (parts_.vx[k] * parts_.vx[k] + parts_.vy[k] * parts_.vy[k]) + parts_.vz[k] * parts_.vz[k]);
   }
   fluidCount_ = fluidIds_.size();
-  if (fluidCount_ == 0) return;
+  if (fluidCount_ == 0) {  // nothing to carry across a time without dynamic fluid
+    fluidCarry_.clear(), fluidCarryIds_.clear();
+    return;
+  }
   if (fluidSoundAuto_) {
     const double height = box.max().y() - box.min().y() + 2.0 * params_.particleRadius;
     fluidSoundSpeed_ = std::max(fluidSoundSpeed_, FluidSolver::autoSoundSpeed(static_cast<float>(params_.gravity.norm()),
@@ -1419,10 +1422,10 @@ void PbdWorld::fluidNeighbors() {
     in.relaxation = frelax_.data(), in.xsph = fxsph_.data(), in.vorticity = fvort_.data(), in.cohesion = fcoh_.data();
     in.soundSpeeds = fsound_.data(), in.viscosity = fmu_.data();
   }
-  // The last substep's multipliers, while the fluid's particles are the same ones (a sketch
-  // edit, a cut or a particle fixed starts the solve from zero once).
+  // The last substep's multipliers, while the fluid's particles are the same ones and no body
+  // was edited since (a sketch edit, a cut, a particle fixed starts the solve from zero once).
   densityIteration_ = 0;
-  if (params_.warmStart > 0.0 && fluidCarryIds_.size() == fluidCount_ &&
+  if (params_.warmStart > 0.0 && fluidCarryEdits_ == bodyEdits_ && fluidCarryIds_.size() == fluidCount_ &&
       std::equal(fluidCarryIds_.begin(), fluidCarryIds_.end(), fluidIds_.begin())) {
     fcarried_.assign(n, 0.0f);
     std::copy(fluidCarry_.begin(), fluidCarry_.end(), fcarried_.begin());
@@ -1450,6 +1453,7 @@ void PbdWorld::density() {
     fluid_->multipliers(fcarried_.data());
     fluidCarry_.assign(fcarried_.begin(), fcarried_.begin() + std::ptrdiff_t(fluidCount_));
     fluidCarryIds_.assign(fluidIds_.begin(), fluidIds_.begin() + std::ptrdiff_t(fluidCount_));
+    fluidCarryEdits_ = bodyEdits_;
   }
 }
 
@@ -1509,15 +1513,29 @@ void PbdWorld::fluidVelocity(double h) {
   std::vector<std::int32_t> role(n, ViscousSolids::kFixed);
   std::vector<std::size_t> bodies;             // table index -> body
   std::map<std::size_t, std::int32_t> index;   // body -> table index
+  // A dynamic thick rope particle's samples are one unknown of the particle's own, entered as
+  // a body of their square (its mass, the samples' inertia about it; the spin it would take is
+  // dropped, a rope particle has none): table index bodies.size() + ropeOf[k].
+  std::vector<std::size_t> ropeParticles;
+  std::map<std::size_t, std::int32_t> ropeIndex;  // particle -> its place in ropeParticles
+  std::vector<std::int32_t> ropeOf(n, -1);
   for (std::size_t k = 0; k < n; ++k) {
     const auto i = std::size_t(fluidIds_[k]);
     const auto b = std::size_t(parts_.group(i));
     if (!isRigid(b)) {
       put(fx_, fy_, fz_, k, at(parts_.x, parts_.y, parts_.z, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
       vx[k] = parts_.vx[i], vy[k] = parts_.vy[i], vz[k] = parts_.vz[i];
-      // A thick rope's samples are fixed velocities to the viscosity (one way): n^2 rows of
-      // one particle would be n^2 unknowns of one velocity.
-      if (k >= fluidCount_ && fw_[k] > 0.0f && fshare_[k] == 1.0f) role[k] = ViscousSolids::kFree;
+      if (k < fluidCount_ || !(fw_[k] > 0.0f)) continue;
+      if (fshare_[k] == 1.0f) {
+        role[k] = ViscousSolids::kFree;
+        continue;
+      }
+      auto it = ropeIndex.find(i);
+      if (it == ropeIndex.end()) {
+        it = ropeIndex.emplace(i, std::int32_t(ropeParticles.size())).first;
+        ropeParticles.push_back(i);
+      }
+      ropeOf[k] = it->second;
       continue;
     }
     const Vec3 p = rigidPoint(i), v = motion_[b].v + motion_[b].w.cross(p - motion_[b].c);
@@ -1531,10 +1549,13 @@ void PbdWorld::fluidVelocity(double h) {
     }
     role[k] = it->second;
   }
-  const std::size_t nb = bodies.size();
+  const std::size_t nb = bodies.size(), nr = ropeParticles.size();
   viscousBodies_ = nb;
-  viscousLoose_ = std::size_t(std::count(role.begin(), role.end(), ViscousSolids::kFree));
-  std::vector<double> mass(nb), inertia(9 * nb), centre(3 * nb), bv(3 * nb), bw(3 * nb);
+  viscousLoose_ = std::size_t(std::count(role.begin(), role.end(), ViscousSolids::kFree)) + nr;
+  for (std::size_t k = 0; k < n; ++k)
+    if (ropeOf[k] >= 0) role[k] = std::int32_t(nb) + ropeOf[k];
+  std::vector<double> mass(nb + nr), inertia(9 * (nb + nr), 0.0), centre(3 * (nb + nr)), bv(3 * (nb + nr)),
+      bw(3 * (nb + nr), 0.0);
   for (std::size_t t = 0; t < nb; ++t) {
     const std::size_t b = bodies[t];
     const Motion& mo = motion_[b];
@@ -1546,8 +1567,23 @@ void PbdWorld::fluidVelocity(double h) {
       centre[3 * t + std::size_t(r)] = mo.c[r], bv[3 * t + std::size_t(r)] = mo.v[r], bw[3 * t + std::size_t(r)] = mo.w[r];
     }
   }
+  for (std::size_t r = 0; r < nr; ++r) {
+    const std::size_t i = ropeParticles[r], t = nb + r;
+    mass[t] = double(parts_.mass[i]);
+    centre[3 * t] = parts_.x[i], centre[3 * t + 1] = parts_.y[i], centre[3 * t + 2] = parts_.z[i];
+    bv[3 * t] = parts_.vx[i], bv[3 * t + 1] = parts_.vy[i], bv[3 * t + 2] = parts_.vz[i];
+  }
+  for (std::size_t k = 0; k < n; ++k) {  // the samples' inertia about their particle: sum m (|r|^2 1 - r r^T)
+    if (ropeOf[k] < 0) continue;
+    const std::size_t t = nb + std::size_t(ropeOf[k]);
+    const Vec3 r(foffx_[k], foffy_[k], foffz_[k]);
+    const Mat3 I = (double(parts_.mass[std::size_t(fluidIds_[k])]) * double(fshare_[k])) *
+                   (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c) inertia[9 * t + std::size_t(3 * a + c)] += I(a, c);
+  }
   ViscousSolids solids;
-  solids.role = role.data(), solids.bodies = nb;
+  solids.role = role.data(), solids.bodies = nb + nr;
   solids.mass = mass.data(), solids.inertia = inertia.data(), solids.centre = centre.data();
   solids.v = bv.data(), solids.w = bw.data();
   fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
@@ -1561,6 +1597,10 @@ void PbdWorld::fluidVelocity(double h) {
     Motion& mo = motion_[bodies[t]];
     mo.v = Vec3(bv[3 * t], bv[3 * t + 1], bv[3 * t + 2]);
     mo.w = Vec3(bw[3 * t], bw[3 * t + 1], bw[3 * t + 2]);
+  }
+  for (std::size_t r = 0; r < nr; ++r) {
+    const std::size_t i = ropeParticles[r], t = nb + r;
+    parts_.vx[i] = float(bv[3 * t]), parts_.vy[i] = float(bv[3 * t + 1]), parts_.vz[i] = float(bv[3 * t + 2]);
   }
 }
 
