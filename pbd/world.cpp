@@ -850,7 +850,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
     case PbdPass::kFindNeighbors: return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j);
     case PbdPass::kParticleContact: return surface(contacts_.particlePlane);
     case PbdPass::kFluidNeighbors: return fluid_ ? fluid_->neighborBytes() : 0;
-    case PbdPass::kDensity: return (fluid_ ? fluid_->solverBytes() : 0) + heldBytes(fluidIds_, fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_, fflag_, foffx_, foffy_, foffz_, fshare_);
+    case PbdPass::kDensity: return (fluid_ ? fluid_->solverBytes() : 0) + heldBytes(fluidIds_, fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_, fflag_, fsample_);
     case PbdPass::kClusterMatch: {
       const SoftClusters& c = clusters_;
       // (offset starts as {0}, one entry, before any cluster: not the pass's.)

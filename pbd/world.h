@@ -569,7 +569,17 @@ class PbdWorld final : public Solver {
   // cross-section (n = round(2 radius / spacing), the cross-section its mass is), each with its
   // offset from the particle (m, in the plane across the rope's tangent) and its share of the
   // particle's mass (1 / n^2); every other entry has offset 0 and share 1 (fluidNeighbors).
-  std::vector<float> foffx_, foffy_, foffz_, fshare_;
+  // Kept for the solid entries only (index k - fluidCount_): fluid entries are never samples.
+  struct FluidSample {
+    float x, y, z, share;
+  };
+  std::vector<FluidSample> fsample_;
+  Vec3 sampleOffset(std::size_t k) const {
+    if (k < fluidCount_) return Vec3::Zero();
+    const FluidSample& s = fsample_[k - fluidCount_];
+    return Vec3(s.x, s.y, s.z);
+  }
+  float sampleShare(std::size_t k) const { return k < fluidCount_ ? 1.0f : fsample_[k - fluidCount_].share; }
   int strandSamples(std::size_t i) const;
   Vec3 strandTangent(std::size_t i) const;
   void loadFluidPositions();

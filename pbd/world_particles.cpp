@@ -1350,12 +1350,10 @@ void PbdWorld::fluidNeighbors() {
   const double reachH = fluid_->params().kernelRadius;
   box.min().array() -= reachH;
   box.max().array() += reachH;
-  foffx_.assign(fluidCount_, 0.0f), foffy_.assign(fluidCount_, 0.0f), foffz_.assign(fluidCount_, 0.0f);
-  fshare_.assign(fluidCount_, 1.0f);
+  fsample_.clear();
   const auto entry = [&](std::int32_t i, const Vec3& off, float share) {
     fluidIds_.push_back(i);
-    foffx_.push_back(float(off.x())), foffy_.push_back(float(off.y())), foffz_.push_back(float(off.z()));
-    fshare_.push_back(share);
+    fsample_.push_back({float(off.x()), float(off.y()), float(off.z()), share});
   };
   for (std::int32_t i : loose_) {
     const auto k = std::size_t(i);
@@ -1390,10 +1388,10 @@ void PbdWorld::fluidNeighbors() {
     const auto i = std::size_t(fluidIds_[k]);
     const auto b = std::size_t(parts_.group(i));
     const bool rigid = isRigid(b);
-    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(px_, py_, pz_, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
+    put(fx_, fy_, fz_, k, rigid ? rigidPoint(i) : at(px_, py_, pz_, i) + sampleOffset(k));
     fflag_[k] = k < fluidCount_ ? 1 : 0;
     // A sleeper: at rest, fixed. A thick rope's sample: its share of the particle's mass.
-    fw_[k] = rigid ? (moving(b) ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i] / fshare_[k];
+    fw_[k] = rigid ? (moving(b) ? 1.0f / parts_.mass[i] : 0.0f) : invMassP_[i] / sampleShare(k);
     frho_[k] = static_cast<float>(materials_[std::size_t(parts_.material[i])].density);
   }
   if (fluidMixed_) {  // each fluid particle its material's parameters (solids' entries unread)
@@ -1464,7 +1462,7 @@ void PbdWorld::loadFluidPositions() {
   for (std::size_t k = 0; k < n; ++k) {
     const auto i = std::size_t(fluidIds_[k]);
     put(fx_, fy_, fz_, k,
-        isRigid(std::size_t(parts_.group(i))) ? rigidPoint(i) : at(px_, py_, pz_, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
+        isRigid(std::size_t(parts_.group(i))) ? rigidPoint(i) : at(px_, py_, pz_, i) + sampleOffset(k));
   }
   fluid_->setPositions(fx_.data(), fy_.data(), fz_.data());
 }
@@ -1481,7 +1479,7 @@ void PbdWorld::applyFluidCorrections() {
     const Vec3 d(fdx_[k], fdy_[k], fdz_[k]);
     const auto b = std::size_t(parts_.group(i));
     if (!isRigid(b)) {  // a thick rope's sample moves its particle by its share: sum m dp / M
-      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + double(fshare_[k]) * d);
+      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + double(sampleShare(k)) * d);
       continue;
     }
     auto it = impulse.find(b);
@@ -1523,10 +1521,10 @@ void PbdWorld::fluidVelocity(double h) {
     const auto i = std::size_t(fluidIds_[k]);
     const auto b = std::size_t(parts_.group(i));
     if (!isRigid(b)) {
-      put(fx_, fy_, fz_, k, at(parts_.x, parts_.y, parts_.z, i) + Vec3(foffx_[k], foffy_[k], foffz_[k]));
+      put(fx_, fy_, fz_, k, at(parts_.x, parts_.y, parts_.z, i) + sampleOffset(k));
       vx[k] = parts_.vx[i], vy[k] = parts_.vy[i], vz[k] = parts_.vz[i];
       if (k < fluidCount_ || !(fw_[k] > 0.0f)) continue;
-      if (fshare_[k] == 1.0f) {
+      if (sampleShare(k) == 1.0f) {
         role[k] = ViscousSolids::kFree;
         continue;
       }
@@ -1576,8 +1574,8 @@ void PbdWorld::fluidVelocity(double h) {
   for (std::size_t k = 0; k < n; ++k) {  // the samples' inertia about their particle: sum m (|r|^2 1 - r r^T)
     if (ropeOf[k] < 0) continue;
     const std::size_t t = nb + std::size_t(ropeOf[k]);
-    const Vec3 r(foffx_[k], foffy_[k], foffz_[k]);
-    const Mat3 I = (double(parts_.mass[std::size_t(fluidIds_[k])]) * double(fshare_[k])) *
+    const Vec3 r = sampleOffset(k);
+    const Mat3 I = (double(parts_.mass[std::size_t(fluidIds_[k])]) * double(sampleShare(k))) *
                    (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
     for (int a = 0; a < 3; ++a)
       for (int c = 0; c < 3; ++c) inertia[9 * t + std::size_t(3 * a + c)] += I(a, c);
