@@ -170,6 +170,10 @@ class PbdWorld final : public Solver {
   // The fluids' density error rho/rho0 - 1 at the end of the last substep's iterations
   // (fluidCount 0 when the scene has no moving fluid).
   DensityError fluidDensityError() const;
+  // With the warm start on (PbdParams::warmStart), how many substeps' density solves started
+  // from zero multipliers: the first, and the first after any body edit (a sketch edit, a cut,
+  // a new body) or after a time when no fluid particle was dynamic.
+  long fluidColdStarts() const { return fluidColdStarts_; }
   // The particle pairs of the body pairs that may touch, at the poses now: what find_contacts
   // hands body_contact (for tests and tools; it refreshes the kept lists and wakes no sleeper,
   // so it never changes what a later step does).
@@ -564,11 +568,13 @@ class PbdWorld final : public Solver {
   std::vector<float> fluidCarry_, startCarry_, fcarried_;
   std::vector<std::int32_t> fluidCarryIds_, startCarryIds_;
   std::uint64_t fluidCarryEdits_ = 0;  // bodyEdits_ when the carry was kept (bodyEdits_ is not replayed)
+  long fluidColdStarts_ = 0, startColdStarts_ = 0;  // fluidColdStarts(); at the start of a step, for the replay
   int densityIteration_ = 0;  // density passes run this substep
   // A thick rope's particle enters the fluid kernel as n x n solid samples filling its square
-  // cross-section (n = round(2 radius / spacing), the cross-section its mass is), each with its
-  // offset from the particle (m, in the plane across the rope's tangent) and its share of the
-  // particle's mass (1 / n^2); every other entry has offset 0 and share 1 (fluidNeighbors).
+  // cross-section (n = round(2 radius / spacing), the cross-section its mass is), a thick
+  // cloth's as n samples across its sheet (along sheetNormal), each with its offset from the
+  // particle (m) and its share of the particle's mass (1 / n^2, 1 / n); every other entry has
+  // offset 0 and share 1 (fluidNeighbors).
   // Kept for the solid entries only (index k - fluidCount_): fluid entries are never samples.
   struct FluidSample {
     float x, y, z, share;
@@ -582,6 +588,7 @@ class PbdWorld final : public Solver {
   float sampleShare(std::size_t k) const { return k < fluidCount_ ? 1.0f : fsample_[k - fluidCount_].share; }
   int strandSamples(std::size_t i) const;
   Vec3 strandTangent(std::size_t i) const;
+  Vec3 sheetNormal(std::size_t i) const;
   void loadFluidPositions();
   void applyFluidCorrections();
   std::vector<float> frelax_, fxsph_, fvort_, fcoh_, fsound_, fmu_;  // per kernel particle, fluidMixed_ only

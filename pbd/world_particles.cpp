@@ -1225,12 +1225,16 @@ namespace physketch::pbd {
 
 // --- fluids (pbd/fluid.h) -------------------------------------------------------------
 
-// A rope particle thicker than a voxel fills n x n samples of the fluid kernel (fluidNeighbors):
-// n = round(2 radius / spacing), the side of the square cross-section its mass is (a rope
-// particle weighs density x spacing^3 x (2 radius / spacing)^2). Every other particle is one.
+// A rope or cloth particle thicker than a voxel is several samples of the fluid kernel
+// (fluidNeighbors): n = round(2 radius / spacing) across. A rope particle weighs density x
+// spacing^3 x (2 radius / spacing)^2, the square cross-section n x n samples fill; a cloth
+// particle density x spacing^3 x (2 radius / spacing), the n samples across its sheet. Every
+// other particle (and a cloth drawn as no lattice) is one.
 int PbdWorld::strandSamples(std::size_t i) const {
   const auto b = std::size_t(parts_.group(i));
-  if (kind_[b] != MaterialKind::kRope || !(strandRadius_[b] > 0.0f)) return 1;
+  const bool rope = kind_[b] == MaterialKind::kRope,
+             sheet = kind_[b] == MaterialKind::kCloth && lattice_[b][1] >= 1 && lattice_[b][2] >= 1;
+  if (!(rope || sheet) || !(strandRadius_[b] > 0.0f)) return 1;
   return std::max(1, int(std::lround(double(strandRadius_[b]) / params_.particleRadius)));
 }
 
@@ -1250,6 +1254,33 @@ Vec3 PbdWorld::strandTangent(std::size_t i) const {
   const bool hasPrev = i > 0 && near(i - 1, prev), hasNext = near(i + 1, next);
   const Vec3 t = (hasNext ? next : x) - (hasPrev ? prev : x);
   return t.norm() > 0.0 ? Vec3(t.normalized()) : Vec3::UnitX();
+}
+
+// A cloth particle's normal to its sheet at the predicted positions: the cross product of the
+// lattice's directions along its row and down its column, each from the neighbour before to the
+// one after (one side at an edge; neighbours of its body within two spacings), +y where the
+// lattice gives none (a lone particle, a row or column cut away).
+Vec3 PbdWorld::sheetNormal(std::size_t i) const {
+  const auto b = std::size_t(parts_.group(i));
+  const std::int64_t first = lattice_[b][0], cols = lattice_[b][2], k = std::int64_t(i) - first;
+  const std::int64_t row = k / cols, col = k % cols, rows = lattice_[b][1];
+  if (k < 0 || row >= rows) return Vec3::UnitY();
+  const double reach = 4.0 * params_.particleRadius;
+  const Vec3 x = at(px_, py_, pz_, i);
+  const auto along = [&](std::int64_t dr, std::int64_t dc) {  // from the neighbour before to the one after
+    Vec3 ends[2] = {x, x};
+    for (int s = 0; s < 2; ++s) {
+      const std::int64_t r = row + (s ? dr : -dr), c = col + (s ? dc : -dc);
+      if (r < 0 || r >= rows || c < 0 || c >= cols) continue;
+      const auto j = std::size_t(first + r * cols + c);
+      if (j >= parts_.size() || std::size_t(parts_.group(j)) != b) continue;
+      const Vec3 y = at(px_, py_, pz_, j);
+      if ((y - x).norm() < reach) ends[s] = y;
+    }
+    return Vec3(ends[1] - ends[0]);
+  };
+  const Vec3 n = along(0, 1).cross(along(1, 0));
+  return n.norm() > 0.0 ? Vec3(n.normalized()) : Vec3::UnitY();
 }
 
 // One kernel for every fluid of the scene, kernel radius 2.1 spacings (~30 neighbours,
@@ -1365,13 +1396,18 @@ void PbdWorld::fluidNeighbors() {
       continue;
     }
     if (box.exteriorDistance(x) > radiusOf(k)) continue;
+    const double radius = radiusOf(k), step = 2.0 * radius / ns;
+    if (kind_[std::size_t(parts_.group(k))] == MaterialKind::kCloth) {  // n samples across the sheet
+      const Vec3 nrm = sheetNormal(k);
+      for (int a = 0; a < ns; ++a) entry(i, ((a + 0.5) * step - radius) * nrm, 1.0f / float(ns));
+      continue;
+    }
     // A thick rope's cross-section, n x n samples at spacing s = 2 radius / n across the
     // tangent, in a fixed order.
     const Vec3 t = strandTangent(k);
     int minor = 0;
     t.cwiseAbs().minCoeff(&minor);
     const Vec3 u = t.cross(Vec3::Unit(minor)).normalized(), v = t.cross(u);
-    const double radius = radiusOf(k), step = 2.0 * radius / ns;
     for (int a = 0; a < ns; ++a)
       for (int c = 0; c < ns; ++c)
         entry(i, ((a + 0.5) * step - radius) * u + ((c + 0.5) * step - radius) * v, 1.0f / float(ns * ns));
@@ -1428,6 +1464,8 @@ void PbdWorld::fluidNeighbors() {
     fcarried_.assign(n, 0.0f);
     std::copy(fluidCarry_.begin(), fluidCarry_.end(), fcarried_.begin());
     in.carried = fcarried_.data();
+  } else if (params_.warmStart > 0.0) {
+    ++fluidColdStarts_;
   }
   fluid_->begin(in);
 }
@@ -1511,12 +1549,12 @@ void PbdWorld::fluidVelocity(double h) {
   std::vector<std::int32_t> role(n, ViscousSolids::kFixed);
   std::vector<std::size_t> bodies;             // table index -> body
   std::map<std::size_t, std::int32_t> index;   // body -> table index
-  // A dynamic thick rope particle's samples are one unknown of the particle's own, entered as
-  // a body of their square (its mass, the samples' inertia about it; the spin it would take is
-  // dropped, a rope particle has none): table index bodies.size() + ropeOf[k].
-  std::vector<std::size_t> ropeParticles;
-  std::map<std::size_t, std::int32_t> ropeIndex;  // particle -> its place in ropeParticles
-  std::vector<std::int32_t> ropeOf(n, -1);
+  // A dynamic thick rope or cloth particle's samples are one unknown of the particle's own,
+  // entered as a body of their square or column (its mass, the samples' inertia about it; the
+  // spin it would take is dropped, a strand particle has none): table index bodies.size() + strandOf[k].
+  std::vector<std::size_t> strandParticles;
+  std::map<std::size_t, std::int32_t> strandIndex;  // particle -> its place in strandParticles
+  std::vector<std::int32_t> strandOf(n, -1);
   for (std::size_t k = 0; k < n; ++k) {
     const auto i = std::size_t(fluidIds_[k]);
     const auto b = std::size_t(parts_.group(i));
@@ -1528,12 +1566,12 @@ void PbdWorld::fluidVelocity(double h) {
         role[k] = ViscousSolids::kFree;
         continue;
       }
-      auto it = ropeIndex.find(i);
-      if (it == ropeIndex.end()) {
-        it = ropeIndex.emplace(i, std::int32_t(ropeParticles.size())).first;
-        ropeParticles.push_back(i);
+      auto it = strandIndex.find(i);
+      if (it == strandIndex.end()) {
+        it = strandIndex.emplace(i, std::int32_t(strandParticles.size())).first;
+        strandParticles.push_back(i);
       }
-      ropeOf[k] = it->second;
+      strandOf[k] = it->second;
       continue;
     }
     const Vec3 p = rigidPoint(i), v = motion_[b].v + motion_[b].w.cross(p - motion_[b].c);
@@ -1547,11 +1585,11 @@ void PbdWorld::fluidVelocity(double h) {
     }
     role[k] = it->second;
   }
-  const std::size_t nb = bodies.size(), nr = ropeParticles.size();
+  const std::size_t nb = bodies.size(), nr = strandParticles.size();
   viscousBodies_ = nb;
   viscousLoose_ = std::size_t(std::count(role.begin(), role.end(), ViscousSolids::kFree)) + nr;
   for (std::size_t k = 0; k < n; ++k)
-    if (ropeOf[k] >= 0) role[k] = std::int32_t(nb) + ropeOf[k];
+    if (strandOf[k] >= 0) role[k] = std::int32_t(nb) + strandOf[k];
   std::vector<double> mass(nb + nr), inertia(9 * (nb + nr), 0.0), centre(3 * (nb + nr)), bv(3 * (nb + nr)),
       bw(3 * (nb + nr), 0.0);
   for (std::size_t t = 0; t < nb; ++t) {
@@ -1566,17 +1604,21 @@ void PbdWorld::fluidVelocity(double h) {
     }
   }
   for (std::size_t r = 0; r < nr; ++r) {
-    const std::size_t i = ropeParticles[r], t = nb + r;
+    const std::size_t i = strandParticles[r], t = nb + r;
     mass[t] = double(parts_.mass[i]);
     centre[3 * t] = parts_.x[i], centre[3 * t + 1] = parts_.y[i], centre[3 * t + 2] = parts_.z[i];
     bv[3 * t] = parts_.vx[i], bv[3 * t + 1] = parts_.vy[i], bv[3 * t + 2] = parts_.vz[i];
   }
-  for (std::size_t k = 0; k < n; ++k) {  // the samples' inertia about their particle: sum m (|r|^2 1 - r r^T)
-    if (ropeOf[k] < 0) continue;
-    const std::size_t t = nb + std::size_t(ropeOf[k]);
+  // The samples' inertia about their particle, sum m (|r|^2 1 - r r^T), and each sample's own as a
+  // cube of a spacing's side (m s^2 / 6): a cloth particle's samples lie on a line, which alone
+  // would leave the block singular about it.
+  const double own = std::pow(2.0 * params_.particleRadius, 2) / 6.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (strandOf[k] < 0) continue;
+    const std::size_t t = nb + std::size_t(strandOf[k]);
     const Vec3 r = sampleOffset(k);
     const Mat3 I = (double(parts_.mass[std::size_t(fluidIds_[k])]) * double(sampleShare(k))) *
-                   (r.squaredNorm() * Mat3::Identity() - r * r.transpose());
+                   ((r.squaredNorm() + own) * Mat3::Identity() - r * r.transpose());
     for (int a = 0; a < 3; ++a)
       for (int c = 0; c < 3; ++c) inertia[9 * t + std::size_t(3 * a + c)] += I(a, c);
   }
@@ -1597,7 +1639,7 @@ void PbdWorld::fluidVelocity(double h) {
     mo.w = Vec3(bw[3 * t], bw[3 * t + 1], bw[3 * t + 2]);
   }
   for (std::size_t r = 0; r < nr; ++r) {
-    const std::size_t i = ropeParticles[r], t = nb + r;
+    const std::size_t i = strandParticles[r], t = nb + r;
     parts_.vx[i] = float(bv[3 * t]), parts_.vy[i] = float(bv[3 * t + 1]), parts_.vz[i] = float(bv[3 * t + 2]);
   }
 }
