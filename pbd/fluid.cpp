@@ -556,20 +556,31 @@ void FluidSolver::correctionPass() {
 bool FluidSolver::warmStart() {
   if (carried_.empty() || !n_) return false;
   for (std::size_t r = 0; r < n_; ++r) rec_[r * kRecord + kLambda] = carried_[r];
-  // Shepard averages over fluid neighbours, Jacobi (each pass reads the last pass's values
-  // from the records), the same bits for any threads and either kernel.
+  // Shepard averages over the neighbours that carry (fluid with a compliance), Jacobi (each
+  // pass reads the last pass's values from the records), the same bits for any threads and
+  // either kernel. A fluid particle without a compliance keeps no multiplier sum: it carries
+  // 0 and is left out of its neighbours' averages (the kernels weigh by the fluid flag, here
+  // cleared for it until the averages are done), which it would otherwise dilute.
+  const bool someDont = !alphaR_.empty() && std::any_of(alphaR_.begin(), alphaR_.begin() + std::ptrdiff_t(n_), [](float x) {
+                          return !(x > 0.0f);
+                        });
+  std::vector<float> fluidFlag;
+  if (someDont) {
+    fluidFlag.resize(n_);
+    for (std::size_t r = 0; r < n_; ++r) {
+      fluidFlag[r] = rec_[r * kRecord + kFluid];
+      if (!(alphaR_[r] > 0.0f)) rec_[r * kRecord + kFluid] = 0.0f;
+    }
+  }
   PairArgs a = pairArgs(params_, walls_, rec_.data(), bidx_, boff_, bk_, dx_.data(), dy_.data(), dz_.data(), n_);
   const bool simd = useSimd();
   for (int pass = 0; pass < params_.warmSmoothing; ++pass) {
     forChunks(bk_.size(), kBlockChunk, [&](std::size_t b0, std::size_t b1) {
       simd ? smoothLambdaBlocksAvx2(a, b0, b1, carried_.data()) : smoothLambdaBlocksScalar(a, b0, b1, carried_.data());
     });
-    for (std::size_t r = 0; r < n_; ++r) {
-      // A fluid particle without a compliance keeps no multiplier sum: it carries 0.
-      if (!alphaR_.empty() && !(alphaR_[r] > 0.0f)) carried_[r] = 0.0f;
-      rec_[r * kRecord + kLambda] = carried_[r];
-    }
+    for (std::size_t r = 0; r < n_; ++r) rec_[r * kRecord + kLambda] = carried_[r];
   }
+  for (std::size_t r = 0; someDont && r < n_; ++r) rec_[r * kRecord + kFluid] = fluidFlag[r];
   std::copy(carried_.begin(), carried_.begin() + std::ptrdiff_t(n_), lambdaSum_.begin());
   scorrOff_ = true;
   correctionPass();
