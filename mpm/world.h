@@ -108,6 +108,10 @@ class MpmWorld final : public Solver {
   void setGuardPolicy(GuardPolicy policy) override { guardLog_.policy = policy; }
   const GuardLog& guardLog() const override { return guardLog_; }
 
+  // A particle's affine velocity C (APIC / MLS-MPM, 1/s): its velocity field about it is
+  // v + C (x - x_p). With the quadratic B-splines' D = dx^2/4 I, its angular momentum beyond
+  // m x_p x v_p is m dx^2/4 (C_zy - C_yz, C_xz - C_zx, C_yx - C_xy) (Jiang et al. 2015).
+  const Eigen::Matrix3f& affineVelocity(std::size_t i) const { return C_.at(i); }
   const ParticleArrays& particles() const override { return parts_; }
   int bodyCount() const override { return static_cast<int>(members_.size()); }
   const std::vector<std::int32_t>& bodyParticles(int body) const override { return members_.at(std::size_t(body)); }
