@@ -274,6 +274,10 @@ SceneDesc build(const RecordFile& file) {
       FieldReader f(file, r, {"spacings"});
       s.gridDx = f.inRange(0, 1.0, 4.0);
       s.gridDxLine = r.line;
+    } else if (kw == "particle_shift") {
+      FieldReader f(file, r, {"spacings"});
+      s.particleShift = f.inRange(0, 0.0, 1.0);
+      s.particleShiftLine = r.line;
     } else if (kw == "sleep") {
       // sleep off | sleep on | sleep SPEED [SECONDS]  (SPEED may be `auto`)
       FieldReader f(file, r, {"speed", "seconds"}, 1);
@@ -342,7 +346,7 @@ SceneDesc build(const RecordFile& file) {
     } else {
       throw InputError(file.path, r.line, "record", "unknown record '" + kw +
                                                   "' (known: strokes workspace solver dt substeps iterations gravity "
-                                                  "walls grid_dx cfl scale sleep warm_start ground duration fps material collider keyframe expect camera image output)");
+                                                  "walls grid_dx particle_shift cfl scale sleep warm_start ground duration fps material collider keyframe expect camera image output)");
     }
   }
   if (!haveStrokes) throw InputError(file.path, 0, "strokes", "missing 'strokes PATH' record");

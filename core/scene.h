@@ -82,6 +82,11 @@ struct SceneDesc {
   int wallsLine = 0;          // line of the 'walls' record, 0 = the default
   double gridDx = 2.0;
   int gridDxLine = 0;         // line of the 'grid_dx' record, 0 = the default
+  // solver mpm: fluid particle shifting (`particle_shift`): once a step, fluid particles closer
+  // than this many particle spacings are pushed apart (0 = off, the default; 0.8 removes the
+  // filaments a sheet thinner than a grid cell breaks into).
+  double particleShift = 0.0;
+  int particleShiftLine = 0;
   // solver mpm: the Courant number C of `substeps auto` (`cfl`): h <= C dx / c_p and
   // h <= C dx / |v|max; 0.5 by default, in (0, 1].
   double cfl = 0.5;

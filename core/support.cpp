@@ -85,7 +85,8 @@ void checkSupport(const SceneDesc& scene, const SketchUses& uses, const SolverSu
   if (!support.domainGrid) {
     // The records only a background grid gives meaning to, the first one given.
     const std::pair<int, const char*> gridRecords[] = {
-        {scene.wallsLine, "walls"}, {scene.gridDxLine, "grid_dx"}, {scene.scaleLine, "scale"}, {scene.cflLine, "cfl"}};
+        {scene.wallsLine, "walls"}, {scene.gridDxLine, "grid_dx"}, {scene.particleShiftLine, "particle_shift"},
+        {scene.scaleLine, "scale"},    {scene.cflLine, "cfl"}};
     for (const auto& [line, name] : gridRecords)
       if (line > 0)
         throw InputError(scene.path, line, "record",

@@ -821,3 +821,96 @@ void MpmWorld::plasticity() {
 #pragma GCC diagnostic pop
 
 }  // namespace physketch::mpm
+
+namespace physketch::mpm {
+
+// particle_shift (MpmParams::particleShift), once a step after the substeps: the dynamic fluid
+// particles closer than r0 = particleShift x spacing are pushed apart, each pair by half its
+// overlap along the line between them (two coincident ones along x, the lower rank to -x), in
+// two Jacobi sweeps whose moves are capped at a quarter spacing each, a particle at a free
+// surface keeping only the part of its move along the surface; then every particle takes
+// its affine field's velocity at the new place (v + C dx, APIC's field) and is held inside the
+// walls and outside the colliders. In rank order of one neighbour grid, each rank writing its
+// own move: the same bits for any thread count.
+void MpmWorld::shiftFluid() {
+  shiftIds_.clear();
+  for (std::size_t i = 0; i < parts_.size(); ++i)
+    if (phase::dynamic(parts_.phase[i]) && models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid)
+      shiftIds_.push_back(std::int32_t(i));
+  const std::size_t n = shiftIds_.size();
+  if (n < 2) return;
+  shiftX_.resize(n), shiftY_.resize(n), shiftZ_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto i = std::size_t(shiftIds_[k]);
+    shiftX_[k] = parts_.x[i], shiftY_[k] = parts_.y[i], shiftZ_[k] = parts_.z[i];
+  }
+  constexpr int kSweeps = 2;
+  const float h = float(params_.spacing), r0 = float(params_.particleShift) * h, cap = 0.25f * h;
+  // Neighbours within r0 and the two sweeps' moves (a pair may close by 2 cap before the last).
+  const float reach = r0 + 2.0f * float(kSweeps - 1) * cap;
+  shiftGrid_.build(shiftX_.data(), shiftY_.data(), shiftZ_.data(), n, reach);
+  int width = std::max(8, shiftLists_.width);
+  for (;;) {
+    shiftGrid_.buildNeighborLists(reach, width, shiftLists_);
+    if (!shiftLists_.overflowed) break;
+    width = (shiftLists_.maxCount + 7) / 8 * 8;
+  }
+  // Positions in rank order (x y z interleaved), then the moves.
+  std::vector<float>& p = shiftD_;
+  p.resize(6 * n);
+  float* const pos = p.data();
+  float* const move = p.data() + 3 * n;
+  for (std::size_t r = 0; r < n; ++r)
+    pos[3 * r] = shiftGrid_.sortedX()[r], pos[3 * r + 1] = shiftGrid_.sortedY()[r], pos[3 * r + 2] = shiftGrid_.sortedZ()[r];
+  const std::int32_t* idx = shiftLists_.index.data();
+  const std::size_t w = std::size_t(shiftLists_.width);
+  for (int sweep = 0; sweep < kSweeps; ++sweep) {
+    forRange(n, [&](std::size_t lo, std::size_t hi) {
+      for (std::size_t r = lo; r < hi; ++r) {
+        float m[3] = {0.0f, 0.0f, 0.0f}, out[3] = {0.0f, 0.0f, 0.0f};
+        for (std::int32_t k = 0; k < shiftLists_.count[r]; ++k) {
+          const auto j = std::size_t(idx[r * w + std::size_t(k)]);
+          const float e[3] = {pos[3 * r] - pos[3 * j], pos[3 * r + 1] - pos[3 * j + 1], pos[3 * r + 2] - pos[3 * j + 2]};
+          for (int a = 0; a < 3; ++a) out[a] += e[a];
+          const float d = std::sqrt((e[0] * e[0] + e[1] * e[1]) + e[2] * e[2]);
+          if (!(d < r0)) continue;
+          if (d > 0.0f) {
+            const float s = 0.5f * (r0 - d) / d;
+            for (int a = 0; a < 3; ++a) m[a] += s * e[a];
+          } else {
+            m[0] += (r < j ? -0.5f : 0.5f) * r0;
+          }
+        }
+        // At a free surface (its neighbours lopsided: the sum of their offsets over half a
+        // spacing) no move outwards, only along the surface (Lind et al. 2012): a sheet's edge
+        // is not pushed out into droplets.
+        const float o2 = (out[0] * out[0] + out[1] * out[1]) + out[2] * out[2];
+        if (o2 > 0.25f * h * h) {
+          const float on = (m[0] * out[0] + m[1] * out[1]) + m[2] * out[2];
+          if (on > 0.0f)
+            for (int a = 0; a < 3; ++a) m[a] -= (on / o2) * out[a];
+        }
+        const float len = std::sqrt((m[0] * m[0] + m[1] * m[1]) + m[2] * m[2]);
+        const float f = len > cap ? cap / len : 1.0f;
+        for (int a = 0; a < 3; ++a) move[3 * r + std::size_t(a)] = f * m[a];
+      }
+    });
+    for (std::size_t k = 0; k < 3 * n; ++k) pos[k] += move[k];
+  }
+  const std::int32_t* order = shiftGrid_.order().data();
+  const float lo[3] = {lo_[0], lo_[1], lo_[2]}, hi[3] = {hi_[0], hi_[1], hi_[2]};
+  forRange(n, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      const auto i = std::size_t(shiftIds_[std::size_t(order[r])]);
+      float x[3] = {pos[3 * r], pos[3 * r + 1], pos[3 * r + 2]};
+      for (int a = 0; a < 3; ++a) x[a] = std::min(std::max(x[a], lo[a]), hi[a]);
+      const Eigen::Vector3f d(x[0] - parts_.x[i], x[1] - parts_.y[i], x[2] - parts_.z[i]);
+      const Eigen::Vector3f dv = C_[i] * d;
+      parts_.vx[i] += dv.x(), parts_.vy[i] += dv.y(), parts_.vz[i] += dv.z();
+      parts_.x[i] = x[0], parts_.y[i] = x[1], parts_.z[i] = x[2];
+      if (!colliders_.empty()) pushOutOfColliders(i, double(lastH_));
+    }
+  });
+}
+
+}  // namespace physketch::mpm

@@ -29,6 +29,8 @@ const PassSpec kMpmPasses[static_cast<int>(MpmPass::kCount)] = {
     {"projection", Cadence::kPerSubstep, "particles past a wall or the ground put back on it (VR-Doh Alg. 1 line 4)"},
     {"plasticity", Cadence::kPerSubstep,
      "return maps on F: Drucker-Prager (sand), von Mises (plasticine), snow clamp with J_p hardening"},
+    {"particle_shift", Cadence::kPerStep,
+     "fluid particles closer than particle_shift spacings pushed apart (2 Jacobi sweeps), v += C dx (Xu et al. 2009)"},
     {"guard", Cadence::kPerStep, "first NaN, explosion, inverted F (J <= 0) or particle faster than a cell per substep"},
 };
 
@@ -87,6 +89,7 @@ MpmParams paramsFromScene(const SceneDesc& scene, double spacing) {
   p.domainSize = scene.workspaceSize;
   p.domainMin = scene.workspaceCenter - Vec3::Constant(0.5 * scene.workspaceSize);
   p.dxPerSpacing = scene.gridDx;
+  p.particleShift = scene.particleShift;
   p.waveCourant = p.velocityCourant = scene.cfl;
   for (int k = 0; k < 6; ++k)
     p.walls[k] = scene.walls[k] == SceneDesc::Wall::kSticky ? WallKind::kSticky
@@ -104,6 +107,8 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
       !(params_.dxPerSpacing > 0) || !(params_.domainSize > 0) || !params_.domainMin.allFinite() ||
       !params_.gravity.allFinite() || !std::isfinite(params_.groundY))
     throw RuntimeError("MpmWorld: dt, spacing, grid and domain must be positive and finite, substeps in [0, 1000]");
+  if (!(params_.particleShift >= 0.0 && params_.particleShift <= 1.0))
+    throw RuntimeError("MpmWorld: particleShift must be in [0, 1] particle spacings");
   for (const Material& m : materials_) {
     const SolverModel sm = solverModel(m.kind, SolverKind::kMpm);
     if (!sm.simulated) throw RuntimeError("MpmWorld: material '" + m.name + "' is kind " + toString(m.kind) + ", which mpm does not simulate");
@@ -519,12 +524,14 @@ int MpmWorld::substepsForNextStep() const {
 
 std::vector<bool> MpmWorld::work() const {
   std::vector<bool> on(static_cast<std::size_t>(MpmPass::kCount), false);
-  bool dynamic = false, plastic = false, any = false;
+  bool dynamic = false, plastic = false, any = false, fluid = false;
   for (std::size_t i = 0; i < parts_.size(); ++i) {
     any = any || !phase::has(parts_.phase[i], phase::kRemoved);
     if (!phase::dynamic(parts_.phase[i])) continue;
     dynamic = true;
-    plastic = plastic || models_[std::size_t(parts_.material[i])].plastic;
+    const MatModel& m = models_[std::size_t(parts_.material[i])];
+    plastic = plastic || m.plastic;
+    fluid = fluid || m.kind == MaterialKind::kFluid;
   }
   const bool carried = std::count(mode_.begin(), mode_.end(), BodyMode::kKinematic) > 0;
   on[int(MpmPass::kP2G)] = dynamic;
@@ -532,6 +539,7 @@ std::vector<bool> MpmWorld::work() const {
   on[int(MpmPass::kG2P)] = dynamic || carried;
   on[int(MpmPass::kProjection)] = dynamic;
   on[int(MpmPass::kPlasticity)] = plastic;
+  on[int(MpmPass::kShift)] = fluid && params_.particleShift > 0.0;
   on[int(MpmPass::kGuard)] = any;
   return on;
 }
@@ -542,7 +550,8 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
     bool used = false;
     for (std::size_t i = 0; i < parts_.size() && !used; ++i)
       used = phase::dynamic(parts_.phase[i]) && std::size_t(parts_.material[i]) == m &&
-             (pass != MpmPass::kPlasticity || models_[m].plastic);
+             (pass != MpmPass::kPlasticity || models_[m].plastic) &&
+             (pass != MpmPass::kShift || models_[m].kind == MaterialKind::kFluid);
     if (used) names.push_back(materials_[m].name + " (" + toString(models_[m].kind) + ")");
   }
   std::string list;
@@ -567,6 +576,9 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
                 : "no dynamic particle";
     case MpmPass::kPlasticity:
       return on ? "plastic materials " + list : "no dynamic particle of a plastic kind (sand, snow, plasticine)";
+    case MpmPass::kShift:
+      if (on) return "particle_shift " + num(params_.particleShift) + " spacings: fluids " + list;
+      return params_.particleShift > 0.0 ? "no dynamic fluid" : "particle_shift 0 (off; the scene's particle_shift record)";
     case MpmPass::kGuard: return on ? "checks every step" : "no particles";
     case MpmPass::kCount: break;
   }
@@ -574,11 +586,12 @@ std::string MpmWorld::reason(MpmPass pass, bool on) const {
 }
 
 std::string MpmWorld::touches(MpmPass pass) const {
-  long dyn = 0, plastic = 0;
+  long dyn = 0, plastic = 0, fluid = 0;
   for (std::size_t i = 0; i < parts_.size(); ++i) {
     if (!phase::dynamic(parts_.phase[i])) continue;
     ++dyn;
     plastic += models_[std::size_t(parts_.material[i])].plastic;
+    fluid += models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
   }
   const long cells = long(n_) * n_ * n_;
   switch (pass) {
@@ -586,6 +599,7 @@ std::string MpmWorld::touches(MpmPass pass) const {
       return "the nodes near " + std::to_string(dyn) + " particles (grid " + std::to_string(n_) + "^3 = " +
              std::to_string(cells) + " nodes, dx = " + num(dx_) + " m)";
     case MpmPass::kPlasticity: return std::to_string(plastic) + " particles";
+    case MpmPass::kShift: return std::to_string(fluid) + " particles";
     default: return std::to_string(dyn) + " particles";
   }
 }
@@ -718,6 +732,9 @@ std::size_t MpmWorld::passBytes(MpmPass pass) const {
     case MpmPass::kG2P: return heldBytes(C_, F_, plastic_, fluidJ_);
     case MpmPass::kPlasticity: return heldBytes(svdU_, svdLnS_);
     case MpmPass::kProjection: return heldBytes(blockTails_);
+    case MpmPass::kShift:
+      return heldBytes(shiftIds_, shiftX_, shiftY_, shiftZ_, shiftD_, shiftLists_.index, shiftLists_.count) +
+             shiftGrid_.heldBytes();
     default: return 0;
   }
 }
@@ -814,7 +831,8 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
   svdCached_ = polarCached_ = false;  // see svdU_, polarQ_
   // The end-of-step guard's checks are summed by the last g2p where nothing moves a particle or
   // changes its F after it (StepSummary).
-  const bool summarize = runs(MpmPass::kGuard) && colliders_.empty() && !runs(MpmPass::kPlasticity);
+  const bool summarize =
+      runs(MpmPass::kGuard) && colliders_.empty() && !runs(MpmPass::kPlasticity) && !runs(MpmPass::kShift);
   summary_.valid = false;
   for (int s = 0; s < substeps; ++s) {
     lastH_ = h;
@@ -830,6 +848,8 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
     if (runs(MpmPass::kPlasticity) && !runPass(MpmPass::kPlasticity, s, checkEachPass, [&] { plasticity(); }))
       return false;
   }
+  if (runs(MpmPass::kShift) && !runPass(MpmPass::kShift, substeps - 1, checkEachPass, [&] { shiftFluid(); }))
+    return false;
   return true;
 }
 

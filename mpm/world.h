@@ -32,6 +32,7 @@
 
 #include "core/material.h"
 #include "core/math.h"
+#include "core/neighbor_grid.h"
 #include "core/scene.h"
 #include "core/solver.h"
 #include "core/triangle_soup.h"
@@ -64,12 +65,19 @@ struct MpmParams {
   double waveCourant = 0.5;    // C in h <= C dx / c_p (c_p the material's P-wave speed)
   double velocityCourant = 0.5;  // h <= velocityCourant dx / |v|max
   double maxSpeed = 100.0;     // m/s, the guard's explosion bound
+  // Fluid particle shifting (the particle_shift pass, once a step): dynamic fluid particles
+  // closer than particleShift x spacing are pushed apart, each pair by half its overlap, in two
+  // Jacobi sweeps of at most spacing / 4 each (at a free surface only along it); a particle
+  // takes its affine field's velocity at its new place (v + C dx). 0 = off. MLS-MPM's grid cannot see a particle arrangement finer
+  // than a cell, so where a fluid sheet is thinner than a cell its particles gather into lines
+  // with gaps between ("filaments"; Xu et al. 2009's shifting for SPH is the remedy here).
+  double particleShift = 0.0;
 };
 
 // The solver settings a scene asks for; `spacing` is the sketch's voxel size.
 MpmParams paramsFromScene(const SceneDesc& scene, double spacing);
 
-enum class MpmPass : int { kP2G, kGridUpdate, kG2P, kProjection, kPlasticity, kGuard, kCount };
+enum class MpmPass : int { kP2G, kGridUpdate, kG2P, kProjection, kPlasticity, kShift, kGuard, kCount };
 extern const PassSpec kMpmPasses[static_cast<int>(MpmPass::kCount)];
 
 // The explicit time-step bound of a material: h <= waveCourant dx / c_p.
@@ -232,6 +240,7 @@ class MpmWorld final : public Solver {
   // projection()), and, with `summarize`, sums the end-of-step guard's checks (StepSummary).
   void g2p(float h, int substep, bool summarize);
   void projection();
+  void shiftFluid();
   void plasticity();
   template <class Fn>
   void forPlasticSvds(const Fn& fn);
@@ -288,6 +297,11 @@ class MpmWorld final : public Solver {
   Eigen::Vector3i wallLo_, wallHi_;  // nodes with index <= wallLo or >= wallHi are wall nodes
   int groundNode_ = -1;              // nodes with j <= groundNode are ground nodes
   float lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the walls (m), for the projection
+  // particle_shift's buffers (MpmParams::particleShift): the fluid's ids, their neighbours.
+  std::vector<std::int32_t> shiftIds_;
+  std::vector<float> shiftX_, shiftY_, shiftZ_, shiftD_;
+  NeighborGrid shiftGrid_;
+  NeighborLists shiftLists_;
   // A node's mass (kg) and momentum (kg m/s), then velocity (m/s): one 16-byte record, so
   // that P2G's and G2P's 27 nodes touch one cache line each, not four.
   struct Node {

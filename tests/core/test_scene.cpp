@@ -771,6 +771,21 @@ TEST(Support, WallsAndGridDxAreForSolverMpm) {
   const InputError c = supportError(cfl, usesOfMaterials({{"wood", 2}}), pbd);
   EXPECT_EQ(c.line(), 10);
   EXPECT_NE(std::string(c.what()).find("cfl: solver pbd (the default) has no domain walls"), std::string::npos) << c.what();
+  const SceneDesc shift = parseScene(std::string(kGood) + "particle_shift 0.8\n", "dir/x.scene");
+  const InputError sh = supportError(shift, usesOfMaterials({{"wood", 2}}), pbd);
+  EXPECT_EQ(sh.line(), 10);
+  EXPECT_NE(std::string(sh.what()).find("particle_shift: solver pbd (the default) has no domain walls"), std::string::npos)
+      << sh.what();
+}
+
+// particle_shift (solver mpm): 0 (off) by default, a distance in particle spacings in [0, 1].
+TEST(Scene, ParticleShiftIsOffByDefaultAndADistanceInSpacings) {
+  EXPECT_EQ(parseScene(kGood, "dir/x.scene").particleShift, 0.0);
+  const SceneDesc s = parseScene(std::string(kGood) + "particle_shift 0.8\n", "dir/x.scene");
+  EXPECT_DOUBLE_EQ(s.particleShift, 0.8);
+  EXPECT_EQ(s.particleShiftLine, 10);
+  for (const char* bad : {"particle_shift -0.1\n", "particle_shift 1.5\n", "particle_shift nan\n", "particle_shift\n"})
+    EXPECT_EQ(sceneError(bad).field(), "spacings") << bad;
 }
 
 // sleep: on by default (speed 0 = auto, 0.5 s); off, on, or SPEED [SECONDS], each number checked.
