@@ -83,8 +83,8 @@ struct SceneDesc {
   double gridDx = 2.0;
   int gridDxLine = 0;         // line of the 'grid_dx' record, 0 = the default
   // solver mpm: fluid particle shifting (`particle_shift`): once a step, fluid particles closer
-  // than this many particle spacings are pushed apart (0 = off, the default; 0.8 removes the
-  // filaments a sheet thinner than a grid cell breaks into).
+  // than this many particle spacings are pushed apart (0 = off, the default; at 0.8 the
+  // particles of a sheet thinner than a grid cell no longer gather onto one another).
   double particleShift = 0.0;
   int particleShiftLine = 0;
   // solver mpm: the Courant number C of `substeps auto` (`cfl`): h <= C dx / c_p and

@@ -28,6 +28,9 @@ constexpr KnobSpec kKnobs[] = {
      "voxel size = particle spacing (m); the workspace edge becomes 151 voxels, centred as in the scene"},
     {"grid_dx", 1.0, 4.0, false, "solver mpm: grid spacing in particle spacings (scene record 'grid_dx')"},
     {"cfl", 1e-3, 1.0, false, "solver mpm with 'substeps auto': the Courant number C (scene record 'cfl')"},
+    {"particle_shift", 0, 1.0, false,
+     "solver mpm: fluid particles closer than this many spacings pushed apart once a step, 0 = off (scene record "
+     "'particle_shift')"},
     {"sleep", 0, 10, false, "solver pbd: the sleep speed in m/s, 0 = off (scene record 'sleep'; its time stays the scene's)"},
     {"warm_start", 0, 0.9, false,
      "solver pbd: the fraction of the fluids' density multipliers carried between substeps, 0 = off (scene record "
@@ -203,6 +206,11 @@ void applySetting(const Setting& s, SceneDesc& scene, const std::string& option)
         throw InputError(where, 0, knob, std::string("knob 'sleep' is solver pbd's; the scene runs solver ") + toString(scene.solver));
       scene.sleep = v > 0.0;
       scene.sleepSpeed = v;
+    } else if (knob == "particle_shift") {
+      if (scene.solver != SolverKind::kMpm)
+        throw InputError(where, 0, knob,
+                         std::string("knob 'particle_shift' is solver mpm's; the scene runs solver ") + toString(scene.solver));
+      scene.particleShift = v;
     } else if (knob == "warm_start") {
       if (scene.solver != SolverKind::kPbd)
         throw InputError(where, 0, knob,

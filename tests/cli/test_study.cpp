@@ -180,6 +180,18 @@ TEST(StudyKnobs, WarmStartSetsTheCarriedFraction) {
   EXPECT_THROW(applySetting({{"warm_start", 0.6}}, sc, "--only"), InputError);
 }
 
+// The particle_shift knob sets the scene's shifting distance and is solver mpm's alone.
+TEST(StudyKnobs, ParticleShiftSetsTheDistance) {
+  SceneDesc sc;
+  sc.solver = SolverKind::kMpm;
+  applySetting({{"particle_shift", 0.8}}, sc, "--only");
+  EXPECT_DOUBLE_EQ(sc.particleShift, 0.8);
+  EXPECT_THROW(parseVary("particle_shift=-0.1"), InputError);
+  EXPECT_THROW(parseVary("particle_shift=1.5"), InputError);
+  sc.solver = SolverKind::kPbd;
+  EXPECT_THROW(applySetting({{"particle_shift", 0.8}}, sc, "--only"), InputError);
+}
+
 TEST(StudyKnobs, VoxelSetsTheWorkspaceEdgeAndDtMustDivideAFrame) {
   SceneDesc sc;
   sc.fps = 30;
