@@ -983,6 +983,28 @@ TEST(Fluid, AWarmStartStartsColdAfterAnEditOrAFrozenFluid) {
   EXPECT_EQ(cold.fluidColdStarts(), 0);
 }
 
+namespace {
+// A rope or cloth of `density` (material 2) laid on a 12 x layers x 12 pool of water in a fixed
+// tank `tankLayers` high, stepped `steps` times at 3 substeps x 8 iterations: its particles' mean
+// height (m), and the state's hash in `hash` when asked. `strand` adds the body's particles.
+template <class Strand>
+double strandOnAPool(MaterialKind kind, double density, int layers, int tankLayers, int steps, std::uint64_t* hash,
+                     Strand&& strand) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("tank", MaterialKind::kRigid), makeKind("water", MaterialKind::kFluid),
+                                makeKind("strand", kind, density)};
+  BodyRange tank = addTank(p, 12, tankLayers, 0);
+  BodyRange water = addBox(p, Vec3(kRadius, kRadius, kRadius), 12, layers, 12, 1, 1);
+  BodyRange body = strand(p);
+  PbdWorld w(p, {tank, water, body}, mats, params(3, 8));
+  for (int s = 0; s < steps; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+  if (hash) *hash = w.stateHash();
+  double y = 0.0;
+  for (std::int32_t i = body.first; i < body.first + body.count; ++i) y += w.particles().y[std::size_t(i)];
+  return y / body.count;
+}
+}  // namespace
+
 // A thick rope floats or sinks by its density, as a rigid body does (Archimedes): its particles
 // weigh a square cross-section 2R x 2R of the material, and the fluid sees them as n x n solid
 // samples filling that square (PbdWorld::strandSamples). A rope of radius R = 2 spacings (4
@@ -997,20 +1019,12 @@ TEST(Fluid, AThickRopeFloatsOrSinksByItsDensity) {
   const int layers = 7;
   const double surface = layers * kSpacing, radius = 2.0 * kSpacing;
   const auto axisHeight = [&](double density, int steps, std::uint64_t* hash = nullptr) {
-    ParticleArrays p;
-    std::vector<Material> mats = {makeKind("tank", MaterialKind::kRigid), makeKind("water", MaterialKind::kFluid),
-                                  makeKind("rope", MaterialKind::kRope, density)};
-    BodyRange tank = addTank(p, 12, layers + 6, 0);
-    BodyRange water = addBox(p, Vec3(kRadius, kRadius, kRadius), 12, layers, 12, 1, 1);
-    BodyRange rope = addChain(p, Vec3(0.03 + kRadius, surface + radius + kRadius, 0.06 + kRadius), Vec3(1, 0, 0), 6, 2);
-    rope.radius = float(radius);
-    rope.stroke = 2;
-    PbdWorld w(p, {tank, water, rope}, mats, params(3, 8));
-    for (int s = 0; s < steps; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
-    if (hash) *hash = w.stateHash();
-    double y = 0.0;
-    for (std::int32_t i = rope.first; i < rope.first + rope.count; ++i) y += w.particles().y[std::size_t(i)];
-    return y / rope.count;
+    return strandOnAPool(MaterialKind::kRope, density, layers, layers + 6, steps, hash, [&](ParticleArrays& p) {
+      BodyRange rope = addChain(p, Vec3(0.03 + kRadius, surface + radius + kRadius, 0.06 + kRadius), Vec3(1, 0, 0), 6, 2);
+      rope.radius = float(radius);
+      rope.stroke = 2;
+      return rope;
+    });
   };
   std::uint64_t one = 0, two = 0;  // the samples' corrections summed in a fixed order
   {
@@ -1048,20 +1062,12 @@ TEST(Fluid, AThickClothFloatsOrSinksByItsDensity) {
   const int layers = 7, side = 6;
   const double radius = 2.0 * kSpacing;
   const auto midPlane = [&](double density, int steps, double tilt, std::uint64_t* hash = nullptr) {
-    ParticleArrays p;
-    std::vector<Material> mats = {makeKind("tank", MaterialKind::kRigid), makeKind("water", MaterialKind::kFluid),
-                                  makeKind("raft", MaterialKind::kCloth, density)};
-    BodyRange tank = addTank(p, 12, layers + 8, 0);
-    BodyRange water = addBox(p, Vec3(kRadius, kRadius, kRadius), 12, layers, 12, 1, 1);
-    const Vec3 corner(0.03 + kRadius, layers * kSpacing + radius + kRadius, 0.03 + kRadius);
-    BodyRange raft = addSheet(p, corner, side, side, 2, Vec3(0, std::sin(tilt), std::cos(tilt)));
-    raft.radius = float(radius);
-    PbdWorld w(p, {tank, water, raft}, mats, params(3, 8));
-    for (int s = 0; s < steps; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
-    if (hash) *hash = w.stateHash();
-    double y = 0.0;
-    for (std::int32_t i = raft.first; i < raft.first + raft.count; ++i) y += w.particles().y[std::size_t(i)];
-    return y / raft.count;
+    return strandOnAPool(MaterialKind::kCloth, density, layers, layers + 8, steps, hash, [&](ParticleArrays& p) {
+      const Vec3 corner(0.03 + kRadius, layers * kSpacing + radius + kRadius, 0.03 + kRadius);
+      BodyRange raft = addSheet(p, corner, side, side, 2, Vec3(0, std::sin(tilt), std::cos(tilt)));
+      raft.radius = float(radius);
+      return raft;
+    });
   };
   std::uint64_t one = 0, two = 0;  // the samples' corrections summed in a fixed order
   {
