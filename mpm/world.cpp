@@ -848,7 +848,7 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
     if (runs(MpmPass::kPlasticity) && !runPass(MpmPass::kPlasticity, s, checkEachPass, [&] { plasticity(); }))
       return false;
   }
-  if (runs(MpmPass::kShift) && !runPass(MpmPass::kShift, substeps - 1, checkEachPass, [&] { shiftFluid(); }))
+  if (runs(MpmPass::kShift) && !runPass(MpmPass::kShift, -1, checkEachPass, [&] { shiftFluid(); }))  // once a step: no substep
     return false;
   return true;
 }

@@ -67,10 +67,11 @@ struct MpmParams {
   double maxSpeed = 100.0;     // m/s, the guard's explosion bound
   // Fluid particle shifting (the particle_shift pass, once a step): dynamic fluid particles
   // closer than particleShift x spacing are pushed apart, each pair by half its overlap, in two
-  // Jacobi sweeps of at most spacing / 4 each (at a free surface only along it); a particle
-  // takes its affine field's velocity at its new place (v + C dx). 0 = off. MLS-MPM's grid
-  // cannot see a particle arrangement finer than a cell, so in a fluid sheet thinner than a
-  // cell particles gather onto one another (Xu et al. 2009's shifting for SPH; docs/mpm.md).
+  // Jacobi sweeps of at most spacing / 4 each (never outwards at a sheet's rim, an edge or a
+  // corner); a particle takes its affine field's velocity at its new place (v + C dx). 0 = off.
+  // MLS-MPM's grid cannot see a particle arrangement finer than a cell, so in a fluid sheet
+  // thinner than a cell particles gather onto one another (Xu et al. 2009's shifting for SPH;
+  // docs/mpm.md).
   double particleShift = 0.0;
 };
 

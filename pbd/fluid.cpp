@@ -561,14 +561,13 @@ bool FluidSolver::warmStart() {
   // either kernel. A fluid particle without a compliance keeps no multiplier sum: it carries
   // 0 and is left out of its neighbours' averages (the kernels weigh by the fluid flag, here
   // cleared for it until the averages are done), which it would otherwise dilute.
-  const bool someDont = !alphaR_.empty() && std::any_of(alphaR_.begin(), alphaR_.begin() + std::ptrdiff_t(n_), [](float x) {
-                          return !(x > 0.0f);
-                        });
-  std::vector<float> fluidFlag;
+  bool someDont = false;  // a fluid particle without a compliance (solids' entries have none either)
+  for (std::size_t r = 0; r < n_ && !alphaR_.empty() && !someDont; ++r)
+    someDont = rec_[r * kRecord + kFluid] != 0.0f && !(alphaR_[r] > 0.0f);
   if (someDont) {
-    fluidFlag.resize(n_);
+    warmFluidFlag_.resize(n_);
     for (std::size_t r = 0; r < n_; ++r) {
-      fluidFlag[r] = rec_[r * kRecord + kFluid];
+      warmFluidFlag_[r] = rec_[r * kRecord + kFluid];
       if (!(alphaR_[r] > 0.0f)) rec_[r * kRecord + kFluid] = 0.0f;
     }
   }
@@ -580,7 +579,7 @@ bool FluidSolver::warmStart() {
     });
     for (std::size_t r = 0; r < n_; ++r) rec_[r * kRecord + kLambda] = carried_[r];
   }
-  for (std::size_t r = 0; someDont && r < n_; ++r) rec_[r * kRecord + kFluid] = fluidFlag[r];
+  for (std::size_t r = 0; someDont && r < n_; ++r) rec_[r * kRecord + kFluid] = warmFluidFlag_[r];
   std::copy(carried_.begin(), carried_.begin() + std::ptrdiff_t(n_), lambdaSum_.begin());
   scorrOff_ = true;
   correctionPass();

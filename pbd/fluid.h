@@ -344,6 +344,7 @@ class FluidSolver {
   std::vector<float> comp_;           // by rank: max(C_i, 0) of fluid particles in the last lambda pass
   std::vector<float> lambdaSum_;      // by rank: XPBD's lambda summed over this substep's iterations
   std::vector<float> carried_;        // by rank: f times FluidInput::carried (empty: no warm start)
+  std::vector<float> warmFluidFlag_;  // warmStart(): the records' fluid flags while the averages skip some
   bool scorrOff_ = false;             // the warm start's correction pass runs without s_corr
   // By rank (padded to whole blocks with 0), from FluidInput's per-particle arrays; empty when
   // not given: eps coefficient relaxation_i * (V cs h^2)^2, compliance 1 / (c_i h)^2 (0: none),

@@ -170,10 +170,13 @@ class PbdWorld final : public Solver {
   // The fluids' density error rho/rho0 - 1 at the end of the last substep's iterations
   // (fluidCount 0 when the scene has no moving fluid).
   DensityError fluidDensityError() const;
-  // With the warm start on (PbdParams::warmStart), how many substeps' density solves started
-  // from zero multipliers: the first, and the first after any body edit (a sketch edit, a cut,
-  // a new body) or after a time when no fluid particle was dynamic.
+  // With the warm start on (PbdParams::warmStart), how many substeps' density solves were
+  // handed no carried multipliers: the first, and the first after any body edit (a sketch edit,
+  // a cut, a new body) or after a time when no fluid particle was dynamic. (A fluid without a
+  // compliance is handed them but carries none: FluidSolver::warmStart.)
   long fluidColdStarts() const { return fluidColdStarts_; }
+  // A cloth particle's normal to its sheet (at the predicted positions; for tests and tools).
+  Vec3 clothNormal(std::int32_t i) const { return sheetNormal(std::size_t(i)); }
   // The particle pairs of the body pairs that may touch, at the poses now: what find_contacts
   // hands body_contact (for tests and tools; it refreshes the kept lists and wakes no sleeper,
   // so it never changes what a later step does).

@@ -1061,7 +1061,7 @@ TEST(MpmWorld, AFinerOrCoarserGridStillFallsFreely) {
 // column only 4 particles deep in z spreads sideways too and lags twice as much.
 TEST(MpmWorld, ADamBreakFrontMeetsMartinAndMoyceRmse) {
   // Also with particle_shift 0.8 (ParticleShiftKeepsASpreadingSheetASheet): it pushes a
-  // gathered front apart, which runs ahead by up to half a spacing (RMSE 0.036 -> 0.049).
+  // gathered front apart, which runs a little ahead (RMSE 0.036 -> 0.038).
   for (const double shift : {0.0, 0.8}) {
     SCOPED_TRACE(shift > 0.0 ? "particle_shift 0.8" : "no particle_shift");
     const double h = 0.01, a = 0.1;
@@ -1112,12 +1112,13 @@ TEST(MpmWorld, ADamBreakFrontMeetsMartinAndMoyceRmse) {
 // pairs: a 12 x 16 x 12 column of water (bulk modulus 2e4 Pa, scenes/mpm.scene's) spread for
 // 0.6 s over a unit floor, most of it within 2 spacings of the floor; its tenth-percentile
 // nearest-neighbour distance without shifting below 0.3 spacings (the case gathers; measured
-// 0.094), with particle_shift 0.8 above 0.6 (measured 0.717). Also: the same bits on 1 and 2
-// threads; the pass in the plan only where a fluid moves and the record asks for it; and a
-// free surface is not pushed outwards (Lind et al. 2012): a crowded square sheet (spacing 0.6,
-// at rest in zero gravity, one step) spreads inside while its outline stays within 0.05
-// spacings (measured 0.014 near the corners, where the neighbours' lopsidedness is not quite the
-// edge's normal; without the rule its edges moved out by 0.15).
+// 0.094), with particle_shift 0.8 above 0.5 (measured 0.687). Also: the pass in the plan only
+// where a fluid moves and the record asks for it; a rim is not pushed outwards (after Lind et
+// al. 2012): a crowded square sheet (spacing 0.6 h, at rest in zero gravity, one step) keeps its
+// outline within 0.05 spacings (measured 0; without the rule its edges moved out by 0.15); the
+// same bits on 1 and 2 threads for a crowded block of 10,648 particles (over two of the parallel
+// loops' 4,096-particle chunks, so a race between chunks would show); and a step that blows up
+// with the pass on is the guard's to report, not an exception from the neighbour grid.
 TEST(MpmWorld, ParticleShiftKeepsASpreadingSheetASheet) {
   const double h = 0.01;
   Material water = makeMaterial(MaterialKind::kFluid, "water");
@@ -1155,10 +1156,41 @@ TEST(MpmWorld, ParticleShiftKeepsASpreadingSheetASheet) {
     return tenth;
   };
   EXPECT_LT(run(0.0, 2, nullptr), 0.3) << "without shifting the sheet no longer gathers: the case tests nothing";
-  std::uint64_t one = 0, two = 0;
-  EXPECT_GT(run(0.8, 2, &two), 0.6);
-  run(0.8, 1, &one);
-  EXPECT_EQ(one, two) << "particle_shift differs on 1 and 2 threads";
+  EXPECT_GT(run(0.8, 2, nullptr), 0.5);
+  {
+    const auto crowded = [&](int threads) {
+      ParticleArrays p;
+      for (int a = 0; a < 22; ++a)
+        for (int b = 0; b < 22; ++b)
+          for (int c = 0; c < 22; ++c) p.push(float(0.4 + 0.6 * h * a), float(0.3 + 0.6 * h * b), float(0.4 + 0.6 * h * c), 0, 0);
+      BodyRange block;
+      block.first = 0, block.count = std::int32_t(p.size());
+      MpmParams q = unitDomain(h, 2);
+      q.particleShift = 0.8;
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+      MpmWorld w(p, {block}, {water}, q);
+      const std::uint64_t start = w.stateHash();
+      for (int s = 0; s < 2; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+      EXPECT_NE(w.stateHash(), start);
+      return w.stateHash();
+    };
+    EXPECT_EQ(crowded(1), crowded(2)) << "particle_shift differs on 1 and 2 threads";
+  }
+  {  // blown up: a NaN position reaches the pass (g2p leaves it to the guard)
+    ParticleArrays p;
+    std::vector<BodyRange> bodies;
+    BodyInit right, left;  // two blocks that meet: their momenta sum to inf - inf
+    right.velocity = Vec3(1e38, 0.0, 0.0), left.velocity = Vec3(-1e38, 0.0, 0.0);
+    addBox(p, bodies, Vec3(0.3, 0.3, 0.3), 4, 4, 4, h, 0, right);
+    addBox(p, bodies, Vec3(0.3 + 4 * h, 0.3, 0.3), 4, 4, 4, h, 0, left);
+    MpmParams q = unitDomain(h, 2);  // substep 1 makes C infinite, substep 2 the positions NaN
+    q.particleShift = 0.8;
+    MpmWorld w(p, bodies, {water}, q);
+    bool stepped = true;
+    EXPECT_NO_THROW(stepped = w.step());
+    EXPECT_FALSE(stepped);
+    EXPECT_TRUE(w.guard().tripped()) << "the guard names the blow-up";
+  }
   {
     ParticleArrays p;
     for (int a = 0; a < 10; ++a)
@@ -1800,7 +1832,7 @@ TEST(MpmWorld, WaterFillsACupSketchedAsAFixedBodyToItsWalls) {
 // quadratic B-splines, and a symmetric stress exerts no torque. Oracle: nothing outside acts on
 // a block spinning about a tilted axis in zero gravity, away from every wall, so the total about
 // the origin stays; for every material (water, honey, corotated and neo-Hookean jelly, sand,
-// snow, clay), within 1e-5 of itself over 30 steps (float round-off; measured at most 9e-7).
+// snow, clay), within 3e-6 of itself over 30 steps (float round-off; measured at most 9e-7).
 // The particles' sum alone is not conserved: a spinning inviscid fluid's affine part hands its
 // share to the particles as the block comes apart (water 0.34 % of the total here; the block of
 // AViscousFluidResistsShearButNotRotation without viscosity: +11.8 % about z in 0.5 s, its
@@ -1847,6 +1879,11 @@ TEST(MpmWorld, TheParticlesAndTheirAffineFieldsKeepTheAngularMomentum) {
     }
     std::printf("%s spinning in zero gravity: angular momentum drift %.2g, the particles' sum alone %.2g\n",
                 m.name.c_str(), drift, particles);
-    EXPECT_LT(drift, 1e-5) << m.name;
+    EXPECT_LT(drift, 3e-6) << m.name;
+    // Where the affine part carries a share (the fluids, sand), the particles' sum alone moves:
+    // the case exercises it (water 3.4e-3, sand 4.0e-3, honey 2.2e-4).
+    if (m.kind == MaterialKind::kFluid || m.kind == MaterialKind::kSand) {
+      EXPECT_GT(particles, 1e-4) << m.name;
+    }
   }
 }
