@@ -917,9 +917,8 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (moving(b) && isRigid(b)) active_.push_back(static_cast<std::int32_t>(b));
   const double h = params_.dt / params_.substeps;
   const auto runs = [&](PbdPass p) { return bool(on[std::size_t(p)]); };
-  // No dynamic fluid this step (the pass is off): nothing of the warm start's carry survives it.
-  if (!runs(PbdPass::kFluidNeighbors)) fluidCarry_.clear(), fluidCarryIds_.clear();
   for (int s = 0; s < params_.substeps; ++s) {
+    substepStamp_ = steps_ * params_.substeps + s;
     if (runs(PbdPass::kIntegrate) && !runPass(PbdPass::kIntegrate, s, checkEachPass, [&] { integrate(h); })) return false;
     if (runs(PbdPass::kPredict) && !runPass(PbdPass::kPredict, s, checkEachPass, [&] { predict(h); })) return false;
     if (runs(PbdPass::kKinematic) && !runPass(PbdPass::kKinematic, s, checkEachPass, [&] { kinematic(s); }))
@@ -1020,6 +1019,7 @@ bool PbdWorld::step() {
     startSoundSpeed_ = fluidSoundSpeed_;
     startCarry_ = fluidCarry_;
     startCarryIds_ = fluidCarryIds_;
+    startCarryStamp_ = fluidCarryStamp_;
     startColdStarts_ = fluidColdStarts_;
     looseStart.resize(6 * loose_.size());
     std::size_t at = 0;
@@ -1035,6 +1035,7 @@ bool PbdWorld::step() {
     fluidSoundSpeed_ = startSoundSpeed_;
     fluidCarry_ = startCarry_;
     fluidCarryIds_ = startCarryIds_;
+    fluidCarryStamp_ = startCarryStamp_;
     fluidColdStarts_ = startColdStarts_;
     markTied();
     std::size_t at = 0;

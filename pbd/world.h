@@ -571,6 +571,9 @@ class PbdWorld final : public Solver {
   std::vector<float> fluidCarry_, startCarry_, fcarried_;
   std::vector<std::int32_t> fluidCarryIds_, startCarryIds_;
   std::uint64_t fluidCarryEdits_ = 0;  // bodyEdits_ when the carry was kept (bodyEdits_ is not replayed)
+  // The running substep's number (steps_ x substeps + s) and the one whose multipliers the carry
+  // holds: a carry is used only in the substep right after it was kept.
+  std::int64_t substepStamp_ = 0, fluidCarryStamp_ = -2, startCarryStamp_ = -2;
   long fluidColdStarts_ = 0, startColdStarts_ = 0;  // fluidColdStarts(); at the start of a step, for the replay
   int densityIteration_ = 0;  // density passes run this substep
   // A thick rope's particle enters the fluid kernel as n x n solid samples filling its square

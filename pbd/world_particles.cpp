@@ -1369,10 +1369,7 @@ void PbdWorld::fluidNeighbors() {
     v2 = std::max(v2, (parts_.vx[k] * parts_.vx[k] + parts_.vy[k] * parts_.vy[k]) + parts_.vz[k] * parts_.vz[k]);
   }
   fluidCount_ = fluidIds_.size();
-  if (fluidCount_ == 0) {  // nothing to carry across a time without dynamic fluid
-    fluidCarry_.clear(), fluidCarryIds_.clear();
-    return;
-  }
+  if (fluidCount_ == 0) return;
   if (fluidSoundAuto_) {
     const double height = box.max().y() - box.min().y() + 2.0 * params_.particleRadius;
     fluidSoundSpeed_ = std::max(fluidSoundSpeed_, FluidSolver::autoSoundSpeed(static_cast<float>(params_.gravity.norm()),
@@ -1456,11 +1453,13 @@ void PbdWorld::fluidNeighbors() {
     in.relaxation = frelax_.data(), in.xsph = fxsph_.data(), in.vorticity = fvort_.data(), in.cohesion = fcoh_.data();
     in.soundSpeeds = fsound_.data(), in.viscosity = fmu_.data();
   }
-  // The last substep's multipliers, while the fluid's particles are the same ones and no body
-  // was edited since (a sketch edit, a cut, a particle fixed starts the solve from zero once).
+  // The multipliers of the substep just before this one (not of an earlier one: a step or a
+  // substep without dynamic fluid between starts the solve from zero), while the fluid's
+  // particles are the same ones and no body was edited since (a sketch edit, a cut, a particle
+  // fixed starts the solve from zero once).
   densityIteration_ = 0;
-  if (params_.warmStart > 0.0 && fluidCarryEdits_ == bodyEdits_ && fluidCarryIds_.size() == fluidCount_ &&
-      std::equal(fluidCarryIds_.begin(), fluidCarryIds_.end(), fluidIds_.begin())) {
+  if (params_.warmStart > 0.0 && fluidCarryStamp_ == substepStamp_ - 1 && fluidCarryEdits_ == bodyEdits_ &&
+      fluidCarryIds_.size() == fluidCount_ && std::equal(fluidCarryIds_.begin(), fluidCarryIds_.end(), fluidIds_.begin())) {
     fcarried_.assign(n, 0.0f);
     std::copy(fluidCarry_.begin(), fluidCarry_.end(), fcarried_.begin());
     in.carried = fcarried_.data();
@@ -1490,6 +1489,7 @@ void PbdWorld::density() {
     fluidCarry_.assign(fcarried_.begin(), fcarried_.begin() + std::ptrdiff_t(fluidCount_));
     fluidCarryIds_.assign(fluidIds_.begin(), fluidIds_.begin() + std::ptrdiff_t(fluidCount_));
     fluidCarryEdits_ = bodyEdits_;
+    fluidCarryStamp_ = substepStamp_;
   }
 }
 
