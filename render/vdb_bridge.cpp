@@ -7,6 +7,7 @@
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/LevelSetMeasure.h>
 #include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tools/TopologyToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
@@ -23,6 +24,7 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/profile.h"
+#include "render/dense_level_set.h"
 #include "render/fluid_surface.h"
 #include "render/voxel_mesh.h"
 
@@ -148,6 +150,82 @@ void smoothLevelSet(openvdb::FloatGrid& sdf, int iterations, SmoothingReport* re
   }
 }
 
+// offsetToVolume and smoothLevelSet on a DenseLevelSet: the same steps, the same order.
+void offsetToVolume(DenseLevelSet& ls, double target) {
+  for (int pass = 0; pass < 2; ++pass) {
+    double area = 0.0, volume = 0.0;
+    ls.measure(area, volume);
+    if (!(area > 0.0)) return;
+    ls.offset(static_cast<float>((volume - target) / area));
+  }
+}
+
+void smoothLevelSet(DenseLevelSet& ls, int iterations, SmoothingReport* report) {
+  if (iterations <= 0) return;
+  double area = 0.0, before = 0.0, after = 0.0;
+  ls.measure(area, before);
+  for (int i = 0; i < iterations; ++i) ls.meanCurvature(1);  // setNormCount(1), as above
+  ls.normalize(3);                                            // the filter's default count
+  offsetToVolume(ls, before);
+  ls.measure(area, after);
+  if (report) {
+    report->volumeBefore = before;
+    report->volumeAfter = after;
+  }
+}
+
+// The dense level set as an OpenVDB level set: a leaf for every 8^3 block with a band voxel
+// (values as they are, inactive ones +-background), an inactive interior tile of -background
+// for a block wholly inside, nothing (the +background background) for one wholly outside.
+openvdb::FloatGrid::Ptr toGrid(const DenseLevelSet& ls, const openvdb::math::Transform::Ptr& xform) {
+  using Leaf = openvdb::FloatGrid::TreeType::LeafNodeType;
+  const float background = ls.background();
+  openvdb::FloatGrid::Ptr sdf = openvdb::FloatGrid::create(background);
+  sdf->setTransform(xform);
+  sdf->setGridClass(openvdb::GRID_LEVEL_SET);
+  openvdb::FloatTree& tree = sdf->tree();
+  const Vec3i lo = ls.lo(), hi = ls.lo() + ls.dims() - Vec3i::Ones();
+  const std::vector<float>& phi = ls.values();
+  std::array<float, Leaf::SIZE> values;
+  std::array<bool, Leaf::SIZE> on;
+  for (int bz = lo.z() & ~7; bz <= hi.z(); bz += 8)
+    for (int by = lo.y() & ~7; by <= hi.y(); by += 8)
+      for (int bx = lo.x() & ~7; bx <= hi.x(); bx += 8) {
+        bool anyOn = false, anyInside = false, anyOutside = false;
+        for (int x = 0; x < 8; ++x)
+          for (int y = 0; y < 8; ++y)
+            for (int z = 0; z < 8; ++z) {
+              const Vec3i c(bx + x, by + y, bz + z);
+              const openvdb::Index o = Leaf::coordToOffset(openvdb::Coord(c.x(), c.y(), c.z()));
+              float v = background;
+              bool a = false;
+              if ((c.array() >= lo.array()).all() && (c.array() <= hi.array()).all()) {
+                const Vec3i r = c - lo;
+                const std::size_t i = std::size_t(r.x()) +
+                                      std::size_t(ls.dims().x()) * (std::size_t(r.y()) + std::size_t(ls.dims().y()) * std::size_t(r.z()));
+                v = phi[i];
+                a = ls.active(i);
+              }
+              values[o] = v;
+              on[o] = a;
+              anyOn = anyOn || a;
+              (v < 0.0f ? anyInside : anyOutside) = true;
+            }
+        const openvdb::Coord origin(bx, by, bz);
+        if (anyOn || (anyInside && anyOutside)) {
+          Leaf* leaf = tree.touchLeaf(origin);
+          for (openvdb::Index o = 0; o < Leaf::SIZE; ++o) {
+            leaf->setValueOnly(o, values[o]);
+            leaf->setActiveState(o, on[o]);
+          }
+        } else if (anyInside) {
+          tree.addTile(1, origin, -background, false);
+        }
+      }
+  openvdb::tools::pruneLevelSet(tree);
+  return sdf;
+}
+
 // Cells (i,j,k) with centres origin + h*(i,j,k) -> narrow-band signed distance field in world
 // units (nullptr for no cells), moved to enclose targetVolume when it is > 0, then smoothed.
 // Options are checked by the caller.
@@ -160,9 +238,25 @@ openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells
 
   // Index space = the lattice: OpenVDB puts voxel (i,j,k)'s centre at index (i,j,k),
   // so world = origin + h*(i,j,k) is a uniform scale followed by a translation.
-  openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
   openvdb::math::Transform::Ptr xform = openvdb::math::Transform::createLinearTransform(voxelSize);
   xform->postTranslate(openvdb::Vec3d(origin.x(), origin.y(), origin.z()));
+
+  if (options.denseLevelSet) {
+    std::vector<Vec3i> lattice;
+    lattice.reserve(cells.size());
+    for (const openvdb::Coord& c : cells) lattice.emplace_back(c.x(), c.y(), c.z());
+    if (DenseLevelSet::boxVoxels(lattice, options.halfWidth, options.closingSteps) <= kDenseLevelSetVoxels) {
+      DenseLevelSet ls = DenseLevelSet::fromCells(lattice, voxelSize, options.halfWidth, options.closingSteps,
+                                                  options.smoothingSteps);
+      if (targetVolume > 0.0) offsetToVolume(ls, targetVolume);
+      const double built = nowSeconds();
+      smoothLevelSet(ls, smoothIterations, report);
+      if (times) times->smoothing = nowSeconds() - built;
+      return toGrid(ls, xform);
+    }
+  }
+
+  openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
   grid->setTransform(xform);
   {
     // Serial: the grid's topology is the set of cells, whatever their order or repeats.

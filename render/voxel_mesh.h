@@ -1,6 +1,7 @@
 // Voxel set or particle cloud -> closed triangle surface, through OpenVDB:
-//   lattice voxels -> BoolGrid topology -> tools::topologyToLevelSet -> tools::volumeToMesh.
-// Implemented in vdb_bridge.cpp, the only translation unit that includes OpenVDB.
+//   lattice voxels -> narrow-band level set (tools::topologyToLevelSet's updates, run on a dense
+//   box by render/dense_level_set.h, or OpenVDB's own tools) -> tools::volumeToMesh.
+// Implemented in vdb_bridge.cpp, the translation unit that includes OpenVDB for these.
 #pragma once
 
 #include <cstdint>
@@ -18,7 +19,16 @@ struct VoxelMeshOptions {
   int closingSteps = 0;     // dilate/erode steps that close small gaps (voxels)
   int smoothingSteps = 1;   // level-set smoothing steps; 0 keeps the blocky "legolized" look
   double adaptivity = 0.0;  // volumeToMesh adaptivity; 0 gives watertight, non-self-intersecting meshes
+  // How the level set is built and smoothed before volumeToMesh: true, OpenVDB's updates
+  // (topologyToLevelSet, LevelSetFilter, LevelSetMeasure) run on a dense box around the cells
+  // (render/dense_level_set.h: the same arithmetic, several times faster); false, OpenVDB's own
+  // tools on its tree, which a box of more than kDenseLevelSetVoxels voxels also takes.
+  bool denseLevelSet = true;
 };
+
+// The largest box (voxels) a level set is built on densely: 4 Mi voxels hold 36 MiB of work
+// arrays, and the whole 151^3 sketch grid fits.
+constexpr std::uint64_t kDenseLevelSetVoxels = std::uint64_t(1) << 22;
 
 // voxels: integer lattice coordinates of occupied cells; the centre of cell (i,j,k)
 // is origin + h*(i,j,k) in metres. Returns a closed mesh around the union of the
@@ -65,7 +75,7 @@ struct SmoothingReport {
 // Where meshParticles' time went (s), for benchmarks and reports.
 struct MeshStageTimes {
   double cells = 0.0;      // particles -> lattice cells
-  double levelSet = 0.0;   // cells -> narrow-band level set (topologyToLevelSet)
+  double levelSet = 0.0;   // cells -> narrow-band level set (topologyToLevelSet's steps, the volume target)
   double smoothing = 0.0;  // the smoothing knob (0 when off)
   double meshing = 0.0;    // volumeToMesh and assembly into a TriangleMesh
 };
