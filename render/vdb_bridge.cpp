@@ -403,11 +403,21 @@ TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSp
   const double t2 = nowSeconds();
   TriangleMesh mesh = meshLevelSet(sdf.get(), options.surface.adaptivity);
   if (options.targetVolume > 0.0 && !mesh.empty()) {
-    // The dual mesh cuts the level set's corners (1.3 % of a ball's volume unsmoothed): one more
-    // meshing at the isovalue that moves the surface out by the shortfall over the mesh's area.
+    // The dual mesh cuts the level set's corners (1.3 % of a ball's volume unsmoothed): the
+    // surface moves out by the shortfall over the mesh's area (dV = A dn). A move under a
+    // quarter of a voxel moves the vertices along their normals, which is what meshing again at
+    // that isovalue gives to first order, at a tenth of its cost; a larger one (where the
+    // vertices' normals could cross in thin parts) meshes again.
     const double shortfall = options.targetVolume - enclosedVolume(mesh), area = surfaceArea(mesh);
-    if (area > 0.0 && std::abs(shortfall) > 2e-3 * options.targetVolume)
-      mesh = meshLevelSet(sdf.get(), options.surface.adaptivity, shortfall / area);
+    if (area > 0.0 && std::abs(shortfall) > 2e-3 * options.targetVolume) {
+      const double move = shortfall / area;
+      if (std::abs(move) < 0.25 * particleSpacing) {
+        for (std::size_t i = 0; i < mesh.positions.size(); ++i)
+          mesh.positions[i] += static_cast<float>(move) * mesh.normals[i];
+      } else {
+        mesh = meshLevelSet(sdf.get(), options.surface.adaptivity, move);
+      }
+    }
   }
   if (times) {
     times->cells = t1 - t0;

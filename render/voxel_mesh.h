@@ -54,9 +54,10 @@ struct ParticleMeshOptions {
   // volume (the particles' own, spacing^3 each, times their volume ratio). The union of marked
   // cells of particles off the lattice holds more than they do (closing fills gaps, and a
   // rotated lattice marks cells partly), 7 % more for a spinning ball. After meshing, a mesh
-  // still 0.2 % or more off it is meshed once more at the isovalue that moves the surface by
-  // the difference over its area (the dual mesh cuts the level set's corners: -1.3 % of a
-  // ball). 0: the cells' surface as it is.
+  // still 0.2 % or more off it is moved out by the difference over its area (the dual mesh cuts
+  // the level set's corners: -1.3 % of a ball): its vertices along their normals when that is
+  // under a quarter of a cell, else by meshing once more at that isovalue. 0: the cells'
+  // surface as it is.
   double targetVolume = 0.0;
 };
 

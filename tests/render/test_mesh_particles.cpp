@@ -109,7 +109,7 @@ TEST(MeshParticles, RotatedBallOffTheLatticeIsOneClosedSurfaceWithTheBallVolume)
 
 // With a target volume (ParticleMeshOptions::targetVolume: the particles' N h^3) the surface is
 // moved until it holds it: the rotated ball's surface, 5-6 % over N h^3 as the cells make it
-// (printed), encloses N h^3 within 0.5 % (the mesh is re-meshed when 0.2 % off; measured
+// (printed), encloses N h^3 within 0.5 % (the mesh is moved out when 0.2 % off; measured
 // 0.9995 and 1.0000; -1.3 % without that step, the dual mesh's rounding of the level set), with
 // and without smoothing, still one closed piece. Oracle: the particle count times h^3.
 TEST(MeshParticles, ATargetVolumeHoldsTheSurfaceToTheParticlesVolume) {
