@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <set>
 #include <sstream>
@@ -412,22 +413,38 @@ Image readPng(const std::string& path) {
   return out;
 }
 
+// writePng deflates the rows in bands of 128 side by side and joins them into one zlib stream:
+// libpng's decoder (which checks the stream's Adler-32 and the chunks' CRCs) must read back
+// every byte, for one band, several, and a last band cut short; and the file's bytes must not
+// depend on the thread count.
 TEST(WritePng, RoundTripsBytesExactly) {
-  Image img;
-  img.width = 37;  // odd width: rows are not 4-byte aligned
-  img.height = 23;
-  img.rgba.resize(static_cast<std::size_t>(img.width) * img.height * 4);
-  for (std::size_t i = 0; i < img.rgba.size(); ++i) img.rgba[i] = static_cast<std::uint8_t>((i * 7919u) >> 3);
-  const std::string dir = tempDir("png");
-  const std::string path = dir + "/frame.png";
-  writePng(path, img);
-  const Image back = readPng(path);
-  EXPECT_EQ(back.width, img.width);
-  EXPECT_EQ(back.height, img.height);
-  EXPECT_EQ(back.rgba, img.rgba);
-  // Only the final file remains: the temporary was renamed, not copied.
-  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator{}), 1);
-  fs::remove_all(dir);
+  for (int height : {1, 23, 300}) {
+    SCOPED_TRACE("height " + std::to_string(height));
+    Image img;
+    img.width = 37;  // odd width: rows are not 4-byte aligned
+    img.height = height;
+    img.rgba.resize(static_cast<std::size_t>(img.width) * img.height * 4);
+    // Noise in the top half, flat runs (what Sub turns into zeros) below.
+    for (std::size_t i = 0; i < img.rgba.size(); ++i)
+      img.rgba[i] = i < img.rgba.size() / 2 ? static_cast<std::uint8_t>((i * 7919u) >> 3) : static_cast<std::uint8_t>(i % 4 * 60);
+    const std::string dir = tempDir("png");
+    const std::string path = dir + "/frame.png";
+    auto fileBytes = [&](int threads) {
+      tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
+      writePng(path, img);
+      std::ifstream in(path, std::ios::binary);
+      return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    const std::string one = fileBytes(1), two = fileBytes(2);
+    EXPECT_EQ(one, two);
+    const Image back = readPng(path);
+    EXPECT_EQ(back.width, img.width);
+    EXPECT_EQ(back.height, img.height);
+    EXPECT_EQ(back.rgba, img.rgba);
+    // Only the final file remains: the temporary was renamed, not copied.
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator{}), 1);
+    fs::remove_all(dir);
+  }
 }
 
 TEST(WritePng, RenderedFrameRoundTrips) {
