@@ -341,17 +341,21 @@ uniform vec3 uLightDir;                // unit, towards the light
 uniform mat4 uView;
 uniform mat4 uProj;
 uniform vec2 uViewport;                // pixels
+uniform float uInvGamma;
 out vec2 vOffset;                      // from the projected centre, pixels (y up)
-out vec3 vConic;                       // the inverse of Sigma2: (xx, xy, yy)
-out vec3 vColor;
-out float vOpacity;
+// Constant over a splat: flat (not interpolated), and the colour gamma-encoded here once per
+// vertex rather than per fragment (three pow a fragment were much of llvmpipe's splat cost).
+flat out vec3 vConic;                  // the inverse of Sigma2: (xx, xy, yy)
+flat out vec3 vColor;                  // gamma-encoded
+flat out float vOpacity;
 )" PHYSKETCH_SPLAT_QUAD_GLSL R"(void main() {
   vec4 t = uView * vec4(aCentre, 1.0);
   float z = -t.z;                      // depth in front of the eye
   vOffset = vec2(0.0);
   vConic = vec3(0.0);
   // The mesh shader's ambient + diffuse, once per splat.
-  vColor = dot(aNormal, aNormal) > 0.25 ? aColor * (0.25 + 0.75 * max(dot(aNormal, uLightDir), 0.0)) : aColor;
+  vec3 lit = dot(aNormal, aNormal) > 0.25 ? aColor * (0.25 + 0.75 * max(dot(aNormal, uLightDir), 0.0)) : aColor;
+  vColor = pow(clamp(lit, 0.0, 1.0), vec3(uInvGamma));
   vOpacity = 0.0;
   if (z <= 0.0) {                      // behind the eye: a degenerate quad, drawn nowhere
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
@@ -373,15 +377,14 @@ out float vOpacity;
 )";
 const char* const kSplatFragmentShader = R"(#version 330 core
 in vec2 vOffset;
-in vec3 vConic;
-in vec3 vColor;
-in float vOpacity;
-uniform float uInvGamma;
+flat in vec3 vConic;
+flat in vec3 vColor;
+flat in float vOpacity;
 out vec4 fragColor;
 )" PHYSKETCH_SPLAT_POWER_GLSL R"(void main() {
   float alpha = min(0.99, vOpacity * exp(splatPower(vOffset, vConic)));
   if (alpha < 1.0 / 255.0) discard;
-  fragColor = vec4(pow(clamp(vColor, 0.0, 1.0), vec3(uInvGamma)) * alpha, alpha);  // premultiplied
+  fragColor = vec4(vColor * alpha, alpha);  // premultiplied
 }
 )";
 
@@ -397,8 +400,8 @@ layout(location = 4) in float aOpacity;
 uniform mat4 uLightViewProj;
 uniform float uMapSize;                // texels
 out vec2 vOffset;
-out vec3 vConic;
-out float vOpacity;
+flat out vec3 vConic;
+flat out float vOpacity;
 )" PHYSKETCH_SPLAT_QUAD_GLSL R"(void main() {
   vec4 clip = uLightViewProj * vec4(aCentre, 1.0);
   float s = 0.5 * uMapSize;
@@ -417,8 +420,8 @@ out float vOpacity;
 )";
 const char* const kSplatShadowFragmentShader = R"(#version 330 core
 in vec2 vOffset;
-in vec3 vConic;
-in float vOpacity;
+flat in vec3 vConic;
+flat in float vOpacity;
 )" PHYSKETCH_SPLAT_POWER_GLSL R"(void main() {
   if (vOpacity * exp(splatPower(vOffset, vConic)) < 0.5) discard;
 }
