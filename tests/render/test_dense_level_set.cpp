@@ -101,8 +101,8 @@ TEST(DenseLevelSet, BuildsWhatTopologyToLevelSetBuilds) {
   const std::vector<std::vector<Vec3i>> shapes = {turnedBall(9.0, 0.7), plateWithPost(), {Vec3i(4, -3, 2)},
                                                   {Vec3i(0, 0, 0), Vec3i(9, 0, 0)}};
   for (std::size_t s = 0; s < shapes.size(); ++s)
-    for (int halfWidth : {2, 3})
-      for (int closing : {0, 1})
+    for (int halfWidth : {1, 2, 3})
+      for (int closing : {0, 1, 2})
         for (int smoothing : {0, 1, 2}) {
           SCOPED_TRACE("shape " + std::to_string(s) + ", half width " + std::to_string(halfWidth) + ", closing " +
                        std::to_string(closing) + ", smoothing " + std::to_string(smoothing));
