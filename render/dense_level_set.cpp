@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include <tbb/blocked_range.h>
@@ -99,9 +100,16 @@ std::uint64_t DenseLevelSet::boxVoxels(const std::vector<Vec3i>& cells, int half
     lo = lo.cwiseMin(c);
     hi = hi.cwiseMax(c);
   }
-  const std::int64_t m = margin(halfWidth, closingSteps);
+  // In int64 and saturated: cells may lie 2^31 apart, whose box's voxel count overflows 64 bits.
+  const std::int64_t m = margin(std::max(halfWidth, 1), std::max(closingSteps, 0));
+  constexpr std::uint64_t kTooMany = std::numeric_limits<std::uint64_t>::max();
   std::uint64_t n = 1;
-  for (int a = 0; a < 3; ++a) n *= std::uint64_t(std::int64_t(hi[a]) - lo[a] + 1 + 2 * m);
+  for (int a = 0; a < 3; ++a) {
+    const std::uint64_t extent = std::uint64_t(std::int64_t(hi[a]) - lo[a] + 1 + 2 * m);
+    if (extent > (std::uint64_t(1) << 31)) return kTooMany;
+    n *= extent;
+    if (n > (std::uint64_t(1) << 40)) return kTooMany;
+  }
   return n;
 }
 
@@ -117,6 +125,9 @@ DenseLevelSet DenseLevelSet::fromCells(const std::vector<Vec3i>& cells, double v
     hi = hi.cwiseMax(c);
   }
   const int m = margin(halfWidth, closingSteps);
+  // Band positions are 32-bit indices into the box.
+  if (boxVoxels(cells, halfWidth, closingSteps) > std::numeric_limits<std::uint32_t>::max())
+    throw std::invalid_argument("DenseLevelSet::fromCells: the cells' box holds more than 2^32 voxels");
   ls.lo_ = lo.array() - m;
   ls.dims_ = (hi - lo).array() + 1 + 2 * m;
   ls.h_ = voxelSize;
@@ -190,6 +201,7 @@ DenseLevelSet DenseLevelSet::fromCells(const std::vector<Vec3i>& cells, double v
     });
     ls.normalize(halfWidth);
     ls.trim();
+    ls.reachedBorder_ = ls.reachedBorder_ || copy.reachedBorder_;
   }
   return ls;
 }
@@ -314,8 +326,13 @@ void DenseLevelSet::trim() {
 void DenseLevelSet::dilate() {
   const std::size_t sy = std::size_t(dims_.x()), sz = sy * std::size_t(dims_.y());
   for (const std::size_t i : band_)
-    for (const std::size_t j : {i - 1, i + 1, i - sy, i + sy, i - sz, i + sz})
-      if (!border_[j]) active_[j] = 1;  // the box's outer layer stays off the band (see margin)
+    for (const std::size_t j : {i - 1, i + 1, i - sy, i + sy, i - sz, i + sz}) {
+      if (border_[j]) {
+        reachedBorder_ = true;  // OpenVDB's band would grow here; this box cannot follow
+      } else {
+        active_[j] = 1;
+      }
+    }
   rebuildBand();
 }
 
@@ -395,8 +412,10 @@ void DenseLevelSet::measure(double& area, double& volume) const {
     sumA += dd * std::sqrt(gx * gx + gy * gy + gz * gz);
     sumV += dd * (gx * double(lo_.x() + int(x)) + gy * double(lo_.y() + int(y)) + gz * double(lo_.z() + int(z)));
   }
-  area = sumA * dx * dx;
-  volume = sumV / 3.0 * dx * dx * dx;
+  // As LevelSetMeasure scales them (Pow2, Pow3); its sums run leaf by leaf and add the sorted
+  // leaf sums, so the two agree to rounding, not bit for bit.
+  area = sumA * (dx * dx);
+  volume = sumV / 3.0 * (dx * dx * dx);
 }
 
 }  // namespace physketch::render

@@ -5,7 +5,8 @@
 //   meanCurvature  = tools::LevelSetFilter::meanCurvature (a flow step, then the tracker's
 //                    one-voxel dilation, renormalization and trim),
 //   normalize      = tools::LevelSetTracker::normalize (FIRST_BIAS, TVD_RK1),
-//   measure        = tools::LevelSetMeasure's area and volume (the smeared Dirac delta).
+//   measure        = tools::LevelSetMeasure's area and volume (the smeared Dirac delta; summed
+//                    in another order, so equal to rounding, where the others are bit for bit).
 // Why: OpenVDB reaches each band voxel through accessors and stencil objects, about 50 ns a
 // voxel a sweep here; a meshed body's level set runs ~17 such sweeps, most of a frame dump's
 // time (docs/benchmarks.md). The same arithmetic over a flat array of the box costs a few ns a
@@ -25,11 +26,13 @@ namespace physketch::render {
 class DenseLevelSet {
  public:
   // The box a level set of these cells needs (cells' bounds plus the band and its growth), in
-  // voxels; compare against a budget before calling fromCells. 0 for no cells.
+  // voxels (saturating at 2^64 - 1 for boxes over 2^40); compare against a budget before
+  // calling fromCells. 0 for no cells.
   static std::uint64_t boxVoxels(const std::vector<Vec3i>& cells, int halfWidth, int closingSteps);
 
   // topologyToLevelSet(cells, halfWidth, closingSteps, dilation 0, smoothingSteps) on voxels of
-  // edge voxelSize (distances in metres). cells must not be empty.
+  // edge voxelSize (distances in metres). Throws std::invalid_argument for no cells or a box of
+  // more than 2^32 voxels.
   static DenseLevelSet fromCells(const std::vector<Vec3i>& cells, double voxelSize, int halfWidth, int closingSteps,
                                  int smoothingSteps);
 
@@ -61,6 +64,10 @@ class DenseLevelSet {
   bool active(std::size_t i) const { return active_[i] != 0; }
   const std::vector<std::uint32_t>& band() const { return band_; }
   float background() const { return background_; }
+  // True once a dilation reached the box's outer layer, where the band could not grow as
+  // OpenVDB's would: from then on the two may differ (the caller falls back to OpenVDB). The
+  // margin keeps a surface that moves by a few voxels well inside.
+  bool reachedBorder() const { return reachedBorder_; }
 
  private:
   std::size_t index(int x, int y, int z) const {
@@ -74,6 +81,7 @@ class DenseLevelSet {
   Vec3i lo_ = Vec3i::Zero(), dims_ = Vec3i::Zero();
   double h_ = 0.0;  // the voxel size as the grid's transform holds it
   float dx_ = 0.0f, background_ = 0.0f;  // as LevelSetTracker holds it (float)
+  bool reachedBorder_ = false;
   std::vector<float> phi_;
   std::vector<std::uint8_t> active_;
   std::vector<std::uint8_t> border_;  // the box's outer layer, never on the band

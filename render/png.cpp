@@ -50,22 +50,30 @@ std::vector<png_byte> deflateImage(const Image& image) {
     }
     adler[std::size_t(b)] = adler32(adler32(0L, Z_NULL, 0), filtered.data(), static_cast<uInt>(filtered.size()));
     lengths[std::size_t(b)] = filtered.size();
-    z_stream z{};
-    if (deflateInit2(&z, kCompressionLevel, Z_DEFLATED, -15, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
+    struct Deflater {  // deflateEnd on every way out
+      z_stream z{};
+      bool open = false;
+      ~Deflater() {
+        if (open) deflateEnd(&z);
+      }
+    } d;
+    if (deflateInit2(&d.z, kCompressionLevel, Z_DEFLATED, -15, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
       ok = false;
       return;
     }
+    d.open = true;
     std::vector<png_byte>& part = parts[std::size_t(b)];
-    part.resize(deflateBound(&z, static_cast<uLong>(filtered.size())) + 16);
-    z.next_in = filtered.data();
-    z.avail_in = static_cast<uInt>(filtered.size());
-    z.next_out = part.data();
-    z.avail_out = static_cast<uInt>(part.size());
+    // deflateBound is for Z_FINISH; a sync flush adds an empty stored block (5 bytes).
+    part.resize(deflateBound(&d.z, static_cast<uLong>(filtered.size())) + 16);
+    d.z.next_in = filtered.data();
+    d.z.avail_in = static_cast<uInt>(filtered.size());
+    d.z.next_out = part.data();
+    d.z.avail_out = static_cast<uInt>(part.size());
     const int last = b + 1 == bands;
-    const int status = deflate(&z, last ? Z_FINISH : Z_SYNC_FLUSH);
-    if (status != (last ? Z_STREAM_END : Z_OK) || z.avail_in != 0) ok = false;
-    part.resize(part.size() - z.avail_out);
-    deflateEnd(&z);
+    const int status = deflate(&d.z, last ? Z_FINISH : Z_SYNC_FLUSH);
+    // A sync flush that filled the output may be unfinished: zlib then leaves no room.
+    if (status != (last ? Z_STREAM_END : Z_OK) || d.z.avail_in != 0 || d.z.avail_out == 0) ok = false;
+    part.resize(part.size() - d.z.avail_out);
   });
   if (!ok) return {};
   // zlib header (deflate, 32 KiB window, FLEVEL 1 "fast": (0x78 * 256 + 0x5E) % 31 == 0), the

@@ -252,9 +252,15 @@ openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells
       const double built = nowSeconds();
       smoothLevelSet(ls, smoothIterations, report);
       if (times) times->smoothing = nowSeconds() - built;
-      return toGrid(ls, xform);
+      // A band that reached the box's edge could not grow as OpenVDB's would: build it again
+      // with OpenVDB's tools (not seen in practice: the margin is 4 voxels past the band).
+      if (!ls.reachedBorder()) {
+        if (times) times->denseLevelSet = true;
+        return toGrid(ls, xform);
+      }
     }
   }
+  if (times) times->denseLevelSet = false;
 
   openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
   grid->setTransform(xform);
@@ -406,12 +412,14 @@ TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSp
     // The dual mesh cuts the level set's corners (1.3 % of a ball's volume unsmoothed): the
     // surface moves out by the shortfall over the mesh's area (dV = A dn). A move under a
     // quarter of a voxel moves the vertices along their normals, which is what meshing again at
-    // that isovalue gives to first order, at a tenth of its cost; a larger one (where the
-    // vertices' normals could cross in thin parts) meshes again.
+    // that isovalue gives to first order, at a tenth of its cost; a larger or an inward one
+    // meshes again.
     const double shortfall = options.targetVolume - enclosedVolume(mesh), area = surfaceArea(mesh);
     if (area > 0.0 && std::abs(shortfall) > 2e-3 * options.targetVolume) {
       const double move = shortfall / area;
-      if (std::abs(move) < 0.25 * particleSpacing) {
+      // Outwards only: moved inwards, a sheet thinner than twice the move would fold over,
+      // where meshing again opens a hole as the level set does.
+      if (move > 0.0 && move < 0.25 * particleSpacing) {
         for (std::size_t i = 0; i < mesh.positions.size(); ++i)
           mesh.positions[i] += static_cast<float>(move) * mesh.normals[i];
       } else {
@@ -424,6 +432,7 @@ TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSp
     times->levelSet = t2 - t1 - local.smoothing;
     times->smoothing = local.smoothing;
     times->meshing = nowSeconds() - t2;
+    times->denseLevelSet = local.denseLevelSet;
   }
   return mesh;
 }

@@ -27,7 +27,8 @@ struct VoxelMeshOptions {
 };
 
 // The largest box (voxels) a level set is built on densely: 4 Mi voxels hold 36 MiB of work
-// arrays, and the whole 151^3 sketch grid fits.
+// arrays (about twice that at the peak: the smoothing step's copy and the closing's masks), and
+// the whole 151^3 sketch grid fits.
 constexpr std::uint64_t kDenseLevelSetVoxels = std::uint64_t(1) << 22;
 
 // voxels: integer lattice coordinates of occupied cells; the centre of cell (i,j,k)
@@ -54,10 +55,10 @@ struct ParticleMeshOptions {
   // volume (the particles' own, spacing^3 each, times their volume ratio). The union of marked
   // cells of particles off the lattice holds more than they do (closing fills gaps, and a
   // rotated lattice marks cells partly), 7 % more for a spinning ball. After meshing, a mesh
-  // still 0.2 % or more off it is moved out by the difference over its area (the dual mesh cuts
+  // still 0.2 % or more off it is moved by the difference over its area (the dual mesh cuts
   // the level set's corners: -1.3 % of a ball): its vertices along their normals when that is
-  // under a quarter of a cell, else by meshing once more at that isovalue. 0: the cells'
-  // surface as it is.
+  // outwards and under a quarter of a cell, else by meshing once more at that isovalue. 0: the
+  // cells' surface as it is.
   double targetVolume = 0.0;
 };
 
@@ -79,6 +80,7 @@ struct MeshStageTimes {
   double levelSet = 0.0;   // cells -> narrow-band level set (topologyToLevelSet's steps, the volume target)
   double smoothing = 0.0;  // the smoothing knob (0 when off)
   double meshing = 0.0;    // volumeToMesh and assembly into a TriangleMesh
+  bool denseLevelSet = false;  // the level set was built on a dense box (VoxelMeshOptions), not by OpenVDB's tools
 };
 
 // A closed surface around particles that no longer sit on the voxel lattice (soft bodies,
