@@ -105,70 +105,74 @@ TriangleMesh assemble(const std::vector<openvdb::Vec3s>& points, const std::vect
   return mesh;
 }
 
-// Moves the level set's surface along its normal until it encloses `target` (m^3): adding d to
-// every distance moves the surface by -d, and dV = A dn, so d = (V - target) / A, twice (the
-// second pass corrects the first's change of area). Area and volume in one measure per pass.
-void offsetToVolume(openvdb::FloatGrid& sdf, double target) {
-  for (int pass = 0; pass < 2; ++pass) {
-    openvdb::tools::LevelSetMeasure<openvdb::FloatGrid> measure(sdf);
-    const double area = measure.area(), volume = measure.volume();
-    if (!(area > 0.0)) return;
-    // A shifted distance field is still one, so this is a plain add over the band, not
-    // LevelSetFilter's offset, whose renormalization cost as much as a smoothing iteration
-    // (13 ms on a 20k-cell ball) and changes nothing here.
-    const float d = static_cast<float>((volume - target) / area);
-    for (auto it = sdf.beginValueOn(); it; ++it) it.setValue(*it + d);
-  }
+// The steps the volume target and the smoothing take, for both representations of a level set
+// (OpenVDB's grid, the reference; DenseLevelSet, the same updates on a dense box).
+//
+// Area (m^2) and enclosed volume (m^3).
+void measure(openvdb::FloatGrid& sdf, double& area, double& volume) {
+  openvdb::tools::LevelSetMeasure<openvdb::FloatGrid> m(sdf);
+  area = m.area();
+  volume = m.volume();
 }
+void measure(DenseLevelSet& ls, double& area, double& volume) { ls.measure(area, volume); }
 
-// Mean-curvature flow on the level set, then a dilation by the lost volume over the area
-// (dV = A dn for a small normal offset dn), applied twice so the second corrects the first's
-// change of area. Serial per grid in a fixed order of operations; LevelSetFilter's parallel
-// loops write disjoint voxels, so the result does not depend on the thread count.
-void smoothLevelSet(openvdb::FloatGrid& sdf, int iterations, SmoothingReport* report) {
-  if (iterations <= 0) return;
-  const double before = openvdb::tools::levelSetVolume(sdf);
+// Adds d to every band value. A shifted distance field is still one, so this is a plain add,
+// not LevelSetFilter's offset, whose renormalization cost as much as a smoothing iteration
+// (13 ms on a 20k-cell ball) and changes nothing here.
+void offsetBand(openvdb::FloatGrid& sdf, float d) {
+  for (auto it = sdf.beginValueOn(); it; ++it) it.setValue(*it + d);
+}
+void offsetBand(DenseLevelSet& ls, float d) { ls.offset(d); }
+
+// `iterations` steps of mean-curvature flow, each ending with the band renormalized
+// (|grad phi| = 1) by one first-order upwind sweep, then the whole band once more.
+// LevelSetFilter's default renormalizes with three fifth-order HJWENO5 sweeps, 70 % of the
+// smoothing's time; one first-order sweep (what topologyToLevelSet itself renormalizes with)
+// keeps the zero crossing as well for a surface that moves under a voxel per iteration:
+// bench_render's sphere of 7,153 particles after 2 iterations is 0.672 mm RMS off the true
+// sphere against 0.684 mm, and the frame's smoothing takes 59 ms against 233
+// (docs/benchmarks.md). The final sweeps over the whole band: LevelSetMeasure's volume, and so
+// the volume correction after the flow, assumes a distance field (without them the measured
+// volume was 2.1 % off the mesh's). LevelSetFilter's parallel loops write disjoint voxels, so
+// the result does not depend on the thread count.
+void meanCurvatureFlow(openvdb::FloatGrid& sdf, int iterations) {
   openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(sdf);
-  // Each iteration ends with the band renormalized (|grad phi| = 1). The filter's default does
-  // that with three fifth-order HJWENO5 sweeps, 70 % of the smoothing's time; one first-order
-  // upwind sweep (what topologyToLevelSet itself renormalizes with) keeps the zero crossing as
-  // well for a surface that moves under a voxel per iteration: bench_render's sphere of 7,153
-  // particles after 2 iterations is 0.672 mm RMS off the true sphere against 0.684 mm, and the
-  // frame's smoothing takes 59 ms against 233 (docs/benchmarks.md).
   filter.setSpatialScheme(openvdb::math::FIRST_BIAS);
   const int bandSweeps = filter.getNormCount();
   filter.setNormCount(1);
   for (int i = 0; i < iterations; ++i) filter.meanCurvature();
-  // The whole band once more (LevelSetMeasure's volume, and so the correction below, assumes
-  // a distance field: without this the measured volume was 2.1 % off the mesh's).
   filter.setNormCount(bandSweeps);
   filter.normalize();
-  offsetToVolume(sdf, before);
-  if (report) {
-    report->volumeBefore = before;
-    report->volumeAfter = openvdb::tools::levelSetVolume(sdf);
-  }
+}
+void meanCurvatureFlow(DenseLevelSet& ls, int iterations) {
+  for (int i = 0; i < iterations; ++i) ls.meanCurvature(1);
+  ls.normalize(3);  // LevelSetFilter's default count
 }
 
-// offsetToVolume and smoothLevelSet on a DenseLevelSet: the same steps, the same order.
-void offsetToVolume(DenseLevelSet& ls, double target) {
+// Moves the level set's surface along its normal until it encloses `target` (m^3): adding d to
+// every distance moves the surface by -d, and dV = A dn, so d = (V - target) / A, twice (the
+// second pass corrects the first's change of area). Area and volume in one measure per pass.
+template <typename LevelSet>
+void offsetToVolume(LevelSet& ls, double target) {
   for (int pass = 0; pass < 2; ++pass) {
     double area = 0.0, volume = 0.0;
-    ls.measure(area, volume);
+    measure(ls, area, volume);
     if (!(area > 0.0)) return;
-    ls.offset(static_cast<float>((volume - target) / area));
+    offsetBand(ls, static_cast<float>((volume - target) / area));
   }
 }
 
-void smoothLevelSet(DenseLevelSet& ls, int iterations, SmoothingReport* report) {
+// Mean-curvature flow on the level set, then a dilation by the lost volume over the area
+// (offsetToVolume). report: the volume before and after.
+template <typename LevelSet>
+void smoothLevelSet(LevelSet& ls, int iterations, SmoothingReport* report) {
   if (iterations <= 0) return;
   double area = 0.0, before = 0.0, after = 0.0;
-  ls.measure(area, before);
-  for (int i = 0; i < iterations; ++i) ls.meanCurvature(1);  // setNormCount(1), as above
-  ls.normalize(3);                                            // the filter's default count
+  measure(ls, area, before);
+  meanCurvatureFlow(ls, iterations);
   offsetToVolume(ls, before);
-  ls.measure(area, after);
   if (report) {
+    measure(ls, area, after);
     report->volumeBefore = before;
     report->volumeAfter = after;
   }
@@ -229,7 +233,7 @@ openvdb::FloatGrid::Ptr toGrid(const DenseLevelSet& ls, const openvdb::math::Tra
 // Cells (i,j,k) with centres origin + h*(i,j,k) -> narrow-band signed distance field in world
 // units (nullptr for no cells), moved to enclose targetVolume when it is > 0, then smoothed.
 // Options are checked by the caller.
-openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells, double voxelSize,
+openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<Vec3i>& cells, double voxelSize,
                                         const Vec3& origin, const VoxelMeshOptions& options, int smoothIterations,
                                         SmoothingReport* report, MeshStageTimes* times = nullptr,
                                         double targetVolume = 0.0) {
@@ -241,23 +245,19 @@ openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells
   openvdb::math::Transform::Ptr xform = openvdb::math::Transform::createLinearTransform(voxelSize);
   xform->postTranslate(openvdb::Vec3d(origin.x(), origin.y(), origin.z()));
 
-  if (options.denseLevelSet) {
-    std::vector<Vec3i> lattice;
-    lattice.reserve(cells.size());
-    for (const openvdb::Coord& c : cells) lattice.emplace_back(c.x(), c.y(), c.z());
-    if (DenseLevelSet::boxVoxels(lattice, options.halfWidth, options.closingSteps) <= kDenseLevelSetVoxels) {
-      DenseLevelSet ls = DenseLevelSet::fromCells(lattice, voxelSize, options.halfWidth, options.closingSteps,
-                                                  options.smoothingSteps);
-      if (targetVolume > 0.0) offsetToVolume(ls, targetVolume);
-      const double built = nowSeconds();
-      smoothLevelSet(ls, smoothIterations, report);
-      if (times) times->smoothing = nowSeconds() - built;
-      // A band that reached the box's edge could not grow as OpenVDB's would: build it again
-      // with OpenVDB's tools (not seen in practice: the margin is 4 voxels past the band).
-      if (!ls.reachedBorder()) {
-        if (times) times->denseLevelSet = true;
-        return toGrid(ls, xform);
-      }
+  if (options.denseLevelSet &&
+      DenseLevelSet::boxVoxels(cells, options.halfWidth, options.closingSteps) <= kDenseLevelSetVoxels) {
+    DenseLevelSet ls = DenseLevelSet::fromCells(cells, voxelSize, options.halfWidth, options.closingSteps,
+                                                options.smoothingSteps);
+    if (targetVolume > 0.0) offsetToVolume(ls, targetVolume);
+    const double built = nowSeconds();
+    smoothLevelSet(ls, smoothIterations, report);
+    if (times) times->smoothing = nowSeconds() - built;
+    // A band that reached the box's edge could not grow as OpenVDB's would: build it again
+    // with OpenVDB's tools (not seen in practice: the margin is 4 voxels past the band).
+    if (!ls.reachedBorder()) {
+      if (times) times->denseLevelSet = true;
+      return toGrid(ls, xform);
     }
   }
   if (times) times->denseLevelSet = false;
@@ -267,7 +267,7 @@ openvdb::FloatGrid::Ptr levelSetOfCells(const std::vector<openvdb::Coord>& cells
   {
     // Serial: the grid's topology is the set of cells, whatever their order or repeats.
     openvdb::BoolGrid::Accessor acc = grid->getAccessor();
-    for (const openvdb::Coord& c : cells) acc.setValueOn(c, true);
+    for (const Vec3i& c : cells) acc.setValueOn(openvdb::Coord(c.x(), c.y(), c.z()), true);
   }
 
   // The level set's zero crossing lies on the boundary between active and inactive voxels,
@@ -290,19 +290,13 @@ TriangleMesh meshLevelSet(const openvdb::FloatGrid* sdf, double adaptivity, doub
   return assemble(points, triangles, quads);
 }
 
-std::vector<openvdb::Coord> toCoords(const std::vector<Vec3i>& voxels) {
-  std::vector<openvdb::Coord> cells;
-  cells.reserve(voxels.size());
-  for (const Vec3i& v : voxels) cells.emplace_back(v.x(), v.y(), v.z());
-  return cells;
-}
 
 }  // namespace
 
 TriangleMesh meshVoxels(const std::vector<Vec3i>& voxels, double voxelSize, const Vec3& origin,
                         const VoxelMeshOptions& options) {
   checkOptions("meshVoxels", voxelSize, origin, options);
-  const openvdb::FloatGrid::Ptr sdf = levelSetOfCells(toCoords(voxels), voxelSize, origin, options, 0, nullptr);
+  const openvdb::FloatGrid::Ptr sdf = levelSetOfCells(voxels, voxelSize, origin, options, 0, nullptr);
   return meshLevelSet(sdf.get(), options.adaptivity);
 }
 
@@ -403,7 +397,7 @@ TriangleMesh meshParticles(const std::vector<Vec3>& positions, double particleSp
   const double t0 = nowSeconds();
   const std::vector<Vec3i> cells = particleCells(positions, particleSpacing, options.latticeOrigin);
   const double t1 = nowSeconds();
-  const openvdb::FloatGrid::Ptr sdf = levelSetOfCells(toCoords(cells), particleSpacing, options.latticeOrigin,
+  const openvdb::FloatGrid::Ptr sdf = levelSetOfCells(cells, particleSpacing, options.latticeOrigin,
                                                       options.surface, options.smoothIterations, report, &local,
                                                       options.targetVolume);
   const double t2 = nowSeconds();
@@ -676,7 +670,7 @@ std::vector<std::uint64_t> writeLevelSetsVdb(const std::string& path, const std:
       sdf = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupt, *xform, points, triangles,
                                                                static_cast<float>(g.surface.halfWidth));
     } else {
-      sdf = levelSetOfCells(toCoords(g.cells), voxelSize, origin, g.surface, g.smoothIterations, nullptr, nullptr,
+      sdf = levelSetOfCells(g.cells, voxelSize, origin, g.surface, g.smoothIterations, nullptr, nullptr,
                             g.targetVolume);
     }
     if (!sdf) sdf = openvdb::createLevelSet<openvdb::FloatGrid>(voxelSize, double(g.surface.halfWidth));
