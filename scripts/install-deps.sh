@@ -20,6 +20,7 @@ PACKAGES=(
   # without it stops at configure with "missing: OPENGL_opengl_LIBRARY".
   libegl-dev libgl-dev libopengl-dev libegl-mesa0 libgl1-mesa-dri
   libpng-dev
+  zlib1g-dev      # render/png.cpp deflates PNG frames in bands with zlib directly (find_package(ZLIB))
   libcairo2-dev   # physketch study draws study.png with Cairo (found through pkg-config 'cairo')
   libgtest-dev
   nlohmann-json3-dev libcli11-dev
