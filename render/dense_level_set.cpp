@@ -298,10 +298,14 @@ void DenseLevelSet::normalize(int sweeps) {
         for (; j < n; ++j) out[j] = normalized(p + j, sy, sz, dt, invDx);
       }
     });
-    forChunks(band_.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t k = b; k < e; ++k) phi_[band_[k]] = scratch_[k];
-    });
+    applyScratch();
   }
+}
+
+void DenseLevelSet::applyScratch() {
+  forChunks(band_.size(), [&](std::size_t b, std::size_t e) {
+    for (std::size_t k = b; k < e; ++k) phi_[band_[k]] = scratch_[k];
+  });
 }
 
 void DenseLevelSet::trim() {
@@ -353,7 +357,7 @@ void DenseLevelSet::boxMean() {
         scratch_[k] = sum * frac;
       }
     });
-    for (std::size_t k = 0; k < band_.size(); ++k) phi_[band_[k]] = scratch_[k];
+    applyScratch();
   }
 }
 
@@ -385,7 +389,7 @@ void DenseLevelSet::meanCurvature(int sweeps) {
       scratch_[k] = v0 + dt * kappa;
     }
   });
-  for (std::size_t k = 0; k < band_.size(); ++k) phi_[band_[k]] = scratch_[k];
+  applyScratch();
   track(sweeps);
 }
 

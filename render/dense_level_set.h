@@ -60,6 +60,9 @@ class DenseLevelSet {
   // x + dims.x * (y + dims.y * z). Voxels off the band hold +-background().
   const Vec3i& lo() const { return lo_; }
   const Vec3i& dims() const { return dims_; }
+  std::size_t index(int x, int y, int z) const {
+    return std::size_t(x) + std::size_t(dims_.x()) * (std::size_t(y) + std::size_t(dims_.y()) * std::size_t(z));
+  }
   const std::vector<float>& values() const { return phi_; }
   bool active(std::size_t i) const { return active_[i] != 0; }
   const std::vector<std::uint32_t>& band() const { return band_; }
@@ -70,9 +73,8 @@ class DenseLevelSet {
   bool reachedBorder() const { return reachedBorder_; }
 
  private:
-  std::size_t index(int x, int y, int z) const {
-    return std::size_t(x) + std::size_t(dims_.x()) * (std::size_t(y) + std::size_t(dims_.y()) * std::size_t(z));
-  }
+  // Jacobi: the new band values, computed into scratch_ in band order, replace the old ones.
+  void applyScratch();
   void rebuildBand();  // band_ from active_
   void rebuildRuns();  // runs_ from band_
   // Three passes of a 3-voxel box mean along one axis each, as LevelSetFilter::mean(1).

@@ -205,8 +205,7 @@ openvdb::FloatGrid::Ptr toGrid(const DenseLevelSet& ls, const openvdb::math::Tra
               bool a = false;
               if ((c.array() >= lo.array()).all() && (c.array() <= hi.array()).all()) {
                 const Vec3i r = c - lo;
-                const std::size_t i = std::size_t(r.x()) +
-                                      std::size_t(ls.dims().x()) * (std::size_t(r.y()) + std::size_t(ls.dims().y()) * std::size_t(r.z()));
+                const std::size_t i = ls.index(r.x(), r.y(), r.z());
                 v = phi[i];
                 a = ls.active(i);
               }
