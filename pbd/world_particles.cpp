@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "core/neighbor_grid.h"
+#include "pbd/cluster_kernels.h"
 #include "pbd/parallel.h"
 #include "pbd/shape_matching.h"
 #include "pbd/world.h"
@@ -38,6 +39,16 @@ Vec3 frictionCorrection(const Vec3& t, double d, double mus, double muk) {
   if (len == 0.0) return Vec3::Zero();
   if (len < mus * d) return t;
   return t * std::min(muk * d / len, 1.0);
+}
+
+// Whether the cluster kernels take their AVX2 form (the same bits as the other, faster).
+bool clusterAvx2() {
+#if defined(__x86_64__)
+  static const bool yes = __builtin_cpu_supports("avx2");
+  return yes;
+#else
+  return false;
+#endif
 }
 
 Vec3 at(const std::vector<float>& x, const std::vector<float>& y, const std::vector<float>& z, std::size_t i) {
@@ -473,7 +484,9 @@ void PbdWorld::colourClusters() {
   clusterCells_.assign(8, {});
   for (int colour = 0; colour < 8; ++colour)
     for (auto& [key, list] : byCell[std::size_t(colour)]) clusterCells_[std::size_t(colour)].push_back(std::move(list));
-  dp_.assign(cl.index.size(), Vec3::Zero());
+  dpx_.assign(cl.index.size(), 0.0f);
+  dpy_.assign(cl.index.size(), 0.0f);
+  dpz_.assign(cl.index.size(), 0.0f);
   clusterColoursDirty_ = false;
 }
 
@@ -919,57 +932,49 @@ void PbdWorld::clusterMatch(double h) {
   if (clusterColoursDirty_) colourClusters();
   const double invH2 = 1.0 / (h * h);
   const Clusters& cl = clusters_.members;
+  const bool avx2 = clusterAvx2();
   const auto match = [&](std::size_t c) {
     if (mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
     const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
     if (hi - lo < 2) return;
-    double m = 0.0;
-    Vec3 cm = Vec3::Zero();
-    for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
-      m += parts_.mass[i];
-      cm += double(parts_.mass[i]) * at(px_, py_, pz_, i);
-    }
-    cm /= m;
-    Mat3 A = Mat3::Zero();
-    for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
-      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
-      A += double(parts_.mass[i]) * (at(px_, py_, pz_, i) - cm) * q.transpose();
-    }
+    detail::ClusterView v;
+    v.idx = cl.index.data();
+    v.qx = clusters_.qx.data(), v.qy = clusters_.qy.data(), v.qz = clusters_.qz.data();
+    v.lambda = clusters_.lambda.data();
+    v.dx = dpx_.data(), v.dy = dpy_.data(), v.dz = dpz_.data();
+    v.x = px_.data(), v.y = py_.data(), v.z = pz_.data();
+    v.mass = parts_.mass.data();
+    v.w = invMassP_.data();
+    v.lo = lo, v.hi = hi;
+    // Everything relative to the first member's position p0 (positions are ~0.5 m, a
+    // cluster's offsets ~cm: the float lanes keep their bits for the offsets).
+    const auto f = std::size_t(v.idx[lo]);
+    const float p0[3] = {px_[f], py_[f], pz_[f]};
+    const detail::ClusterMoments mo = detail::clusterMoments(v, p0, avx2);
+    const double o[3] = {mo.s[0] / mo.m, mo.s[1] / mo.m, mo.s[2] / mo.m};  // centre - p0
+    Mat3 A;
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) A(r, k) = mo.a[3 * r + k] - o[r] * mo.qs[k];
     Quat& rot = clusters_.rotation[c];
     rot = extractRotation(A, rot);
     const Mat3 R = rot.toRotationMatrix();
-    const double alpha = clusters_.compliance[c] * invH2;
     // The members' corrections are computed from the same positions (Jacobi within the
     // cluster), then their net momentum is removed: a member's goal moves with the others
     // (XPBD's per-member gradient ignores that), and without this the compliance term
     // would push the cluster as a whole.
-    Vec3 net = Vec3::Zero();
-    double mDyn = 0.0;
-    for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
-      Vec3& out = dp_[std::size_t(k)];
-      out = Vec3::Zero();
-      const double w = invMassP_[i];
-      if (w == 0.0) continue;
-      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
-      const Vec3 d = at(px_, py_, pz_, i) - (R * q + cm);
-      const double C = d.norm();
-      mDyn += parts_.mass[i];
-      if (C == 0.0) continue;
-      float& lambda = clusters_.lambda[std::size_t(k)];
-      const double dl = (-C - alpha * lambda) / (w + alpha);
-      lambda = static_cast<float>(lambda + dl);
-      out = (w * dl / C) * d;
-      net += double(parts_.mass[i]) * out;
-    }
+    const float Rf[9] = {float(R(0, 0)), float(R(0, 1)), float(R(0, 2)), float(R(1, 0)), float(R(1, 1)),
+                         float(R(1, 2)), float(R(2, 0)), float(R(2, 1)), float(R(2, 2))};
+    const float of[3] = {float(o[0]), float(o[1]), float(o[2])};
+    double net[3], mDyn = 0.0;
+    detail::clusterCorrections(v, p0, Rf, of, static_cast<float>(clusters_.compliance[c] * invH2), net, mDyn, avx2);
     if (mDyn == 0.0) return;
-    const Vec3 shift = net / mDyn;
+    const float shift[3] = {float(net[0] / mDyn), float(net[1] / mDyn), float(net[2] / mDyn)};
     for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
+      const auto i = std::size_t(v.idx[k]);
       if (invMassP_[i] == 0.0f) continue;
-      put(px_, py_, pz_, i, at(px_, py_, pz_, i) + dp_[std::size_t(k)] - shift);
+      px_[i] += dpx_[std::size_t(k)] - shift[0];
+      py_[i] += dpy_[std::size_t(k)] - shift[1];
+      pz_[i] += dpz_[std::size_t(k)] - shift[2];
     }
   };
   // Colour by colour; the cells of a colour in parallel, each cell's clusters in order.
