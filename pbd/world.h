@@ -314,6 +314,7 @@ class PbdWorld final : public Solver {
   void shockPropagation(const std::vector<char>& touching, Solve&& solve);
   void particleContact();
   void clusterMatch(double h);
+  void plasticCreep(std::size_t cluster, double h);
   void distanceConstraints(double h);
   void particleUpdate(double h);
   void plasticity(double h);

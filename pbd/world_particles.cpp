@@ -1161,38 +1161,51 @@ void PbdWorld::particleRestitution(double h) {
 void PbdWorld::plasticity(double h) {
   const Clusters& cl = clusters_.members;
   if (clusters_.creep.empty()) return;  // no plastic cluster
-  for (std::size_t c = 0; c < cl.size(); ++c) {
-    if (clusters_.creep[c] <= 0.0f || mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) continue;
-    const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
-    if (hi - lo < 4) continue;
-    double m = 0.0;
-    Vec3 cm = Vec3::Zero();
-    for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
-      m += parts_.mass[i];
-      cm += double(parts_.mass[i]) * at(parts_.x, parts_.y, parts_.z, i);
-    }
-    cm /= m;
-    Mat3 Apq = Mat3::Zero(), Aqq = Mat3::Zero();
-    for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
-      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
-      Apq += double(parts_.mass[i]) * (at(parts_.x, parts_.y, parts_.z, i) - cm) * q.transpose();
-      Aqq += double(parts_.mass[i]) * q * q.transpose();
-    }
-    if (std::abs(Aqq.determinant()) < 1e-30) continue;  // flat or linear cluster: no 3D strain
-    const Mat3 R = clusters_.rotation[c].toRotationMatrix();
-    const Mat3 S = R.transpose() * Apq * Aqq.inverse();
-    if ((S - Mat3::Identity()).norm() <= clusters_.yield[c]) continue;
-    const double a = std::min(1.0, double(clusters_.creep[c]) * h);
-    for (std::int32_t k = lo; k < hi; ++k) {
-      const auto i = std::size_t(cl.index[std::size_t(k)]);
-      const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
-      const Vec3 now = R.transpose() * (at(parts_.x, parts_.y, parts_.z, i) - cm);
-      const Vec3 nq = q + a * (now - q);
-      clusters_.qx[std::size_t(k)] = float(nq.x()), clusters_.qy[std::size_t(k)] = float(nq.y()),
-      clusters_.qz[std::size_t(k)] = float(nq.z());
-    }
+  // Clusters in parallel, 64 a unit (most are elastic and skipped at once): each writes only its
+  // own memberships' rest offsets.
+  forChunks(cl.size(), 64, [&](std::size_t first, std::size_t last) {
+    for (std::size_t c = first; c < last; ++c) plasticCreep(c, h);
+  });
+}
+
+// One cluster's plastic creep (plasticity()).
+void PbdWorld::plasticCreep(std::size_t c, double h) {
+  const Clusters& cl = clusters_.members;
+  if (clusters_.creep[c] <= 0.0f || mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
+  const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
+  if (hi - lo < 4) return;
+  // The centre and A_pq as cluster_match sums them (relative to the first member), A_qq in a
+  // second sweep over the rest offsets alone.
+  detail::ClusterView v;
+  v.idx = cl.index.data();
+  v.qx = clusters_.qx.data(), v.qy = clusters_.qy.data(), v.qz = clusters_.qz.data();
+  v.x = parts_.x.data(), v.y = parts_.y.data(), v.z = parts_.z.data();
+  v.mass = parts_.mass.data();
+  v.lo = lo, v.hi = hi;
+  const auto f = std::size_t(v.idx[lo]);
+  const float p0[3] = {parts_.x[f], parts_.y[f], parts_.z[f]};
+  const detail::ClusterMoments mo = detail::clusterMoments(v, p0, clusterAvx2());
+  const Vec3 o(mo.s[0] / mo.m, mo.s[1] / mo.m, mo.s[2] / mo.m);  // centre - p0
+  const Vec3 cm = Vec3(p0[0], p0[1], p0[2]) + o;
+  Mat3 Apq, Aqq = Mat3::Zero();
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) Apq(r, k) = mo.a[3 * r + k] - o[r] * mo.qs[k];
+  for (std::int32_t k = lo; k < hi; ++k) {
+    const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
+    Aqq += double(parts_.mass[std::size_t(cl.index[std::size_t(k)])]) * q * q.transpose();
+  }
+  if (std::abs(Aqq.determinant()) < 1e-30) return;  // flat or linear cluster: no 3D strain
+  const Mat3 R = clusters_.rotation[c].toRotationMatrix();
+  const Mat3 S = R.transpose() * Apq * Aqq.inverse();
+  if ((S - Mat3::Identity()).norm() <= clusters_.yield[c]) return;
+  const double a = std::min(1.0, double(clusters_.creep[c]) * h);
+  for (std::int32_t k = lo; k < hi; ++k) {
+    const auto i = std::size_t(cl.index[std::size_t(k)]);
+    const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
+    const Vec3 now = R.transpose() * (at(parts_.x, parts_.y, parts_.z, i) - cm);
+    const Vec3 nq = q + a * (now - q);
+    clusters_.qx[std::size_t(k)] = float(nq.x()), clusters_.qy[std::size_t(k)] = float(nq.y()),
+    clusters_.qz[std::size_t(k)] = float(nq.z());
   }
 }
 
