@@ -888,6 +888,10 @@ TEST(Particles, SameStateForOneAndTwoThreads) {
     ParticleArrays p;
     std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("rope", MaterialKind::kRope),
                                   makeKind("cloth", MaterialKind::kCloth), makeKind("beam", MaterialKind::kRigid)};
+    // Plastic (yield 0: every cluster creeps every substep): the plasticity pass's 1,000+
+    // clusters run in parallel units.
+    mats[0].soft.plasticCreep = 5.0;
+    mats[0].soft.plasticYield = 0.0;
     BodyRange jelly = addBox(p, Vec3(0.0, 0.05, 0.0), 17, 17, 17, 0, 0);
     BodyRange beam = addBox(p, Vec3(0.3, 0.6, 0.0), 20, 1, 3, 3, 3);
     beam.init.fixed = true;
