@@ -132,9 +132,12 @@ PHYSKETCH_CLUSTER_INLINE void correctionsLanes(const ClusterView& v, const float
       d[r] = dp;
     }
     store(v.lambda, k, v.hi, lamNew);
-    store(v.dx, k, v.hi, d[0]);
-    store(v.dy, k, v.hi, d[1]);
-    store(v.dz, k, v.hi, d[2]);
+    for (std::int32_t j = 0; j < kL && k + j < v.hi; ++j) {
+      const auto i = std::size_t(v.idx[k + j]);
+      v.x[i] += d[0][j];
+      v.y[i] += d[1][j];
+      v.z[i] += d[2][j];
+    }
   }
   for (int r = 0; r < 3; ++r) net[r] = laneSum(n[r]);
   mDyn = laneSum(md);

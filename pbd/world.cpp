@@ -856,7 +856,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
       // (offset starts as {0}, one entry, before any cluster: not the pass's.)
       std::size_t b = (c.members.size() > 0 ? heldBytes(c.members.offset) : 0) +
                       heldBytes(c.members.index, c.members.stiffness, c.qx, c.qy, c.qz, c.lambda,
-                                c.compliance, c.rotation, c.body, c.restCentre, c.extent, dpx_, dpy_, dpz_, clusterCells_);
+                                c.compliance, c.rotation, c.body, c.restCentre, c.extent, clusterCells_);
       for (const auto& colour : clusterCells_) {
         b += heldBytes(colour);
         for (const auto& cell : colour) b += heldBytes(cell);

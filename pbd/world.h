@@ -447,7 +447,6 @@ class PbdWorld final : public Solver {
   DistanceConstraints distances_;     // rope and cloth stretch and bending
   std::int32_t nextColour_ = 0;  // the next unused DistanceConstraints colour
   std::vector<std::int32_t> distanceVia_;  // per distance constraint: the node a bending link spans, else -1
-  std::vector<float> dpx_, dpy_, dpz_;  // per membership: the correction of this iteration (m)
   // Clusters in 8 colours for parallel matching: colour = parity of the cell (edge twice the
   // largest cluster extent) of the cluster's rest centre. Clusters of one colour in different
   // cells share no particle; those of one cell are matched in order by one task.

@@ -484,9 +484,6 @@ void PbdWorld::colourClusters() {
   clusterCells_.assign(8, {});
   for (int colour = 0; colour < 8; ++colour)
     for (auto& [key, list] : byCell[std::size_t(colour)]) clusterCells_[std::size_t(colour)].push_back(std::move(list));
-  dpx_.assign(cl.index.size(), 0.0f);
-  dpy_.assign(cl.index.size(), 0.0f);
-  dpz_.assign(cl.index.size(), 0.0f);
   clusterColoursDirty_ = false;
 }
 
@@ -941,7 +938,6 @@ void PbdWorld::clusterMatch(double h) {
     v.idx = cl.index.data();
     v.qx = clusters_.qx.data(), v.qy = clusters_.qy.data(), v.qz = clusters_.qz.data();
     v.lambda = clusters_.lambda.data();
-    v.dx = dpx_.data(), v.dy = dpy_.data(), v.dz = dpz_.data();
     v.x = px_.data(), v.y = py_.data(), v.z = pz_.data();
     v.mass = parts_.mass.data();
     v.w = invMassP_.data();
@@ -972,9 +968,9 @@ void PbdWorld::clusterMatch(double h) {
     for (std::int32_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(v.idx[k]);
       if (invMassP_[i] == 0.0f) continue;
-      px_[i] += dpx_[std::size_t(k)] - shift[0];
-      py_[i] += dpy_[std::size_t(k)] - shift[1];
-      pz_[i] += dpz_[std::size_t(k)] - shift[2];
+      px_[i] -= shift[0];
+      py_[i] -= shift[1];
+      pz_[i] -= shift[2];
     }
   };
   // Colour by colour; the cells of a colour in parallel, each cell's clusters in order.
