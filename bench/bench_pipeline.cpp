@@ -44,6 +44,8 @@ int main(int argc, char** argv) {
   }
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
   const SceneDesc sc = loadScene(scenePath);
+  // The rows' case names start with the scene's name (hello for the default scene).
+  const std::string name = std::filesystem::path(scenePath).stem().string();
   const auto strokes = sketch::loadStrokes(sc.strokesPath);
   const sketch::GridMapping mapping(sc.workspaceCenter, sc.workspaceSize);
 
@@ -56,7 +58,7 @@ int main(int argc, char** argv) {
     tv.push_back(nowSeconds() - t0);
   }
   const std::size_t n = sk->particles.size();
-  row("pipeline", "hello", n, threads, "voxelize_ms", 1e3 * median(tv), "ms");
+  row("pipeline", name.c_str(), n, threads, "voxelize_ms", 1e3 * median(tv), "ms");
 
   const std::vector<BodyRange>& bodies = sk->bodies;
   const pbd::PbdParams pp = pbd::paramsFromScene(sc, 0.5 * mapping.voxelSize());
@@ -68,8 +70,8 @@ int main(int argc, char** argv) {
     world.step();
     ts.push_back(nowSeconds() - t0);
   }
-  char kase[96];
-  std::snprintf(kase, sizeof kase, "hello_s%d_i%d", sc.substeps, sc.iterations);
+  const std::string kaseName = name + "_s" + std::to_string(sc.substeps) + "_i" + std::to_string(sc.iterations);
+  const char* const kase = kaseName.c_str();
   row("pbd", kase, n, threads, "ms_per_step", 1e3 * median(ts), "ms");
   for (const auto& e : world.profile().entries())
     if (e.calls > 0) {
@@ -91,8 +93,8 @@ int main(int argc, char** argv) {
   }
   std::size_t tris = 0;
   for (const auto& m : meshes) tris += m.triangleCount();
-  row("render", "hello_mesh", n, threads, "mesh_all_bodies_ms", 1e3 * median(tm), "ms");
-  row("render", "hello_mesh", n, threads, "triangles", double(tris), "count");
+  row("render", (name + "_mesh").c_str(), n, threads, "mesh_all_bodies_ms", 1e3 * median(tm), "ms");
+  row("render", (name + "_mesh").c_str(), n, threads, "triangles", double(tris), "count");
 
   render::OffscreenRenderer renderer(sc.width, sc.height);
   std::vector<int> handles;
@@ -113,8 +115,8 @@ int main(int argc, char** argv) {
     td.push_back(t1 - t0);
   }
   std::filesystem::remove(tmp);
-  char res[64];
-  std::snprintf(res, sizeof res, "hello_%dx%d", sc.width, sc.height);
+  const std::string resName = name + "_" + std::to_string(sc.width) + "x" + std::to_string(sc.height);
+  const char* const res = resName.c_str();
   row("render", res, n, threads, "draw_readback_ms_per_frame", 1e3 * median(td), "ms");
   row("render", res, n, threads, "png_ms_per_frame", 1e3 * median(tp), "ms");
   return 0;
