@@ -4,6 +4,12 @@
 // never cross a call.
 #include "pbd/cluster_kernels.h"
 
+// The two forms give equal bits only with IEEE operations kept as written (the project builds
+// with -ffp-contract=off); -ffast-math would let GCC reassociate them differently in each.
+#ifdef __FAST_MATH__
+#error "cluster_kernels.cpp needs IEEE arithmetic: build without -ffast-math"
+#endif
+
 #include <cmath>
 #include <cstring>
 
@@ -49,6 +55,9 @@ struct Lanes {
   F8 x, y, z, m, w, qx, qy, qz;
   I8 live;  // -1 in lanes of real members
 };
+// kWithW: the inverse masses too (the corrections'; the moments never read w, which a view for
+// them may leave null).
+template <bool kWithW>
 PHYSKETCH_CLUSTER_INLINE Lanes load(const ClusterView& v, std::int32_t k, const float (&p0)[3]) {
   std::int32_t i[kL];
   I8 live;
@@ -64,7 +73,8 @@ PHYSKETCH_CLUSTER_INLINE Lanes load(const ClusterView& v, std::int32_t k, const 
   l.y = live ? gather(v.y, i) - splat(p0[1]) : zero;
   l.z = live ? gather(v.z, i) - splat(p0[2]) : zero;
   l.m = live ? gather(v.mass, i) : zero;
-  l.w = live ? gather(v.w, i) : zero;
+  l.w = zero;
+  if (kWithW) l.w = live ? gather(v.w, i) : zero;
   l.qx = run(v.qx, k, v.hi);
   l.qy = run(v.qy, k, v.hi);
   l.qz = run(v.qz, k, v.hi);
@@ -82,7 +92,7 @@ PHYSKETCH_CLUSTER_INLINE ClusterMoments momentsLanes(const ClusterView& v, const
   F8 m = zero, s[3] = {zero, zero, zero}, qs[3] = {zero, zero, zero};
   F8 a[9] = {zero, zero, zero, zero, zero, zero, zero, zero, zero};
   for (std::int32_t k = v.lo; k < v.hi; k += kL) {
-    const Lanes l = load(v, k, p0);
+    const Lanes l = load<false>(v, k, p0);
     const F8 d[3] = {l.m * l.x, l.m * l.y, l.m * l.z};
     const F8 q[3] = {l.qx, l.qy, l.qz};
     m += l.m;
@@ -107,7 +117,7 @@ PHYSKETCH_CLUSTER_INLINE void correctionsLanes(const ClusterView& v, const float
   const F8 zero = splat(0.0f), al = splat(alpha);
   F8 n[3] = {zero, zero, zero}, md = zero;
   for (std::int32_t k = v.lo; k < v.hi; k += kL) {
-    const Lanes l = load(v, k, p0);
+    const Lanes l = load<true>(v, k, p0);
     F8 d[3];
     const F8 q[3] = {l.qx, l.qy, l.qz};
     const F8 p[3] = {l.x, l.y, l.z};
@@ -133,6 +143,7 @@ PHYSKETCH_CLUSTER_INLINE void correctionsLanes(const ClusterView& v, const float
     }
     store(v.lambda, k, v.hi, lamNew);
     for (std::int32_t j = 0; j < kL && k + j < v.hi; ++j) {
+      if (!dyn[j]) continue;  // a fixed member's position is not written (not even + 0)
       const auto i = std::size_t(v.idx[k + j]);
       v.x[i] += d[0][j];
       v.y[i] += d[1][j];
@@ -158,6 +169,16 @@ void correctionsSse(const ClusterView& v, const float (&p0)[3], const float (&R)
 }
 
 }  // namespace
+
+Vec3 ClusterMoments::offset() const { return Vec3(s[0], s[1], s[2]) / m; }
+
+Mat3 ClusterMoments::matrix() const {
+  const Vec3 o = offset();
+  Mat3 A;
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) A(r, k) = a[3 * r + k] - o[r] * qs[k];
+  return A;
+}
 
 ClusterMoments clusterMoments(const ClusterView& v, const float (&p0)[3], bool avx2) {
   return avx2 ? momentsAvx2(v, p0) : momentsSse(v, p0);

@@ -2,10 +2,13 @@
 // a cluster's mass moments, and its members' XPBD corrections towards their goals. Both run
 // eight members at a time in float lanes (GCC vectors: one AVX2 register where the CPU has it,
 // two SSE ones otherwise), each lane the same IEEE operations in the same order either way, so
-// the two forms give equal bits; the lanes' sums are added into doubles in lane order.
+// the two forms give equal bits for finite values (a NaN's sign or payload may differ); the
+// lanes' sums are added into doubles in lane order.
 #pragma once
 
 #include <cstdint>
+
+#include "core/math.h"
 
 namespace physketch::pbd::detail {
 
@@ -20,7 +23,7 @@ struct ClusterView {
   float* y = nullptr;
   float* z = nullptr;
   const float* mass = nullptr;        // per particle (kg)
-  const float* w = nullptr;           // per particle: inverse mass (1/kg), 0 = not moved
+  const float* w = nullptr;           // per particle: inverse mass (1/kg), 0 = not moved (clusterCorrections only)
   std::int32_t lo = 0, hi = 0;
 };
 
@@ -32,7 +35,10 @@ struct ClusterMoments {
   double s[3] = {0.0, 0.0, 0.0};
   double qs[3] = {0.0, 0.0, 0.0};
   double a[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // row-major
+  Vec3 offset() const;  // the centre relative to p0: s / m
+  Mat3 matrix() const;  // A = a - offset() qs^T
 };
+// v.lambda and v.w may be null here.
 ClusterMoments clusterMoments(const ClusterView& v, const float (&p0)[3], bool avx2);
 
 // Per member k with w > 0: d = (p_k - p0) - (R q_k + o), C = |d|, and where C > 0

@@ -11,7 +11,8 @@ namespace physketch::pbd {
 
 // Rotation part of A (the polar factor R of A = R S) by the iterative method of
 // Müller et al. 2016, "A robust method to extract the rotational part of
-// deformations", warm-started from q. Robust for rank-deficient A (flat or
+// deformations", warm-started from q, with Newton's step where the Hessian of
+// tr(R^T A) allows it (shape_matching.cpp). Robust for rank-deficient A (flat or
 // linear bodies keep the previous rotation about their free axes) and never a
 // reflection. Returns the updated unit quaternion.
 Quat extractRotation(const Mat3& A, Quat q, int maxIterations = 20);

@@ -69,6 +69,11 @@
 
 namespace physketch::pbd {
 
+namespace detail {
+struct ClusterView;
+struct ClusterMoments;
+}  // namespace detail
+
 struct PbdParams {
   double dt = 1.0 / 60.0;     // s per step
   int substeps = 4;
@@ -314,6 +319,8 @@ class PbdWorld final : public Solver {
   void shockPropagation(const std::vector<char>& touching, Solve&& solve);
   void particleContact();
   void clusterMatch(double h);
+  detail::ClusterView clusterView(std::size_t cluster, float* x, float* y, float* z);
+  detail::ClusterMoments clusterMoments(const detail::ClusterView& v, float (&p0)[3]) const;
   void plasticCreep(std::size_t cluster, double h);
   void distanceConstraints(double h);
   void particleUpdate(double h);

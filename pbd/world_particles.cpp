@@ -470,6 +470,16 @@ void PbdWorld::dropRemovedConstraints() {
 // the bodies have done since.
 void PbdWorld::colourClusters() {
   const Clusters& cl = clusters_.members;
+  // clusterCorrections moves each member as it goes, which is the Jacobi update only while no
+  // particle is a member twice (buildClusters and refresh never make one; checked here, where
+  // clusters change, not per step).
+  std::vector<std::int32_t> seen(parts_.size(), -1);
+  for (std::size_t c = 0; c < cl.size(); ++c)
+    for (std::int32_t k = cl.offset[c]; k < cl.offset[c + 1]; ++k) {
+      std::int32_t& mark = seen[std::size_t(cl.index[std::size_t(k)])];
+      if (mark == std::int32_t(c)) throw RuntimeError("PbdWorld::colourClusters: a particle is a member of one cluster twice");
+      mark = std::int32_t(c);
+    }
   double extent = 0.0;
   for (float e : clusters_.extent) extent = std::max(extent, double(e));
   const double cell = 2.0 * extent * (1.0 + 1e-6) + 1e-9;
@@ -921,10 +931,31 @@ void PbdWorld::particleContact() {
   });
 }
 
+// Cluster c's members over the positions x, y, z (v.lambda and v.w left for the caller).
+detail::ClusterView PbdWorld::clusterView(std::size_t c, float* x, float* y, float* z) {
+  detail::ClusterView v;
+  v.idx = clusters_.members.index.data();
+  v.qx = clusters_.qx.data(), v.qy = clusters_.qy.data(), v.qz = clusters_.qz.data();
+  v.x = x, v.y = y, v.z = z;
+  v.mass = parts_.mass.data();
+  v.lo = clusters_.members.offset[c], v.hi = clusters_.members.offset[c + 1];
+  return v;
+}
+
+// The view's mass moments relative to its first member's position, returned in p0 (positions
+// are ~0.5 m, a cluster's offsets ~cm: the float lanes keep their bits for the offsets).
+detail::ClusterMoments PbdWorld::clusterMoments(const detail::ClusterView& v, float (&p0)[3]) const {
+  const auto f = std::size_t(v.idx[v.lo]);
+  p0[0] = v.x[f], p0[1] = v.y[f], p0[2] = v.z[f];
+  return detail::clusterMoments(v, p0, clusterAvx2());
+}
+
 // Clustered shape matching with XPBD compliance: per cluster, the best rigid transform of
 // its rest shape onto the current positions (Müller 2005, Eq. 5-7; polar decomposition by
-// Müller 2016), then per member the constraint C = |p - g| towards its goal g with
+// extractRotation), then per member the constraint C = |p - g| towards its goal g with
 // compliance alpha: dlambda = (-C - alpha~ lambda) / (w + alpha~), alpha~ = alpha / h^2.
+// Three sweeps over a cluster's members: the moments and the corrections (cluster_kernels.h,
+// eight members at a time), then the net-momentum shift.
 void PbdWorld::clusterMatch(double h) {
   if (clusterColoursDirty_) colourClusters();
   const double invH2 = 1.0 / (h * h);
@@ -934,25 +965,14 @@ void PbdWorld::clusterMatch(double h) {
     if (mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
     const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
     if (hi - lo < 2) return;
-    detail::ClusterView v;
-    v.idx = cl.index.data();
-    v.qx = clusters_.qx.data(), v.qy = clusters_.qy.data(), v.qz = clusters_.qz.data();
+    detail::ClusterView v = clusterView(c, px_.data(), py_.data(), pz_.data());
     v.lambda = clusters_.lambda.data();
-    v.x = px_.data(), v.y = py_.data(), v.z = pz_.data();
-    v.mass = parts_.mass.data();
     v.w = invMassP_.data();
-    v.lo = lo, v.hi = hi;
-    // Everything relative to the first member's position p0 (positions are ~0.5 m, a
-    // cluster's offsets ~cm: the float lanes keep their bits for the offsets).
-    const auto f = std::size_t(v.idx[lo]);
-    const float p0[3] = {px_[f], py_[f], pz_[f]};
-    const detail::ClusterMoments mo = detail::clusterMoments(v, p0, avx2);
-    const double o[3] = {mo.s[0] / mo.m, mo.s[1] / mo.m, mo.s[2] / mo.m};  // centre - p0
-    Mat3 A;
-    for (int r = 0; r < 3; ++r)
-      for (int k = 0; k < 3; ++k) A(r, k) = mo.a[3 * r + k] - o[r] * mo.qs[k];
+    float p0[3];
+    const detail::ClusterMoments mo = clusterMoments(v, p0);
+    const Vec3 o = mo.offset();  // centre - p0
     Quat& rot = clusters_.rotation[c];
-    rot = extractRotation(A, rot);
+    rot = extractRotation(mo.matrix(), rot);
     const Mat3 R = rot.toRotationMatrix();
     // The members' corrections are computed from the same positions (Jacobi within the
     // cluster), then their net momentum is removed: a member's goal moves with the others
@@ -1170,22 +1190,13 @@ void PbdWorld::plasticCreep(std::size_t c, double h) {
   if (clusters_.creep[c] <= 0.0f || mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
   const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
   if (hi - lo < 4) return;
-  // The centre and A_pq as cluster_match sums them (relative to the first member), A_qq in a
-  // second sweep over the rest offsets alone.
-  detail::ClusterView v;
-  v.idx = cl.index.data();
-  v.qx = clusters_.qx.data(), v.qy = clusters_.qy.data(), v.qz = clusters_.qz.data();
-  v.x = parts_.x.data(), v.y = parts_.y.data(), v.z = parts_.z.data();
-  v.mass = parts_.mass.data();
-  v.lo = lo, v.hi = hi;
-  const auto f = std::size_t(v.idx[lo]);
-  const float p0[3] = {parts_.x[f], parts_.y[f], parts_.z[f]};
-  const detail::ClusterMoments mo = detail::clusterMoments(v, p0, clusterAvx2());
-  const Vec3 o(mo.s[0] / mo.m, mo.s[1] / mo.m, mo.s[2] / mo.m);  // centre - p0
-  const Vec3 cm = Vec3(p0[0], p0[1], p0[2]) + o;
-  Mat3 Apq, Aqq = Mat3::Zero();
-  for (int r = 0; r < 3; ++r)
-    for (int k = 0; k < 3; ++k) Apq(r, k) = mo.a[3 * r + k] - o[r] * mo.qs[k];
+  // The centre and A_pq as cluster_match sums them (at the positions after the substep), A_qq
+  // in a second sweep over the rest offsets alone.
+  float p0[3];
+  const detail::ClusterMoments mo = clusterMoments(clusterView(c, parts_.x.data(), parts_.y.data(), parts_.z.data()), p0);
+  const Vec3 cm = Vec3(p0[0], p0[1], p0[2]) + mo.offset();
+  const Mat3 Apq = mo.matrix();
+  Mat3 Aqq = Mat3::Zero();
   for (std::int32_t k = lo; k < hi; ++k) {
     const Vec3 q(clusters_.qx[std::size_t(k)], clusters_.qy[std::size_t(k)], clusters_.qz[std::size_t(k)]);
     Aqq += double(parts_.mass[std::size_t(cl.index[std::size_t(k)])]) * q * q.transpose();
