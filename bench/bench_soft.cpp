@@ -7,8 +7,6 @@
 // row per pass (ms per step, mean over all steps).
 //   build/bench/bench_soft [--threads N] [--steps S] [--n N] [--iterations K]
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
 #include <string>
 #include <vector>
 
@@ -16,19 +14,13 @@
 
 #include "bench/bench_common.h"
 #include "core/material_table.h"
-#include "core/profile.h"
 #include "pbd/world.h"
 
 using namespace physketch;
 
 int main(int argc, char** argv) {
   int threads = 1, steps = 60, n = 20, iterations = 4;
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (!std::strcmp(argv[i], "--threads")) threads = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--steps")) steps = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--n")) n = std::atoi(argv[++i]);
-    else if (!std::strcmp(argv[i], "--iterations")) iterations = std::atoi(argv[++i]);
-  }
+  bench::intOptions(argc, argv, {{"--threads", &threads}, {"--steps", &steps}, {"--n", &n}, {"--iterations", &iterations}});
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
   const double h = 0.01, r = 0.5 * h;
   Material jelly = makeMaterial(MaterialKind::kSoft, "jelly");
@@ -60,17 +52,7 @@ int main(int argc, char** argv) {
   prm.particleRadius = r;
   pbd::PbdWorld w(p, bodies, {jelly, clay}, prm);
   std::vector<double> ms;
-  for (int s = 0; s < steps + 3; ++s) {
-    const double t0 = nowSeconds();
-    if (!w.step()) {
-      std::fprintf(stderr, "bench_soft: %s\n", w.guard().message().c_str());
-      return 1;
-    }
-    if (s >= 3) ms.push_back(1e3 * (nowSeconds() - t0));
-  }
-  const std::size_t np = p.size();
-  bench::row("pbd", "soft", np, threads, "ms_per_step", bench::median(ms), "ms");
-  for (const Profile::Entry& e : w.profile().entries())
-    if (e.calls > 0) bench::row("pbd", ("soft." + e.name).c_str(), np, threads, "ms_per_step", 1e3 * e.seconds / (steps + 3), "ms");
+  if (!bench::timeSteps(w, 3, steps, "bench_soft", ms)) return 1;
+  bench::stepRows("pbd", "soft", p.size(), threads, w, ms, steps + 3);
   return 0;
 }
