@@ -684,8 +684,9 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
                 : c.asleep > 0 ? std::to_string(c.asleep) + " dynamic rigid bodies, all asleep (sleep)"
                                : "no dynamic rigid body (none, or all fixed, held or emptied)";
     case PbdPass::kBodyContact:
-      return on ? "a dynamic rigid body and another rigid body within reach of each other"
-                : (c.rigidDynamic == 0 ? "no dynamic rigid body" : "no two rigid bodies are within reach of each other");
+      return on ? "a dynamic rigid body and another rigid or fixed body within reach of each other"
+                : (c.rigidDynamic == 0 ? "no dynamic rigid body"
+                                       : "no two rigid (or rigid and fixed) bodies are within reach of each other");
     case PbdPass::kKinematic:
       return on ? n(c.kinematic, "bodies held or carried by a stroke")
                 : "no body is held while drawn or carried by a move now";
@@ -760,7 +761,7 @@ std::string PbdWorld::touches(PbdPass pass) const {
       case PbdPass::kIntegrate:
       case PbdPass::kFindContacts:
       case PbdPass::kRigidContact: counts = rigid && dyn; break;
-      case PbdPass::kBodyContact: counts = rigid && m != BodyMode::kEmpty; break;
+      case PbdPass::kBodyContact: counts = (rigid || m == BodyMode::kFixed) && m != BodyMode::kEmpty; break;
       case PbdPass::kRestitution: counts = rigid && dyn && bouncy; break;
       case PbdPass::kKinematic: counts = m == BodyMode::kKinematic; break;
       case PbdPass::kUpdate: counts = rigid && (dyn || m == BodyMode::kKinematic); break;
@@ -1310,7 +1311,12 @@ bool PbdWorld::mayTouch(std::size_t a, std::size_t b, double horizon) const {
     return mode_[k] == BodyMode::kKinematic && mode_[o] == BodyMode::kDynamic;
   };
   if (!moving(a) && !moving(b) && !carriedToSleeper(a, b) && !carriedToSleeper(b, a)) return false;
-  if (!isRigid(a) || !isRigid(b)) return false;  // particle-level bodies touch through particle_contact
+  // Particle-level bodies touch through particle_contact, but fixed particle-level material (a
+  // fixed jelly slab, a fixed cloth) never moves: to a rigid body it is a fixed body like any
+  // other, met at body level (its pose stays its rest pose). Through particle pairs alone a block
+  // landing on it took each pair's correction in turn and tumbled.
+  const auto bodyLevel = [&](std::size_t k) { return isRigid(k) || mode_[k] == BodyMode::kFixed; };
+  if (!bodyLevel(a) || !bodyLevel(b)) return false;
   const double g = params_.gravity.norm();
   const auto travel = [&](std::size_t k) {
     const Motion& m = motion_[k];

@@ -317,6 +317,41 @@ TEST(Soft, ASpinningCubeInZeroGravityKeepsItsAngularMomentumAndSize) {
   EXPECT_NEAR(g1, g0, 1e-4 * g0);
 }
 
+// `fixed` works for every kind: a fixed jelly slab or a fixed cloth is a fixed support, and a
+// block dropped on it lands as on a fixed rigid slab of the same particles. Before, a rigid
+// body met particle-level material only through particle pairs, which drop pairs where neither
+// side can move, so the block fell through the fixed jelly to the ground (and, with those pairs
+// kept, took each pair's correction in turn and tumbled over). The oracle: the same drop onto
+// the slab as a fixed rigid body: the block's rest height within 1e-6 m (the same body-level
+// contact on the same particles; float positions), and no tilt.
+TEST(Soft, AFixedSoftSlabOrClothHoldsUpABlockAsAFixedRigidSlabDoes) {
+  const auto drop = [](MaterialKind slabKind) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("slab", slabKind), makeKind("wood", MaterialKind::kRigid)};
+    BodyRange slab;
+    if (slabKind == MaterialKind::kCloth) {
+      slab = addSheet(p, Vec3(-0.1, 0.2, -0.1), 21, 21, 0, Vec3(0, 0, 1));
+    } else {
+      slab = addBox(p, Vec3(-0.1, 0.18, -0.1), 21, 3, 21, 0, 0);
+    }
+    slab.init.fixed = true;
+    BodyRange block = addBox(p, Vec3(-0.02, 0.3, -0.02), 5, 5, 5, 1, 1);
+    PbdWorld w(p, {slab, block}, mats, params(8, 4));
+    for (int s = 0; s < 60; ++s) EXPECT_TRUE(w.step()) << w.guard().message();
+    return std::make_pair(w.pose(1).centre, w.pose(1).rotation);
+  };
+  const auto [rigidC, rigidQ] = drop(MaterialKind::kRigid);
+  EXPECT_NEAR(rigidC.y(), 0.2 + kSpacing / 2 + 0.02 + kSpacing / 2, 0.5 * kRadius)
+      << "the oracle itself: the block rests on the slab's top row";
+  for (MaterialKind kind : {MaterialKind::kSoft, MaterialKind::kCloth}) {
+    const auto [c, q] = drop(kind);
+    EXPECT_NEAR(c.y(), rigidC.y(), 1e-6) << (kind == MaterialKind::kSoft ? "soft" : "cloth");
+    EXPECT_NEAR(c.x(), rigidC.x(), 1e-6);
+    EXPECT_NEAR(c.z(), rigidC.z(), 1e-6);
+    EXPECT_LT(q.angularDistance(rigidQ), 1e-5);
+  }
+}
+
 // The same with a rigid body: a soft cube hits a rigid box; the rigid body takes its share
 // through its generalized inverse mass, so the momentum of both together is conserved
 // (tolerance as above: float32 rounding of the soft side's positions).
