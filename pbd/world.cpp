@@ -398,6 +398,7 @@ void PbdWorld::setMode(int body, BodyMode mode) {
   for (std::int32_t i : members_[b])
     parts_.phase[std::size_t(i)] = phase::make(group, flags | fluid | (pinnedAt(std::size_t(i)) ? phase::kPrescribed : 0u));
   if (!isRigid(b)) refreshInverseMasses(b);
+  if (!isRigid(b) && (mode == BodyMode::kFixed || mode == BodyMode::kKinematic)) holdShape(b);
   Motion& mo = motion_[b];
   mo.kinStart = mo.kinTarget = mo.c;
   if (mode == BodyMode::kFixed) mo.v = mo.w = Vec3::Zero();
@@ -417,6 +418,32 @@ void PbdWorld::setKinematicTarget(int body, const Vec3& centre) {
   const auto b = static_cast<std::size_t>(body);
   if (mode_.at(b) != BodyMode::kKinematic) throw RuntimeError("PbdWorld::setKinematicTarget: body is not kinematic");
   motion_[b].kinTarget = centre;
+}
+
+// A particle-level body that no longer moves by itself (fixed, or carried by a stroke, which
+// translates its particles as they are) meets rigid bodies at body level (mayTouch), through
+// rigidPoint(): its rest frame becomes its particles' shape now, centred on their centre of
+// mass, unrotated.
+void PbdWorld::holdShape(std::size_t b) {
+  double m = 0.0;
+  Vec3 c = Vec3::Zero();
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    m += parts_.mass[k];
+    c += double(parts_.mass[k]) * Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
+  }
+  if (!(m > 0.0)) return;
+  c /= m;
+  for (std::int32_t i : members_[b]) {
+    const auto k = std::size_t(i);
+    rx_[k] = static_cast<float>(parts_.x[k] - c.x());
+    ry_[k] = static_cast<float>(parts_.y[k] - c.y());
+    rz_[k] = static_cast<float>(parts_.z[k] - c.z());
+  }
+  Motion& mo = motion_[b];
+  mo.c = mo.cPrev = c;
+  mo.q = mo.qPrev = Quat::Identity();
+  refreshMassProperties(b);  // reach and box of the held shape
 }
 
 // Moves a body's rest frame to its members' centre of mass, keeping every particle where it is.
@@ -1311,11 +1338,13 @@ bool PbdWorld::mayTouch(std::size_t a, std::size_t b, double horizon) const {
     return mode_[k] == BodyMode::kKinematic && mode_[o] == BodyMode::kDynamic;
   };
   if (!moving(a) && !moving(b) && !carriedToSleeper(a, b) && !carriedToSleeper(b, a)) return false;
-  // Particle-level bodies touch through particle_contact, but fixed particle-level material (a
-  // fixed jelly slab, a fixed cloth) never moves: to a rigid body it is a fixed body like any
-  // other, met at body level (its pose stays its rest pose). Through particle pairs alone a block
-  // landing on it took each pair's correction in turn and tumbled.
-  const auto bodyLevel = [&](std::size_t k) { return isRigid(k) || mode_[k] == BodyMode::kFixed; };
+  // Particle-level bodies touch through particle_contact, but a fixed or carried one moves only
+  // as a whole (not at all, or translated by its stroke): to a rigid body it is a fixed or
+  // carried body like any other, met at body level (holdShape: its particles are rigidPoint()'s).
+  // Particle pairs never join a particle without inverse mass to a rigid body, so a block fell
+  // through a fixed jelly slab and a carried jelly passed through a box; keeping those pairs made
+  // a block landing on the slab take each pair's correction in turn and tumble.
+  const auto bodyLevel = [&](std::size_t k) { return isRigid(k) || mode_[k] == BodyMode::kFixed || mode_[k] == BodyMode::kKinematic; };
   if (!bodyLevel(a) || !bodyLevel(b)) return false;
   const double g = params_.gravity.norm();
   const auto travel = [&](std::size_t k) {

@@ -342,6 +342,7 @@ class PbdWorld final : public Solver {
   void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode, MaterialKind kind);
   void refreshMassProperties(std::size_t body);
   void recentre(std::size_t body);
+  void holdShape(std::size_t body);  // rest frame := the particles now (a fixed or carried particle-level body)
   std::vector<Vec3i> restCells(std::size_t body) const;
   std::vector<std::vector<std::int32_t>> pieces(std::size_t body) const;
   void labelDesignPieces(std::size_t body);
