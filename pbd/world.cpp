@@ -201,20 +201,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
 void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode, MaterialKind kind) {
   const std::size_t b = pushBodySlot(std::move(members), Motion{}, Vec3::Zero(), BodyMode::kDynamic, kind);
   // Rest shape = the particles' current positions; the pose starts at identity.
-  Vec3 c = Vec3::Zero();
-  double m = 0.0;
-  for (std::int32_t i : members_[b]) {
-    const double mi = parts_.mass[std::size_t(i)];
-    c += mi * Vec3(parts_.x[std::size_t(i)], parts_.y[std::size_t(i)], parts_.z[std::size_t(i)]);
-    m += mi;
-  }
-  c /= m;
-  for (std::int32_t i : members_[b]) {
-    const auto k = std::size_t(i);
-    rx_[k] = static_cast<float>(parts_.x[k] - c.x());
-    ry_[k] = static_cast<float>(parts_.y[k] - c.y());
-    rz_[k] = static_cast<float>(parts_.z[k] - c.z());
-  }
+  const Vec3 c = restShapeFromParticles(b);
   Motion& mo = motion_[b];
   mo.c = mo.cPrev = mo.kinStart = mo.kinTarget = restCentre_[b] = c;
   if (kind == MaterialKind::kRigid) labelDesignPieces(b);
@@ -420,26 +407,25 @@ void PbdWorld::setKinematicTarget(int body, const Vec3& centre) {
   motion_[b].kinTarget = centre;
 }
 
-// A particle-level body that no longer moves by itself (fixed, or carried by a stroke, which
-// translates its particles as they are) meets rigid bodies at body level (mayTouch), through
-// rigidPoint(): its rest frame becomes its particles' shape now, centred on their centre of
-// mass, unrotated.
-void PbdWorld::holdShape(std::size_t b) {
-  double m = 0.0;
-  Vec3 c = Vec3::Zero();
-  for (std::int32_t i : members_[b]) {
-    const auto k = std::size_t(i);
-    m += parts_.mass[k];
-    c += double(parts_.mass[k]) * Vec3(parts_.x[k], parts_.y[k], parts_.z[k]);
-  }
-  if (!(m > 0.0)) return;
-  c /= m;
+// Rest offsets of body b from its particles as they are now, about their centre of mass, which
+// it returns (the origin for a body without mass, which refreshMassProperties then empties).
+Vec3 PbdWorld::restShapeFromParticles(std::size_t b) {
+  const Vec3 c = massMean(b, parts_.x, parts_.y, parts_.z);
   for (std::int32_t i : members_[b]) {
     const auto k = std::size_t(i);
     rx_[k] = static_cast<float>(parts_.x[k] - c.x());
     ry_[k] = static_cast<float>(parts_.y[k] - c.y());
     rz_[k] = static_cast<float>(parts_.z[k] - c.z());
   }
+  return c;
+}
+
+// A particle-level body that no longer moves by itself (fixed, or carried by a stroke, which
+// translates its particles as they are) meets rigid bodies at body level (mayTouch), through
+// rigidPoint(): its rest frame becomes its particles' shape now, centred on their centre of
+// mass, unrotated.
+void PbdWorld::holdShape(std::size_t b) {
+  const Vec3 c = restShapeFromParticles(b);
   Motion& mo = motion_[b];
   mo.c = mo.cPrev = c;
   mo.q = mo.qPrev = Quat::Identity();

@@ -342,7 +342,8 @@ class PbdWorld final : public Solver {
   void appendBody(std::vector<std::int32_t> members, const BodyInit& init, BodyMode mode, MaterialKind kind);
   void refreshMassProperties(std::size_t body);
   void recentre(std::size_t body);
-  void holdShape(std::size_t body);  // rest frame := the particles now (a fixed or carried particle-level body)
+  void holdShape(std::size_t body);
+  Vec3 restShapeFromParticles(std::size_t body);  // rest frame := the particles now (a fixed or carried particle-level body)
   std::vector<Vec3i> restCells(std::size_t body) const;
   std::vector<std::vector<std::int32_t>> pieces(std::size_t body) const;
   void labelDesignPieces(std::size_t body);
@@ -537,6 +538,7 @@ class PbdWorld final : public Solver {
   bool bouncySoft(std::size_t b) const { return dynamicSoft(b) && (restitution_[b] > 0.0 || anyBouncy_); }
   bool anyBouncy_ = false;
   Vec3 centreVelocity(std::size_t b) const;
+  Vec3 massMean(std::size_t b, const std::vector<float>& x, const std::vector<float>& y, const std::vector<float>& z) const;
   void softBodyRestitution(double h);
   bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level
   void ensureParticleLevel();

@@ -535,16 +535,23 @@ void PbdWorld::predict(double h) {
     if (dynamicSoft(b)) softBounce_[b].vBefore = centreVelocity(b);  // a bouncy one's partner too
 }
 
-// The mass-weighted mean velocity of a particle-level body's particles (serial, in id order).
-Vec3 PbdWorld::centreVelocity(std::size_t b) const {
+// The mass-weighted mean of a per-particle vector over body b's particles (serial, in id
+// order; zero for a body without mass).
+Vec3 PbdWorld::massMean(std::size_t b, const std::vector<float>& x, const std::vector<float>& y,
+                        const std::vector<float>& z) const {
   Vec3 mv = Vec3::Zero();
   double m = 0.0;
   for (std::int32_t i : members_[b]) {
     const auto k = std::size_t(i);
-    mv += double(parts_.mass[k]) * Vec3(parts_.vx[k], parts_.vy[k], parts_.vz[k]);
+    mv += double(parts_.mass[k]) * Vec3(x[k], y[k], z[k]);
     m += parts_.mass[k];
   }
   return m > 0.0 ? Vec3(mv / m) : Vec3::Zero();
+}
+
+// The mass-weighted mean velocity of a particle-level body's particles.
+Vec3 PbdWorld::centreVelocity(std::size_t b) const {
+  return massMean(b, parts_.vx, parts_.vy, parts_.vz);
 }
 
 // Soft bodies' restitution (SoftBounce above): a body that hit something this substep (its
