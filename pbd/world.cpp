@@ -697,9 +697,9 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
                 : c.asleep > 0 ? std::to_string(c.asleep) + " dynamic rigid bodies, all asleep (sleep)"
                                : "no dynamic rigid body (none, or all fixed, held or emptied)";
     case PbdPass::kBodyContact:
-      return on ? "a dynamic rigid body and another rigid or fixed body within reach of each other"
+      return on ? "a dynamic rigid body and another rigid, fixed or carried body within reach of each other"
                 : (c.rigidDynamic == 0 ? "no dynamic rigid body"
-                                       : "no two rigid (or rigid and fixed) bodies are within reach of each other");
+                                       : "no rigid body is within reach of another rigid, fixed or carried one");
     case PbdPass::kKinematic:
       return on ? n(c.kinematic, "bodies held or carried by a stroke")
                 : "no body is held while drawn or carried by a move now";
@@ -774,7 +774,7 @@ std::string PbdWorld::touches(PbdPass pass) const {
       case PbdPass::kIntegrate:
       case PbdPass::kFindContacts:
       case PbdPass::kRigidContact: counts = rigid && dyn; break;
-      case PbdPass::kBodyContact: counts = (rigid || m == BodyMode::kFixed) && m != BodyMode::kEmpty; break;
+      case PbdPass::kBodyContact: counts = rigid ? m != BodyMode::kEmpty : (m == BodyMode::kFixed || m == BodyMode::kKinematic); break;
       case PbdPass::kRestitution: counts = rigid && dyn && bouncy; break;
       case PbdPass::kKinematic: counts = m == BodyMode::kKinematic; break;
       case PbdPass::kUpdate: counts = rigid && (dyn || m == BodyMode::kKinematic); break;
