@@ -100,7 +100,7 @@ struct SceneDesc {
   int scaleLine = 0;
   Vec3 gravityUnscaled{0.0, -9.81, 0.0};
   std::vector<Material> materialsUnscaled;
-  // solver pbd: sleeping (`sleep`): a rigid body whose every point has moved slower than
+  // solver pbd: sleeping (`sleep`): a rigid, soft, rope or cloth body whose every point has moved slower than
   // sleepSpeed for sleepTime seconds, with what it touches, rests until something moving
   // touches it. On by default; sleepSpeed 0 = auto: two particle spacings per second (so a body
   // still for the default 0.5 s stays within one spacing).

@@ -23,7 +23,10 @@
 // particles at rest, and every pass treats it as fixed (moving() is false) until find_contacts
 // finds something moving touching it (a carried body, or an awake one faster than 4 x sleepSpeed)
 // or an awake body touching it leaves its still ball, or find_neighbors finds a particle-level one
-// touching it (looseTouch_); any outside change wakes all.
+// touching it (looseTouch_); any outside change wakes all. Soft bodies, ropes and cloths sleep
+// too (updateSleep: every particle within the same ball): a sleeper is held as a fixed body is
+// (holdShape; its particles without inverse mass), and wakes at the start of a step when
+// something moving may reach it within the step (wakeLooseSleepers), never within one.
 //
 // Soft bodies, ropes and cloth (and fluids) are simulated particle by particle, in the
 // same substeps (Macklin et al. 2014, Alg. 1, with XPBD compliance, Macklin et al. 2016):
@@ -211,6 +214,7 @@ class PbdWorld final : public Solver {
     long bodies = 0;        // not emptied
     long rigidDynamic = 0, looseDynamic = 0, kinematic = 0, kinematicLoose = 0;
     long asleep = 0;        // dynamic rigid bodies asleep (not in rigidDynamic)
+    long looseAsleep = 0;   // dynamic soft, rope and cloth bodies asleep (not in looseDynamic)
     long soft = 0, strands = 0, fluid = 0;  // dynamic particle-level bodies by kind
     long bouncy = 0;        // dynamic rigid bodies that may bounce (anyBouncyRigid)
     long plastic = 0;       // clusters of dynamic soft bodies with plastic_creep > 0
@@ -411,6 +415,16 @@ class PbdWorld final : public Solver {
   void wake(std::size_t b);
   void wakeAll();
   void updateSleep();
+  // Sleeping particle-level bodies (soft, rope, cloth; fluid never sleeps). Per particle: where
+  // its still time began (stillX_..). Per body asleep: its rest offsets before holdShape took the
+  // shape it fell asleep in (given back when it wakes: a cut or a later hold reads them), and the
+  // box of its particles.
+  std::vector<float> stillX_, stillY_, stillZ_;
+  std::vector<std::vector<float>> sleepRest_;
+  std::vector<Eigen::AlignedBox3d> sleepBox_;
+  bool looseMaySleep(std::size_t b) const;
+  void sleepLoose(std::size_t b);
+  void wakeLooseSleepers();
   ContactSet contacts_;                     // found once per substep
   // Per body: the ground candidates of the last full scan, reused while the body has
   // moved less than half the scan's extra margin (a resting body is scanned once).
@@ -530,7 +544,7 @@ class PbdWorld final : public Solver {
   std::vector<std::uint8_t> bounceNoted_;
   void noteParticleBounce(const ParticleBounce& b);
   void particleRestitution(double h);
-  bool dynamicSoft(std::size_t b) const { return kind_[b] == MaterialKind::kSoft && mode_[b] == BodyMode::kDynamic; }
+  bool dynamicSoft(std::size_t b) const { return kind_[b] == MaterialKind::kSoft && moving(b); }
   // A dynamic soft body bounces as a whole (softBodyRestitution) when its material has e > 0 or
   // anything it can hit does: a pair bounces at the mean of its two restitutions, so a soft body
   // of e = 0 leaves a slab of e = 0.8 at 0.4. anyBouncy_: some body's restitution is > 0 (set by

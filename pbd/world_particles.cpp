@@ -82,7 +82,7 @@ void PbdWorld::setupParticleBody(std::size_t b, const BodyRange& range) {
 
 void PbdWorld::refreshInverseMasses(std::size_t b) {
   if (!particleLevel_) return;  // rigid bodies only: no particle-level inverse masses to keep
-  const bool dyn = mode_[b] == BodyMode::kDynamic && !isRigid(b);
+  const bool dyn = !isRigid(b) && moving(b);  // a sleeper is held (sleepLoose)
   for (std::int32_t i : members_[b]) {
     const auto k = std::size_t(i);
     invMassP_[k] = dyn && !pinned_[k] && alive(i) && parts_.mass[k] > 0.0f ? 1.0f / parts_.mass[k] : 0.0f;
@@ -969,7 +969,7 @@ void PbdWorld::clusterMatch(double h) {
   const Clusters& cl = clusters_.members;
   const bool avx2 = clusterAvx2();
   const auto match = [&](std::size_t c) {
-    if (mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
+    if (!moving(std::size_t(clusters_.body[c]))) return;  // fixed, carried or asleep
     const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
     if (hi - lo < 2) return;
     detail::ClusterView v = clusterView(c, px_.data(), py_.data(), pz_.data());
@@ -1194,7 +1194,7 @@ void PbdWorld::plasticity(double h) {
 // One cluster's plastic creep (plasticity()).
 void PbdWorld::plasticCreep(std::size_t c, double h) {
   const Clusters& cl = clusters_.members;
-  if (clusters_.creep[c] <= 0.0f || mode_[std::size_t(clusters_.body[c])] != BodyMode::kDynamic) return;
+  if (clusters_.creep[c] <= 0.0f || !moving(std::size_t(clusters_.body[c]))) return;
   const std::int32_t lo = cl.offset[c], hi = cl.offset[c + 1];
   if (hi - lo < 4) return;
   // The centre and A_pq as cluster_match sums them (at the positions after the substep), A_qq
