@@ -1861,6 +1861,32 @@ TEST(SleepBeside, AJellyAtRestFallsAsleepStaysBitForBitAndRunsNoParticlePass) {
   EXPECT_EQ(checked, 3);
 }
 
+// A sketch edit wakes a sleeping jelly (as it wakes every body): a jelly asleep on the ground is cut
+// (its top layer removed after play); the next step it is awake, with its remaining particles,
+// and it settles and sleeps again within 1.5 s. Its top layer's particles are gone from it.
+TEST(SleepBeside, ACutWakesASleepingJelly) {
+  PbdWorld w = jellyOnGround(false, 0.02);
+  for (int s = 0; s < 90 && !w.asleep(0); ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+  ASSERT_TRUE(w.asleep(0));
+  const std::size_t before = w.bodyParticles(0).size();
+  float top = -1e30f;
+  for (std::int32_t i : w.bodyParticles(0)) top = std::max(top, w.particles().y[std::size_t(i)]);
+  std::vector<std::int32_t> cut;
+  for (std::int32_t i : w.bodyParticles(0))
+    if (w.particles().y[std::size_t(i)] > top - 0.5f * float(kSpacing)) cut.push_back(i);
+  ASSERT_EQ(cut.size(), 36u);  // the 6 x 6 top layer
+  w.removeParticles(cut);
+  ASSERT_TRUE(w.step()) << w.guard().message();
+  EXPECT_FALSE(w.asleep(0));
+  EXPECT_EQ(w.bodyParticles(0).size(), before - cut.size());
+  bool again = false;
+  for (int s = 0; s < 90 && !again; ++s) {
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    again = w.asleep(0);
+  }
+  EXPECT_TRUE(again);
+}
+
 // A box resting on a soft jelly (E = 2e4 Pa) falls asleep with it, in the same step. Had the
 // jelly slept first (it is still before the box is), the box would meet it at body level, as a
 // fixed body, at the contact distance 2 r, above where the particle pairs let it sink in (2.7 mm
