@@ -1980,6 +1980,40 @@ TEST(SleepBeside, SameStateForOneAndTwoThreadsWhileAJellySleepsAndWakes) {
   for (std::size_t s = 0; s < one.size(); ++s) ASSERT_EQ(one[s], two[s]) << "diverged at step " << s;
 }
 
+namespace {
+
+// Two bodies in zero gravity, 8 substeps x 4 iterations, 120 steps: body 0, a cube of `side`^3
+// particles of material `restingMaterial` (0 wood, 1 jelly of E = 5e4 Pa) at rest at (0, 0.5, 0),
+// and body 1, a 4^3 cube of `thrownMaterial` at x0 thrown along -x at `speed`; with `sleep`, the
+// sleep speed 0.02 m/s and time 0.5 s. The bodies' centres and velocities at the end, whether
+// body 0 slept at some step and whether it is asleep at the end.
+struct ThrowEnd {
+  Vec3 centre[2], velocity[2];
+  bool slept = false, asleepAtEnd = false;
+};
+ThrowEnd throwAtRestingBody(std::int16_t restingMaterial, int side, std::int16_t thrownMaterial, double x0, double speed,
+                            bool sleep) {
+  ParticleArrays p;
+  std::vector<Material> mats = {makeKind("wood", MaterialKind::kRigid), makeKind("jelly", MaterialKind::kSoft)};
+  mats[1].elastic.youngs = 5e4;
+  std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), side, side, side, 0, restingMaterial),
+                                addBox(p, Vec3(x0, 0.5, 0.0), 4, 4, 4, 1, thrownMaterial)};
+  bodies[1].init.velocity = Vec3(-speed, 0.0, 0.0);
+  PbdParams prm = params(8, 4, Vec3::Zero());
+  if (sleep) prm.sleepSpeed = 0.02, prm.sleepTime = 0.5;
+  PbdWorld w(p, bodies, mats, prm);
+  ThrowEnd end;
+  for (int s = 0; s < 120; ++s) {
+    EXPECT_TRUE(w.step()) << w.guard().message();
+    end.slept = end.slept || w.asleep(0);
+  }
+  end.asleepAtEnd = w.asleep(0);
+  for (int b = 0; b < 2; ++b) end.centre[b] = w.pose(b).centre, end.velocity[b] = w.velocity(b);
+  return end;
+}
+
+}  // namespace
+
 // Something moving that reaches a sleeping jelly wakes it before the contact, so that it takes the
 // blow as a jelly: in zero gravity a jelly at rest sleeps after 0.5 s, and a box (rigid) or a second
 // jelly thrown at it at 6 m/s hits it at about 1 s: 6 cm apart at the end of one step, touching
@@ -1993,35 +2027,18 @@ TEST(SleepBeside, SameStateForOneAndTwoThreadsWhileAJellySleepsAndWakes) {
 // thrown body bounces back off it (1.4 m/s the other way; 1.5-2.5 m apart at 2 s).
 TEST(SleepBeside, ABodyThrownAtASleepingJellyWakesItAndBothMoveAsWithoutSleep) {
   for (const bool rigidThrown : {true, false}) {
-    const auto run = [&](bool sleep, bool& wasAsleep) {
-      ParticleArrays p;
-      std::vector<Material> mats = {makeKind("wood", MaterialKind::kRigid), makeKind("jelly", MaterialKind::kSoft)};
-      mats[1].elastic.youngs = 5e4;
-      std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), 5, 5, 5, 0, 1),
-                                    addBox(p, Vec3(6.0, 0.5, 0.0), 4, 4, 4, 1, rigidThrown ? 0 : 1)};
-      bodies[1].init.velocity = Vec3(-6.0, 0.0, 0.0);
-      PbdParams prm = params(8, 4, Vec3::Zero());
-      if (sleep) prm.sleepSpeed = 0.02, prm.sleepTime = 0.5;
-      PbdWorld w(p, bodies, mats, prm);
-      wasAsleep = false;
-      for (int s = 0; s < 120; ++s) {
-        EXPECT_TRUE(w.step()) << w.guard().message();
-        wasAsleep = wasAsleep || w.asleep(0);
-      }
-      EXPECT_FALSE(w.asleep(0));
-      return std::pair{w.pose(1).centre, w.velocity(1)};
-    };
-    bool asleepA = false, asleepB = false;
-    const auto [withSleep, vWith] = run(true, asleepA);
-    const auto [without, vWithout] = run(false, asleepB);
+    const ThrowEnd with = throwAtRestingBody(1, 5, rigidThrown ? 0 : 1, 6.0, 6.0, true);
+    const ThrowEnd without = throwAtRestingBody(1, 5, rigidThrown ? 0 : 1, 6.0, 6.0, false);
     SCOPED_TRACE(rigidThrown ? "a box thrown" : "a jelly thrown");
-    EXPECT_TRUE(asleepA) << "the jelly never slept";
-    EXPECT_FALSE(asleepB);
+    EXPECT_TRUE(with.slept) << "the jelly never slept";
+    EXPECT_FALSE(with.asleepAtEnd);
+    EXPECT_FALSE(without.slept);
+    const Vec3 dc = with.centre[1] - without.centre[1], dv = with.velocity[1] - without.velocity[1];
     std::printf("%s: after the blow %.6f m/s with sleep, %.6f without; centres %.3g m apart\n",
-                rigidThrown ? "box" : "jelly", vWith.x(), vWithout.x(), (withSleep - without).norm());
-    EXPECT_GT(vWithout.x(), -5.4) << "the jelly should slow the thrown body";
-    EXPECT_NEAR((withSleep - without).norm(), 0.0, 5e-4);
-    EXPECT_NEAR((vWith - vWithout).norm(), 0.0, 5e-4);
+                rigidThrown ? "box" : "jelly", with.velocity[1].x(), without.velocity[1].x(), dc.norm());
+    EXPECT_GT(without.velocity[1].x(), -5.4) << "the jelly should slow the thrown body";
+    EXPECT_NEAR(dc.norm(), 0.0, 5e-4);
+    EXPECT_NEAR(dv.norm(), 0.0, 5e-4);
   }
 }
 
@@ -2030,31 +2047,16 @@ TEST(SleepBeside, ABodyThrownAtASleepingJellyWakesItAndBothMoveAsWithoutSleep) {
 // in the substep the contact is found, before it is solved, so the runs agree to round-off (1e-9
 // m). With the sleeper not woken the box stays put and the jelly bounces off a wall.
 TEST(SleepBeside, AJellyThrownAtASleepingBoxWakesItAndBothMoveAsWithoutSleep) {
-  const auto run = [](bool sleep, bool& wasAsleep) {
-    ParticleArrays p;
-    std::vector<Material> mats = {makeKind("wood", MaterialKind::kRigid), makeKind("jelly", MaterialKind::kSoft)};
-    mats[1].elastic.youngs = 5e4;
-    std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, 0.5, 0.0), 4, 4, 4, 0, 0), addBox(p, Vec3(0.8, 0.5, 0.0), 4, 4, 4, 1, 1)};
-    // The gap of 0.76 m closes after 0.76 s; at 1 m/s the jelly crosses the pairs' search margin
-    // (half a spacing) within the step that finds the pair, so the box is pushed in the step it wakes.
-    bodies[1].init.velocity = Vec3(-1.0, 0.0, 0.0);
-    PbdParams prm = params(8, 4, Vec3::Zero());
-    if (sleep) prm.sleepSpeed = 0.02, prm.sleepTime = 0.5;
-    PbdWorld w(p, bodies, mats, prm);
-    wasAsleep = false;
-    for (int s = 0; s < 120; ++s) {
-      EXPECT_TRUE(w.step()) << w.guard().message();
-      wasAsleep = wasAsleep || w.asleep(0);
-    }
-    return std::pair{w.pose(0).centre, w.velocity(0)};
-  };
-  bool asleepA = false, asleepB = false;
-  const auto [withSleep, vWith] = run(true, asleepA);
-  const auto [without, vWithout] = run(false, asleepB);
-  EXPECT_TRUE(asleepA) << "the box never slept";
-  EXPECT_FALSE(asleepB);
+  // The gap of 0.76 m closes after 0.76 s; at 1 m/s the jelly crosses the pairs' search margin
+  // (half a spacing) within the step that finds the pair, so the box is pushed in the step it wakes.
+  const ThrowEnd with = throwAtRestingBody(0, 4, 1, 0.8, 1.0, true);
+  const ThrowEnd without = throwAtRestingBody(0, 4, 1, 0.8, 1.0, false);
+  const Vec3 withSleep = with.centre[0], without0 = without.centre[0];
+  const Vec3 vWith = with.velocity[0], vWithout = without.velocity[0];
+  EXPECT_TRUE(with.slept) << "the box never slept";
+  EXPECT_FALSE(without.slept);
   std::printf("box after the blow: %.6f m/s with sleep, %.6f without\n", vWith.x(), vWithout.x());
   EXPECT_LT(vWithout.x(), -0.01) << "the jelly should push the box";
-  EXPECT_NEAR((withSleep - without).norm(), 0.0, 1e-9);
+  EXPECT_NEAR((withSleep - without0).norm(), 0.0, 1e-9);
   EXPECT_NEAR((vWith - vWithout).norm(), 0.0, 1e-9);
 }
