@@ -512,6 +512,8 @@ class PbdWorld final : public Solver {
     std::int32_t partner = -1;
     int partnerCount = 0;
     Vec3 partnerPoints = Vec3::Zero(), partnerVBefore = Vec3::Zero();
+    Vec3 partnerNSum = Vec3::Zero();  // the partner's share of nSum and eSum
+    double partnerESum = 0.0;
     std::int32_t softPartner = -1;  // another soft body touched (-2: several)
     int softCount = 0;
   };
@@ -554,6 +556,8 @@ class PbdWorld final : public Solver {
   Vec3 centreVelocity(std::size_t b) const;
   Vec3 massMean(std::size_t b, const std::vector<float>& x, const std::vector<float>& y, const std::vector<float>& z) const;
   void softBodyRestitution(double h);
+  template <class Kick>
+  void bounceOffPartnerAndSurfaces(std::size_t b, double mass, double slow, Kick&& kick);
   bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level
   void ensureParticleLevel();
   bool pinnedAt(std::size_t k) const { return particleLevel_ && pinned_[k]; }

@@ -554,6 +554,66 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
   return massMean(b, parts_.vx, parts_.vy, parts_.vz);
 }
 
+// A soft body that hit a free dynamic partner and other surfaces (the ground, colliders, fixed
+// or held bodies) in one substep: two contacts solved together (softBodyRestitution). The
+// surfaces' contacts make one along their mean normal nS (their mean e and velocity), the
+// partner's one along nP at their mean point. Impulses jS, jP >= 0 on the body (jP's opposite on
+// the partner, through its generalized inverse mass wP there) so that each contact the body
+// approached faster than `slow` leaves at e times its approach speed, unless the other impulse
+// already separates it faster (a linear complementarity problem in two unknowns, solved by trying
+// its four cases):
+//   jS / m + jP a / m = dS,   jS a / m + jP (1 / m + wP) = dP,   a = nS . nP,
+// dS and dP the normal velocity each contact still lacks. Momentum is kept along whatever the
+// surfaces do not push (the partner takes -jP nP).
+template <class Kick>
+void PbdWorld::bounceOffPartnerAndSurfaces(std::size_t b, double mass, double slow, Kick&& kick) {
+  const SoftBounce& sb = softBounce_[b];
+  const int cS = sb.count - sb.partnerCount, cP = sb.partnerCount;
+  const Vec3 sumS = sb.nSum - sb.partnerNSum;
+  if (cS <= 0 || cP <= 0 || !(sumS.norm() > 1e-9) || !(sb.partnerNSum.norm() > 1e-9)) return;
+  const Vec3 nS = sumS.normalized(), nP = sb.partnerNSum.normalized();
+  const double eS = (sb.eSum - sb.partnerESum) / cS, eP = sb.partnerESum / cP;
+  const Vec3 vS = sb.vSurface / cS;  // the surfaces' mean velocity (a keyframed collider's), before and now
+  const auto r = std::size_t(sb.partner);
+  Motion& mo = motion_[r];
+  const Vec3 point = sb.partnerPoints / cP;
+  const Vec3 vPBefore = sb.partnerVBefore / cP, vPNow = mo.v + mo.w.cross(point - mo.c);
+  const Vec3 vb = centreVelocity(b);
+  const double uS = (sb.vBefore - vS).dot(nS), uP = (sb.vBefore - vPBefore).dot(nP);
+  const bool onS = uS < -slow, onP = uP < -slow;
+  const double dS = onS ? -eS * uS - (vb - vS).dot(nS) : 0.0;
+  const double dP = onP ? -eP * uP - (vb - vPNow).dot(nP) : 0.0;
+  const RigidPose pose{mo.c, mo.q, invMass_[r], invInertiaRest_[r]};
+  const double wP = generalizedInverseMass(pose, point, nP), im = 1.0 / mass, a = nS.dot(nP);
+  // Both approaching: the four cases of the complementarity problem, the first that holds; one
+  // approaching: that contact alone.
+  double jS = 0.0, jP = 0.0;
+  if (onS && onP) {
+    const auto holds = [&](double s, double q) {
+      const double restS = dS - (s * im + q * a * im), restP = dP - (s * a * im + q * (im + wP));
+      const double tol = 1e-9 * (std::abs(dS) + std::abs(dP));
+      return s >= 0.0 && q >= 0.0 && (s > 0.0 ? std::abs(restS) <= tol : restS <= tol) &&
+             (q > 0.0 ? std::abs(restP) <= tol : restP <= tol);
+    };
+    const double det = im * (im + wP) - a * a * im * im;
+    if (det > 1e-9 * im * (im + wP)) jS = (dS * (im + wP) - dP * a * im) / det, jP = (dP * im - dS * a * im) / det;
+    if (!holds(jS, jP)) jS = std::max(dS * mass, 0.0), jP = 0.0;
+    if (!holds(jS, jP)) jS = 0.0, jP = std::max(dP / (im + wP), 0.0);
+    if (!holds(jS, jP)) jS = jP = 0.0;
+  } else if (onS) {
+    jS = std::max(dS * mass, 0.0);
+  } else if (onP) {
+    jP = std::max(dP / (im + wP), 0.0);
+  }
+  if (jS == 0.0 && jP == 0.0) return;
+  if (jP > 0.0) {
+    const Mat3 R = mo.q.toRotationMatrix();
+    mo.v -= (jP * invMass_[r]) * nP;
+    mo.w -= R * invInertiaRest_[r] * R.transpose() * (point - mo.c).cross(jP * nP);
+  }
+  kick(b, (jS * nS + jP * nP) * im);
+}
+
 // Soft bodies' restitution (SoftBounce above): a body that hit something this substep (its
 // contacts that approached faster than 2 g h; what it rests or slides on does not count) leaves
 // at e times its centre's approach speed along the mean normal of those contacts, relative to
@@ -562,8 +622,9 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
 // none). A dynamic rigid body or another soft body shares the bounce when it is all the body hit
 // (one partner, nothing else), taking the opposite impulse (momentum is kept); a rigid partner
 // the ground, a fixed body or a stack on either holds against the blow (heldAgainst) is a fixed surface instead, also
-// when the body hit it and something else at once; a body that hit a free dynamic partner and
-// something else at once stays inelastic. Serial over bodies: deterministic.
+// when the body hit it and something else at once; a body that hit a free dynamic rigid partner
+// and other surfaces at once bounces off both together (bounceOffPartnerAndSurfaces); one that hit
+// two free dynamic partners at once stays inelastic. Serial over bodies: deterministic.
 void PbdWorld::softBodyRestitution(double h) {
   if (softBounce_.empty()) return;
   const double slow = 2.0 * params_.gravity.norm() * h;
@@ -618,7 +679,11 @@ void PbdWorld::softBodyRestitution(double h) {
     // hit together with others.
     const bool held = sb.partnerCount > 0 && sb.partner >= 0 && heldAgainst(std::size_t(sb.partner), -n);
     const bool pair = sb.partnerCount > 0 && !held;
-    if (pair && (sb.partner < 0 || sb.partnerCount != sb.count)) continue;
+    if (pair && sb.partner < 0) continue;  // two dynamic partners at once: inelastic
+    if (pair && sb.partnerCount != sb.count) {
+      bounceOffPartnerAndSurfaces(b, massOf(b), slow, kick);
+      continue;
+    }
     Vec3 before = sb.vSurface / sb.count, after = before;
     Vec3 point = Vec3::Zero();
     if (sb.partnerCount > 0 && sb.partner >= 0) {
@@ -864,6 +929,8 @@ void PbdWorld::particleContact() {
           ++sb.partnerCount;
           sb.partnerPoints += pj;
           sb.partnerVBefore += otherVelocity();
+          sb.partnerNSum += n;
+          sb.partnerESum += 0.5 * (restitution_[bi] + restitution_[bj]);
         }
       }
     }
