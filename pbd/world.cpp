@@ -720,7 +720,8 @@ std::string PbdWorld::reason(PbdPass pass, bool on) const {
                 : "no soft, rope, cloth or fluid material moves";
     case PbdPass::kFindNeighbors:
       return on ? "particle-level material and another body it can touch"
-                : (c.looseDynamic == 0 ? "no dynamic particle-level material" : "a single body with nothing else to touch");
+                : (c.looseDynamic == 0 ? (c.looseAsleep > 0 ? "no awake particle-level material (sleep)" : "no dynamic particle-level material")
+                                       : "a single body with nothing else to touch");
     case PbdPass::kClusterMatch:
       return on ? n(c.soft, "dynamic soft bodies") + looseAsleepNote
                 : c.looseAsleep > 0 ? "no dynamic soft body awake (sleep)" : "no dynamic soft body";
@@ -1541,10 +1542,15 @@ void PbdWorld::wake(std::size_t b) {
       rx_[i] = saved[3 * k], ry_[i] = saved[3 * k + 1], rz_[i] = saved[3 * k + 2];
     }
     std::vector<float>().swap(sleepRest_[b]);
-    refreshMassProperties(b);
+    reholdRestFrame(b, [&] { refreshMassProperties(b); });
     refreshInverseMasses(b);
     mo.q = mo.qPrev = Quat::Identity();
     mo.cPrev = mo.c;
+    // What it is tied to (ropes' links to it or from it, distance constraints across bodies)
+    // fell asleep with it and wakes with it. (A rigid body it fell asleep with wakes once their
+    // particle pairs are found: touchedByLoose.)
+    for (std::size_t o : tiePartners(b))
+      if (asleep_[o]) wake(o);
     return;
   }
   stillRef_[b] = StillRef{mo.c, mo.q};
@@ -1555,13 +1561,13 @@ void PbdWorld::wake(std::size_t b) {
 }
 
 // Whether particle-level body b may fall asleep: a dynamic soft body, rope or cloth awake (a
-// fluid never sleeps), nothing hanging from it, and every body it is tied to fixed.
+// fluid never sleeps), every rigid body it is attached to fixed.
 bool PbdWorld::looseMaySleep(std::size_t b) const {
   if (isRigid(b) || !moving(b) || kind_[b] == MaterialKind::kFluid) return false;
-  for (const Attachment& a : attachments_) {
-    if (std::size_t(a.body) == b) return false;
+  // (Attachments tie a strand to a rigid body; ties between particle-level bodies are distance
+  // constraints, whose two bodies fall asleep together: updateSleep.)
+  for (const Attachment& a : attachments_)
     if (parts_.group(std::size_t(a.particle)) == std::int32_t(b) && mode_[std::size_t(a.body)] != BodyMode::kFixed) return false;
-  }
   return true;
 }
 
@@ -1585,8 +1591,35 @@ void PbdWorld::sleepLoose(std::size_t b) {
   sleepBox_[b] = box;
   asleep_[b] = 1;
   refreshInverseMasses(b);
-  holdShape(b);
+  reholdRestFrame(b, [&] { holdShape(b); });
   motion_[b].v = motion_[b].w = Vec3::Zero();
+}
+
+// A sleeping or waking particle-level body's rest frame is remade (sleepLoose, wake): not an edit
+// of the scene, so bodyEdits_ is left alone (it wakes everything, and cold-starts a fluid's warm
+// start), and only the body-pair lists with this body in them are made afresh.
+template <class Remake>
+void PbdWorld::reholdRestFrame(std::size_t b, Remake&& remake) {
+  const std::uint64_t edits = bodyEdits_;
+  remake();
+  bodyEdits_ = edits;
+  for (auto it = pairCache_.begin(); it != pairCache_.end();)
+    it = (it->first >> 32) == b || (it->first & 0xffffffffu) == b ? pairCache_.erase(it) : std::next(it);
+}
+
+// The particle-level bodies body b is tied to by distance constraints across bodies (a rope's end
+// linked to a soft body, rope or cloth: attachStrandEnds), in body order.
+std::vector<std::size_t> PbdWorld::tiePartners(std::size_t b) const {
+  std::vector<std::size_t> out;
+  const auto bi = std::int32_t(b);
+  for (std::size_t k = 0; k < distances_.size(); ++k) {
+    const std::int32_t gi = parts_.group(std::size_t(distances_.i[k])), gj = parts_.group(std::size_t(distances_.j[k]));
+    if (gi == gj || (gi != bi && gj != bi) || gi < 0 || gj < 0) continue;
+    out.push_back(std::size_t(gi == bi ? gj : gi));
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
 }
 
 // At the start of a step, before its plan is made: a soft body, rope or cloth asleep wakes when
@@ -1626,6 +1659,8 @@ void PbdWorld::wakeLooseSleepers() {
     box.min().array() -= near;
     box.max().array() += near;
     bool wakes = false;
+    if (s < sleepPartners_.size())
+      for (std::int32_t r : sleepPartners_[s]) wakes = wakes || moving(std::size_t(r));
     for (std::size_t o = 0; o < members_.size() && !wakes; ++o) {
       if (o == s || mode_[o] == BodyMode::kEmpty) continue;
       const Motion& m = motion_[o];
@@ -1678,13 +1713,14 @@ long PbdWorld::sleepingCount() const { return static_cast<long>(std::count(aslee
 // it faster than four times the sleep speed (findBodyPairs), so the sleeper lags what moves it by
 // at most the ball. Waiting instead for every neighbour to be still (islands, as Box2D does) let
 // bench_pile's 200 boxes, whose jitter moves from box to box, all sleep only after 5.75 s
-// against 2.67 s: a sleeper is a firm support and calms the jitter of what rests on it. In
-// body and pair order: the same for any thread count.
+// against 2.67 s: a sleeper is a firm support and calms the jitter of what rests on it. Soft
+// bodies, ropes and cloths the same way, particle by particle (below), with three differences:
+// fluid or a carried body touching one keeps it awake (and fluid coming to touch a sleeper wakes
+// it), one falls asleep only together with the rigid bodies and the particle-level bodies tied to
+// it that it touches, and one sleeping is woken by something moving only between steps
+// (wakeLooseSleepers). In body and pair order: the same for any thread count.
 void PbdWorld::updateSleep() {
   if (!sleepAllowed_) return;
-  // Soft bodies, ropes and cloths falling asleep or waking here remake their rest frames, which
-  // counts as a body edit (refreshMassProperties); unlike a sketch edit it wakes nobody else.
-  const bool unedited = bodyEdits_ == sleepEdits_;
   const std::size_t n = members_.size();
   const double ball = params_.sleepSpeed * params_.sleepTime;
   std::vector<char> ready(n, 0), restless(n, 0);
@@ -1703,12 +1739,13 @@ void PbdWorld::updateSleep() {
     ready[b] = stillFor_[b] >= params_.sleepTime - 0.5 * params_.dt;
   }
   // Soft bodies, ropes and cloths by the same ball, particle by particle (a jelly wobbling in
-  // place sleeps, one creeping or sagging does not).
+  // place sleeps, one creeping or sagging does not); also those that may not sleep (a rope tied
+  // to a dynamic body), whose leaving the ball wakes a sleeper they touch.
   const std::size_t np = parts_.size();
   if (stillX_.size() < np) stillX_.resize(np), stillY_.resize(np), stillZ_.resize(np);
   const auto ball2 = static_cast<float>(ball * ball);
   for (std::size_t b = 0; b < n; ++b) {
-    if (!looseMaySleep(b)) continue;
+    if (isRigid(b) || !moving(b) || kind_[b] == MaterialKind::kFluid) continue;
     const auto& mem = members_[b];
     bool left = stillFor_[b] == 0.0;
     for (std::size_t k = 0; k < mem.size() && !left; ++k) {
@@ -1725,7 +1762,7 @@ void PbdWorld::updateSleep() {
       stillFor_[b] = 0.0;
     }
     stillFor_[b] += params_.dt;
-    ready[b] = stillFor_[b] >= params_.sleepTime - 0.5 * params_.dt;
+    ready[b] = looseMaySleep(b) && stillFor_[b] >= params_.sleepTime - 0.5 * params_.dt;
   }
   const BodyPairContacts& pairs = contacts_.bodyPair;
   std::vector<char> held(n, 0);  // touches a carried body (or, for a soft body, rope or cloth, fluid)
@@ -1738,18 +1775,24 @@ void PbdWorld::updateSleep() {
   }
   // The last substep's particle pairs: a particle-level body touching a carried body or a fluid
   // stays awake (fluid never sleeps, and a body it holds up would no longer float), and a sleeper
-  // touching an awake soft body, rope or cloth that left its ball wakes.
-  // Pairs joining a particle-level body to a dynamic rigid one are kept as links (below).
+  // that fluid comes to touch, or an awake soft body, rope or cloth that left its ball, wakes.
+  // Pairs joining a particle-level body to a dynamic rigid one are kept as links (below), as are
+  // ties across particle-level bodies (distance constraints: a rope linked to a jelly).
   const ParticlePairContacts& pp = contacts_.particlePair;
-  std::vector<std::pair<std::int32_t, std::int32_t>> links;  // (particle-level body, rigid body)
+  std::vector<std::pair<std::int32_t, std::int32_t>> links;  // (particle-level body, other body)
   for (std::size_t c = 0; c < pp.size(); ++c) {
     const auto i = std::size_t(pp.i[c]), j = std::size_t(pp.j[c]);
     const auto bi = std::size_t(parts_.group(i)), bj = std::size_t(parts_.group(j));
-    if (mode_[bj] == BodyMode::kKinematic || phase::has(parts_.phase[j], phase::kFluid)) held[bi] = 1;
-    if (mode_[bi] == BodyMode::kKinematic || phase::has(parts_.phase[i], phase::kFluid)) held[bj] = 1;
-    if (asleep_[bi] && restless[bj]) wake(bi);
-    if (asleep_[bj] && restless[bi]) wake(bj);
+    const bool fluidI = phase::has(parts_.phase[i], phase::kFluid), fluidJ = phase::has(parts_.phase[j], phase::kFluid);
+    if (mode_[bj] == BodyMode::kKinematic || fluidJ) held[bi] = 1;
+    if (mode_[bi] == BodyMode::kKinematic || fluidI) held[bj] = 1;
+    if (asleep_[bi] && (restless[bj] || fluidJ)) wake(bi);
+    if (asleep_[bj] && (restless[bi] || fluidI)) wake(bj);
     if (isRigid(bj) && mode_[bj] == BodyMode::kDynamic) links.emplace_back(std::int32_t(bi), std::int32_t(bj));
+  }
+  for (std::size_t k = 0; k < distances_.size(); ++k) {
+    const std::int32_t gi = parts_.group(std::size_t(distances_.i[k])), gj = parts_.group(std::size_t(distances_.j[k]));
+    if (gi != gj && gi >= 0 && gj >= 0) links.emplace_back(std::min(gi, gj), std::max(gi, gj));
   }
   std::sort(links.begin(), links.end());
   links.erase(std::unique(links.begin(), links.end()), links.end());
@@ -1758,8 +1801,11 @@ void PbdWorld::updateSleep() {
   // may come back). A soft body, rope or cloth and a rigid body it touches fall asleep only
   // together, both ready: a box on a jelly asleep meets it at body level, at the contact distance,
   // where the particle pairs let it sink in (2 mm under the box of scenes/jelly.scene, which
-  // popped up by that much when the jelly slept first). Links whose two ends disagree take both
-  // out, until none do.
+  // popped up by that much when the jelly slept first); so do two particle-level bodies tied
+  // together. Links whose two ends disagree take both out, until none do. A particle-level body
+  // keeps the rigid bodies it fell asleep with (sleepPartners_): one of them woken wakes it
+  // (wakeLooseSleepers), before the body-level contact would lift it by the depth the pairs
+  // allowed.
   std::vector<char> falls(n, 0), tied(n, 0), linked(n, 0);
   for (const Attachment& a : attachments_) tied[std::size_t(a.body)] = 1;
   for (const auto& l : links) linked[std::size_t(l.second)] = 1;
@@ -1772,9 +1818,13 @@ void PbdWorld::updateSleep() {
     for (const auto& [l, r] : links)
       if (falls[std::size_t(l)] != falls[std::size_t(r)]) falls[std::size_t(l)] = falls[std::size_t(r)] = 0, changed = true;
   }
+  sleepPartners_.resize(n);
   for (std::size_t b = 0; b < n; ++b) {
     if (!falls[b]) continue;
     if (!isRigid(b)) {
+      sleepPartners_[b].clear();
+      for (const auto& [l, r] : links)
+        if (std::size_t(l) == b && isRigid(std::size_t(r))) sleepPartners_[b].push_back(r);
       sleepLoose(b);
       continue;
     }
@@ -1786,7 +1836,6 @@ void PbdWorld::updateSleep() {
       parts_.vx[k] = parts_.vy[k] = parts_.vz[k] = 0.0f;
     }
   }
-  if (unedited) sleepEdits_ = bodyEdits_;
 }
 
 const BodyPairContacts& PbdWorld::bodyPairsNow() {

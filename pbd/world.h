@@ -87,9 +87,9 @@ struct PbdParams {
   double maxSpeed = 100.0;    // m/s; the guard's explosion bound
   double maxCompression = 0.1;  // the guard's bound on a fluid's mean rho/rho0 - 1 (10 %: sloshing
                                 // water stays near 1 %; beyond this the fluid visibly shrinks)
-  // Sleeping (docs/formats.md, `sleep`): a dynamic rigid body none of whose points has moved
-  // farther than sleepSpeed x sleepTime in sleepTime seconds (m/s, s), with the bodies it touches,
-  // stops being simulated until something wakes it. 0 = no body sleeps (the API's default; a
+  // Sleeping (docs/formats.md, `sleep`): a dynamic rigid, soft, rope or cloth body none of whose
+  // points has moved farther than sleepSpeed x sleepTime in sleepTime seconds (m/s, s) stops being
+  // simulated until something wakes it (updateSleep). 0 = no body sleeps (the API's default; a
   // scene file's default is on, paramsFromScene).
   double sleepSpeed = 0.0;
   double sleepTime = 0.5;     // s
@@ -392,10 +392,12 @@ class PbdWorld final : public Solver {
   // sleepAllowed_: this step, whether any body may sleep (no collider moving along keyframes:
   // moving colliders do not wake sleepers).
   std::vector<char> asleep_;
-  // Per rigid body, this step: particle-level material (soft, rope, cloth, fluid) touched it (a
-  // particle pair in find_neighbors) or is tied to it. Such a body does not fall asleep, and a
-  // sleeper found so wakes before the contacts are solved: the particle-level passes never meet a
-  // sleeper, and a sleeper meets them only as the fixed solid it is at rest (a fluid's density).
+  // Per rigid body, this step: awake particle-level material (soft, rope, cloth, fluid) touched it
+  // (a particle pair in find_neighbors) or a rope or cloth is tied to it. Such a body falls asleep
+  // only with the soft bodies, ropes and cloths it touches (updateSleep), never when fluid touches
+  // it or a strand is tied to it, and a rigid sleeper found so wakes before the contacts are
+  // solved: the particle-level passes never meet a rigid sleeper, and one meets them only as the
+  // fixed solid it is at rest (a fluid's density).
   std::vector<char> looseTouch_;
   void touchedByLoose(std::size_t b);
   std::vector<double> stillFor_;
@@ -422,9 +424,13 @@ class PbdWorld final : public Solver {
   std::vector<float> stillX_, stillY_, stillZ_;
   std::vector<std::vector<float>> sleepRest_;
   std::vector<Eigen::AlignedBox3d> sleepBox_;
+  std::vector<std::vector<std::int32_t>> sleepPartners_;  // per body asleep: the rigid bodies it fell asleep with
   bool looseMaySleep(std::size_t b) const;
   void sleepLoose(std::size_t b);
   void wakeLooseSleepers();
+  template <class Remake>
+  void reholdRestFrame(std::size_t b, Remake&& remake);
+  std::vector<std::size_t> tiePartners(std::size_t b) const;
   ContactSet contacts_;                     // found once per substep
   // Per body: the ground candidates of the last full scan, reused while the body has
   // moved less than half the scan's extra margin (a resting body is scanned once).

@@ -843,8 +843,9 @@ void PbdWorld::findNeighbors() {
     pairs.i.insert(pairs.i.end(), c.i.begin(), c.i.end());
     pairs.j.insert(pairs.j.end(), c.j.begin(), c.j.end());
   }
-  // A rigid body particle-level material touches does not sleep; a sleeper wakes now, before the
-  // pairs are solved (in pair order: the same for any thread count).
+  // A rigid body awake particle-level material touches is marked (it sleeps only with what touches
+  // it: updateSleep); a rigid sleeper wakes now, before the pairs are solved (in pair order: the
+  // same for any thread count).
   for (std::int32_t j : pairs.j) {
     const auto b = std::size_t(parts_.group(std::size_t(j)));
     if (isRigid(b) && mode_[b] == BodyMode::kDynamic && !looseTouch_[b]) touchedByLoose(b);
