@@ -52,6 +52,25 @@ bool timeSteps(World& w, int warmup, int steps, const char* name, std::vector<do
   return true;
 }
 
+// A world with sleeping on, `steps` steps each timed (ms, appended to `ms`); allAsleepAt: when the
+// last of its bodies fell asleep (s), or steps x dt when some body is awake at the end. False,
+// after printing the guard's message after `name`, when a step fails.
+template <class World>
+bool timeStepsAsleep(World& w, int steps, const std::string& name, std::vector<double>& ms, double& allAsleepAt) {
+  allAsleepAt = steps * w.dt();
+  for (int s = 0; s < steps; ++s) {
+    const double t0 = nowSeconds();
+    if (!w.step()) {
+      std::fprintf(stderr, "%s: %s\n", name.c_str(), w.guard().message().c_str());
+      return false;
+    }
+    ms.push_back(1e3 * (nowSeconds() - t0));
+    if (w.sleepingCount() < w.bodyCount()) allAsleepAt = steps * w.dt();
+    else if (allAsleepAt == steps * w.dt()) allAsleepAt = (s + 1) * w.dt();
+  }
+  return true;
+}
+
 // The median step, then one row per pass of the world's profile (ms per step over all
 // `stepsRun`), as `bench,kase[.pass],particles,threads,ms_per_step,...`.
 template <class World>

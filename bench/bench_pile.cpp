@@ -66,17 +66,8 @@ int runCase(const char* name, int threads, int substeps, int iterations, double 
   prm.sleepSpeed = sleepSpeed;
   pbd::PbdWorld w(p, bodies, {wood}, prm);
   std::vector<double> ms;
-  double allAsleepAt = steps * prm.dt;
-  for (int s = 0; s < steps; ++s) {
-    const double t0 = nowSeconds();
-    if (!w.step()) {
-      std::fprintf(stderr, "bench_pile: %s: %s\n", name, w.guard().message().c_str());
-      return 1;
-    }
-    ms.push_back(1e3 * (nowSeconds() - t0));
-    if (w.sleepingCount() < w.bodyCount()) allAsleepAt = steps * prm.dt;
-    else if (allAsleepAt == steps * prm.dt) allAsleepAt = (s + 1) * prm.dt;
-  }
+  double allAsleepAt = 0.0;
+  if (!bench::timeStepsAsleep(w, steps, std::string("bench_pile: ") + name, ms, allAsleepAt)) return 1;
   const std::size_t n = p.size();
   row("pbd", name, n, threads, "ms_per_step", median(std::vector<double>(ms.end() - 60, ms.end())), "ms");
   row("pbd", name, n, threads, "ms_per_step_falling", median(std::vector<double>(ms.begin(), ms.begin() + 60)), "ms");

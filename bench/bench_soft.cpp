@@ -66,18 +66,9 @@ int runCase(bool sleep, int threads, int steps, int n, int iterations) {
     return 0;
   }
   const int total = 480;
-  double allAsleepAt = total * prm.dt;
-  for (int s = 0; s < total; ++s) {
-    const double t0 = nowSeconds();
-    if (!w.step()) {
-      std::fprintf(stderr, "bench_soft: %s\n", w.guard().message().c_str());
-      return 1;
-    }
-    if (s >= total - 60) ms.push_back(1e3 * (nowSeconds() - t0));
-    if (w.sleepingCount() < w.bodyCount()) allAsleepAt = total * prm.dt;
-    else if (allAsleepAt == total * prm.dt) allAsleepAt = (s + 1) * prm.dt;
-  }
-  bench::stepRows("pbd", "soft_sleep", p.size(), threads, w, ms, total);
+  double allAsleepAt = 0.0;
+  if (!bench::timeStepsAsleep(w, total, "bench_soft", ms, allAsleepAt)) return 1;
+  bench::stepRows("pbd", "soft_sleep", p.size(), threads, w, std::vector<double>(ms.end() - 60, ms.end()), total);
   bench::row("pbd", "soft_sleep", p.size(), threads, "asleep_end", double(w.sleepingCount()), "count");
   bench::row("pbd", "soft_sleep", p.size(), threads, "all_asleep_at", allAsleepAt, "s");
   return 0;

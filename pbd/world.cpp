@@ -1607,18 +1607,29 @@ void PbdWorld::reholdRestFrame(std::size_t b, Remake&& remake) {
     it = (it->first >> 32) == b || (it->first & 0xffffffffu) == b ? pairCache_.erase(it) : std::next(it);
 }
 
-// The particle-level bodies body b is tied to by distance constraints across bodies (a rope's end
-// linked to a soft body, rope or cloth: attachStrandEnds), in body order.
-std::vector<std::size_t> PbdWorld::tiePartners(std::size_t b) const {
-  std::vector<std::size_t> out;
-  const auto bi = std::int32_t(b);
+const std::vector<std::pair<std::int32_t, std::int32_t>>& PbdWorld::crossTies() {
+  if (crossTiesEdits_ == bodyEdits_ && crossTiesCount_ == distances_.size()) return crossTies_;
+  crossTies_.clear();
   for (std::size_t k = 0; k < distances_.size(); ++k) {
     const std::int32_t gi = parts_.group(std::size_t(distances_.i[k])), gj = parts_.group(std::size_t(distances_.j[k]));
-    if (gi == gj || (gi != bi && gj != bi) || gi < 0 || gj < 0) continue;
-    out.push_back(std::size_t(gi == bi ? gj : gi));
+    if (gi != gj && gi >= 0 && gj >= 0) crossTies_.emplace_back(std::min(gi, gj), std::max(gi, gj));
+  }
+  std::sort(crossTies_.begin(), crossTies_.end());
+  crossTies_.erase(std::unique(crossTies_.begin(), crossTies_.end()), crossTies_.end());
+  crossTiesEdits_ = bodyEdits_;
+  crossTiesCount_ = distances_.size();
+  return crossTies_;
+}
+
+// The particle-level bodies body b is tied to by distance constraints across bodies (a rope's end
+// linked to a soft body, rope or cloth: attachStrandEnds), in body order.
+std::vector<std::size_t> PbdWorld::tiePartners(std::size_t b) {
+  std::vector<std::size_t> out;
+  for (const auto& [l, r] : crossTies()) {
+    if (std::size_t(l) == b) out.push_back(std::size_t(r));
+    if (std::size_t(r) == b) out.push_back(std::size_t(l));
   }
   std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;
 }
 
@@ -1790,10 +1801,8 @@ void PbdWorld::updateSleep() {
     if (asleep_[bj] && (restless[bi] || fluidI)) wake(bj);
     if (isRigid(bj) && mode_[bj] == BodyMode::kDynamic) links.emplace_back(std::int32_t(bi), std::int32_t(bj));
   }
-  for (std::size_t k = 0; k < distances_.size(); ++k) {
-    const std::int32_t gi = parts_.group(std::size_t(distances_.i[k])), gj = parts_.group(std::size_t(distances_.j[k]));
-    if (gi != gj && gi >= 0 && gj >= 0) links.emplace_back(std::min(gi, gj), std::max(gi, gj));
-  }
+  const auto& ties = crossTies();
+  links.insert(links.end(), ties.begin(), ties.end());
   std::sort(links.begin(), links.end());
   links.erase(std::unique(links.begin(), links.end()), links.end());
   // Who falls asleep now: every body ready and not held, except a rigid body a rope or cloth is

@@ -430,7 +430,13 @@ class PbdWorld final : public Solver {
   void wakeLooseSleepers();
   template <class Remake>
   void reholdRestFrame(std::size_t b, Remake&& remake);
-  std::vector<std::size_t> tiePartners(std::size_t b) const;
+  std::vector<std::size_t> tiePartners(std::size_t b);
+  // The pairs of particle-level bodies tied by distance constraints (lower body first, sorted,
+  // unique), remade when a body is edited or constraints are added.
+  const std::vector<std::pair<std::int32_t, std::int32_t>>& crossTies();
+  std::vector<std::pair<std::int32_t, std::int32_t>> crossTies_;
+  std::uint64_t crossTiesEdits_ = ~std::uint64_t(0);
+  std::size_t crossTiesCount_ = 0;
   ContactSet contacts_;                     // found once per substep
   // Per body: the ground candidates of the last full scan, reused while the body has
   // moved less than half the scan's extra margin (a resting body is scanned once).

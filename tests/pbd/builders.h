@@ -88,6 +88,23 @@ inline BodyRange addBall(ParticleArrays& p, const Vec3& centre, int cells, int s
   return b;
 }
 
+// Steps until `body` is asleep, at most `maxSteps`: the step it fell asleep in, or -1 (not asleep
+// by then, or a step the guard stopped: w.guard() says which).
+inline int stepUntilAsleep(PbdWorld& w, int body, int maxSteps) {
+  for (int s = 0; s < maxSteps; ++s) {
+    if (!w.step()) return -1;
+    if (w.asleep(body)) return s;
+  }
+  return -1;
+}
+
+// Whether every particle's velocity is exactly 0 (a sleeper's).
+inline bool allExactlyAtRest(const ParticleArrays& p) {
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (p.vx[i] != 0.0f || p.vy[i] != 0.0f || p.vz[i] != 0.0f) return false;
+  return true;
+}
+
 // Steps until the body, having bounced (its centre moving up faster than `rising` m/s), starts
 // down again: the top of its first bounce above `rest` (m), or -1 if it never moved up within
 // 2 s (or the guard stopped it). A soft body's centre wobbles: its tests ask for a clear rise.

@@ -1867,19 +1867,11 @@ PbdWorld jellyOnGround(bool box, double sleepSpeed, double youngs = 5e4) {
 // a resting jelly costs what a resting box does.
 TEST(SleepBeside, AJellyAtRestFallsAsleepStaysBitForBitAndRunsNoParticlePass) {
   PbdWorld w = jellyOnGround(false, 0.02);
-  int fellAsleep = -1;
-  for (int s = 0; s < 90 && fellAsleep < 0; ++s) {
-    ASSERT_TRUE(w.step()) << w.guard().message();
-    if (w.asleep(0)) fellAsleep = s;
-  }
-  ASSERT_GE(fellAsleep, 0) << "not asleep after 1.5 s";
+  const int fellAsleep = stepUntilAsleep(w, 0, 90);
+  ASSERT_GE(fellAsleep, 0) << "not asleep after 1.5 s; " << w.guard().message();
   EXPECT_GT(fellAsleep, 30);
   const ParticleArrays before = w.particles();
-  for (std::size_t i = 0; i < before.size(); ++i) {
-    ASSERT_EQ(before.vx[i], 0.0f);
-    ASSERT_EQ(before.vy[i], 0.0f);
-    ASSERT_EQ(before.vz[i], 0.0f);
-  }
+  ASSERT_TRUE(allExactlyAtRest(before));
   for (int s = 0; s < 60; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
   EXPECT_TRUE(w.asleep(0));
   EXPECT_EQ(w.particles().x, before.x);
@@ -1899,8 +1891,7 @@ TEST(SleepBeside, AJellyAtRestFallsAsleepStaysBitForBitAndRunsNoParticlePass) {
 // and it settles and sleeps again within 1.5 s. Its top layer's particles are gone from it.
 TEST(SleepBeside, ACutWakesASleepingJelly) {
   PbdWorld w = jellyOnGround(false, 0.02);
-  for (int s = 0; s < 90 && !w.asleep(0); ++s) ASSERT_TRUE(w.step()) << w.guard().message();
-  ASSERT_TRUE(w.asleep(0));
+  ASSERT_GE(stepUntilAsleep(w, 0, 90), 0) << w.guard().message();
   const std::size_t before = w.bodyParticles(0).size();
   float top = -1e30f;
   for (std::int32_t i : w.bodyParticles(0)) top = std::max(top, w.particles().y[std::size_t(i)]);
@@ -1912,12 +1903,7 @@ TEST(SleepBeside, ACutWakesASleepingJelly) {
   ASSERT_TRUE(w.step()) << w.guard().message();
   EXPECT_FALSE(w.asleep(0));
   EXPECT_EQ(w.bodyParticles(0).size(), before - cut.size());
-  bool again = false;
-  for (int s = 0; s < 90 && !again; ++s) {
-    ASSERT_TRUE(w.step()) << w.guard().message();
-    again = w.asleep(0);
-  }
-  EXPECT_TRUE(again);
+  EXPECT_GE(stepUntilAsleep(w, 0, 90), 0) << w.guard().message();
 }
 
 // A box resting on a soft jelly (E = 2e4 Pa) falls asleep with it, in the same step. Had the

@@ -72,20 +72,12 @@ TEST(Sleep, ABoxAtRestFallsAsleepWithNoVelocityAndStaysBitForBit) {
   ParticleArrays p;
   std::vector<BodyRange> bodies{addBox(p, Vec3(0.0, kRadius + 0.02, 0.0), 6, 4, 6)};
   PbdWorld w(p, bodies, rigidMaterial(0.5), sleepy());
-  int fellAsleep = -1;
-  for (int s = 0; s < 60 && fellAsleep < 0; ++s) {
-    ASSERT_TRUE(w.step()) << w.guard().message();
-    if (w.asleep(0)) fellAsleep = s;
-  }
-  ASSERT_GE(fellAsleep, 0) << "not asleep after 1 s at rest";
+  const int fellAsleep = stepUntilAsleep(w, 0, 60);
+  ASSERT_GE(fellAsleep, 0) << "not asleep after 1 s at rest; " << w.guard().message();
   EXPECT_GT(fellAsleep, 30);
   EXPECT_EQ(w.sleepingCount(), 1);
   const ParticleArrays before = w.particles();
-  for (std::size_t i = 0; i < before.size(); ++i) {
-    ASSERT_EQ(before.vx[i], 0.0f);
-    ASSERT_EQ(before.vy[i], 0.0f);
-    ASSERT_EQ(before.vz[i], 0.0f);
-  }
+  ASSERT_TRUE(allExactlyAtRest(before));
   EXPECT_NEAR(lowestOf(w, 0), kRadius, 0.05 * kRadius);
   for (int s = 0; s < 60; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
   EXPECT_TRUE(w.asleep(0));
