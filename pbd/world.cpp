@@ -34,7 +34,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps; then the ground lifts out what they pressed into it; then shock propagation, from the ground up"},
     {"collider_contact", Cadence::kPerSubstep, "rigid bodies against mesh colliders at body level, `iterations` sweeps, with friction"},
     {"update", Cadence::kPerSubstep, "rigid velocities from the pose change: v = dc/h, w = 2 vec(dq)/h"},
-    {"particle_update", Cadence::kPerSubstep, "particle velocities v = (p - x)/h, x = p; restitution off the ground, bodies and colliders; soft bodies bounce at their centre of mass"},
+    {"particle_update", Cadence::kPerSubstep, "moves that cross a rigid body or collider stop at its face; particle velocities v = (p - x)/h, x = p; restitution off the ground, bodies and colliders; soft bodies bounce at their centre of mass"},
     {"fluid_velocity", Cadence::kPerSubstep, "fluids: XSPH viscosity, vorticity confinement, cohesion (Eq. 15-17), implicit viscosity (dragging solids), when set"},
     {"plasticity", Cadence::kPerSubstep, "soft clusters strained past plastic_yield: rest shapes creep (Müller 2005 §4.4)"},
     {"restitution", Cadence::kPerSubstep, "bodies that touched the ground or each other leave at e times their approach speed (Müller 2020 Eq. 34; a pair: the mean of their e)"},
@@ -180,6 +180,7 @@ std::size_t PbdWorld::pushBodySlot(std::vector<std::int32_t> members, const Moti
   ++bodyEdits_;
   members_.push_back(std::move(members));
   normalsStale_.push_back(1);
+  restCells_.emplace_back();
   kind_.push_back(kind);
   strandRadius_.push_back(0.0f);
   lattice_.push_back({0, 0, 0});
@@ -250,6 +251,7 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
     box.extend(Vec3(rx_[k], ry_[k], rz_[k]));
   }
   normalsStale_[b] = 1;
+  restCells_[b].stale = true;
   if (mem.empty() || !(m > 0.0)) {
     mode_[b] = BodyMode::kEmpty;
     return;

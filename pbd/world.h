@@ -371,6 +371,24 @@ class PbdWorld final : public Solver {
   std::vector<Eigen::Vector3f> surfaceNormal_;
   std::vector<char> normalsStale_;  // per body
   void refreshSurfaceNormals(std::size_t b);
+  // Per rigid body: which cells of its rest lattice (one spacing, centred on its particles) it
+  // fills, as a bit box, for looseBodySweep. Made lazily, the first substep a particle-level
+  // particle's path comes near the body after its rest shape changed (`stale`); `onLattice`
+  // false for a body whose particles do not sit on one lattice (one built through the API
+  // turned), which keeps contacts alone.
+  struct RestCells {
+    bool stale = true, onLattice = false;
+    Vec3 origin = Vec3::Zero();  // rest offset of cell (0, 0, 0)'s centre (m)
+    Vec3i lo = Vec3i::Zero(), size = Vec3i::Zero();
+    std::vector<std::uint64_t> bits;  // x fastest, then y, then z, from lo
+    bool filled(const Vec3i& c) const;
+  };
+  std::vector<RestCells> restCells_;
+  void refreshRestCells(std::size_t b);
+  // A particle-level particle whose move of the substep, relative to a rigid body, enters a
+  // cell that body fills stops outside that cell's face (continuous collision against sketched
+  // solids: water thrown at a wall one particle thick, faster than contacts can catch).
+  void looseBodySweep();
   // Per body.
   std::vector<std::vector<std::int32_t>> members_;  // particle ids, ascending
   std::vector<Motion> motion_;

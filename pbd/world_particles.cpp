@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "core/neighbor_grid.h"
+#include "pbd/cell_walk.h"
 #include "pbd/cluster_kernels.h"
 #include "pbd/parallel.h"
 #include "pbd/shape_matching.h"
@@ -1121,9 +1122,171 @@ void PbdWorld::distanceConstraints(double h) {
   });
 }
 
+bool PbdWorld::RestCells::filled(const Vec3i& c) const {
+  const Vec3i k = c - lo;
+  if ((k.array() < 0).any() || (k.array() >= size.array()).any()) return false;
+  const std::uint64_t n =
+      std::uint64_t(k.x()) + std::uint64_t(size.x()) * (std::uint64_t(k.y()) + std::uint64_t(size.y()) * std::uint64_t(k.z()));
+  return ((bits[n >> 6] >> (n & 63u)) & 1u) != 0;
+}
+
+// Body b's rest lattice as a bit box (restCells' cells: one spacing, centred on its particles,
+// relative to its first member). Bodies of the sketch always sit on one; a box beyond 2^26
+// cells (a body of the API spread over kilometres) keeps none, and its contacts act alone.
+void PbdWorld::refreshRestCells(std::size_t b) {
+  RestCells& rc = restCells_[b];
+  rc = RestCells{};
+  rc.stale = false;
+  const auto& mem = members_[b];
+  if (!isRigid(b) || mem.empty() || mode_[b] == BodyMode::kEmpty) return;
+  const double inv = 1.0 / (2.0 * params_.particleRadius);
+  const auto f = std::size_t(mem.front());
+  rc.origin = Vec3(rx_[f], ry_[f], rz_[f]);
+  const std::vector<Vec3i> cells = restCells(b);
+  Vec3i lo = cells.front(), hi = cells.front();
+  for (std::size_t k = 0; k < cells.size(); ++k) {
+    const auto i = std::size_t(mem[k]);
+    const Vec3 off = (Vec3(rx_[i], ry_[i], rz_[i]) - rc.origin) * inv - cells[k].cast<double>();
+    if (!(off.cwiseAbs().maxCoeff() < 0.05)) return;  // not on one lattice (or not finite)
+    lo = lo.cwiseMin(cells[k]), hi = hi.cwiseMax(cells[k]);
+  }
+  const Eigen::Array3d size = (hi - lo + Vec3i::Ones()).cast<double>().array();
+  if (size.prod() > double(std::uint64_t(1) << 26)) return;
+  rc.lo = lo, rc.size = hi - lo + Vec3i::Ones();
+  const auto volume = std::uint64_t(rc.size.x()) * std::uint64_t(rc.size.y()) * std::uint64_t(rc.size.z());
+  rc.bits.assign(std::size_t((volume + 63) / 64), 0);
+  for (const Vec3i& c : cells) {
+    const Vec3i k = c - lo;
+    const std::uint64_t n = std::uint64_t(k.x()) +
+                            std::uint64_t(rc.size.x()) * (std::uint64_t(k.y()) + std::uint64_t(rc.size.y()) * std::uint64_t(k.z()));
+    rc.bits[std::size_t(n >> 6)] |= std::uint64_t(1) << (n & 63u);
+  }
+  rc.onLattice = true;
+}
+
+// Continuous collision of particle-level particles against sketched rigid bodies, the sweep
+// colliders get (particleUpdate) for the lattice a rigid body is made of. A particle's move of
+// the substep relative to each body near it (its start in the body's frame at the substep's
+// start pose, its end at the pose now) is walked through the body's rest cells; one that enters
+// a taken cell stops outside the face it entered by (at the pair's contact distance, or less if
+// it started nearer), so nothing passes through a wall however thin it is or however fast it
+// comes: contacts are found at the predicted positions within a spacing and a half, and the
+// density or cluster passes after the last contact sweep may push a particle on. One-way: a
+// dynamic body does not feel the stop (the contacts before it gave it the push of every
+// particle they caught). Each particle alone, in parallel: deterministic.
+void PbdWorld::looseBodySweep() {
+  struct Near {
+    std::size_t body;
+    Eigen::AlignedBox3d box;  // world, over the substep
+    Mat3 toStart, toEnd;      // world -> rest frame at the substep's start and end poses
+    Vec3 cStart, cEnd;
+    Mat3 fromEnd;
+  };
+  std::vector<char> active(members_.size(), 0);
+  for (std::int32_t b : active_) active[std::size_t(b)] = 1;
+  Eigen::AlignedBox3d all;
+  for (std::int32_t i : loose_) {
+    const auto k = std::size_t(i);
+    if (invMassP_[k] == 0.0f) continue;
+    all.extend(Vec3(parts_.x[k], parts_.y[k], parts_.z[k]));
+    all.extend(Vec3(px_[k], py_[k], pz_[k]));
+  }
+  if (all.isEmpty()) return;
+  std::vector<Near> bodies;
+  for (std::size_t b = 0; b < members_.size(); ++b) {
+    if (!isRigid(b) || mode_[b] == BodyMode::kEmpty || members_[b].empty()) continue;
+    const Motion& mo = motion_[b];
+    // The start pose is the substep's only where integrate or kinematic set it this substep.
+    const bool moved = (mode_[b] == BodyMode::kDynamic && active[b]) || mode_[b] == BodyMode::kKinematic;
+    const Mat3 Rs = (moved ? mo.qPrev : mo.q).toRotationMatrix(), Re = mo.q.toRotationMatrix();
+    const Vec3 cs = moved ? mo.cPrev : mo.c;
+    Eigen::AlignedBox3d box;
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3 x = restBox_[b].corner(static_cast<Eigen::AlignedBox3d::CornerType>(corner));
+      box.extend(Rs * x + cs);
+      box.extend(Re * x + mo.c);
+    }
+    if (!box.intersects(all)) continue;
+    if (restCells_[b].stale) refreshRestCells(b);
+    if (!restCells_[b].onLattice) continue;
+    bodies.push_back({b, box, Rs.transpose(), Re.transpose(), cs, mo.c, Re});
+  }
+  if (bodies.empty()) return;
+  const double r = params_.particleRadius, spacing = 2.0 * r, inv = 1.0 / spacing;
+  // The bodies binned by their boxes in a coarse grid over the paths' box (cells of 8 spacings,
+  // or more for at most 32 a side), so a pool beside a pile of boxes tries each particle against
+  // the few boxes near its path, not all of them. Lists in ascending body order.
+  const double binSize = std::max(8.0 * spacing, all.sizes().maxCoeff() / 32.0);
+  const Vec3i bins = (all.sizes() / binSize).array().floor().cast<int>() + 1;
+  const auto binOf = [&](const Vec3& x) -> Vec3i {
+    const Vec3i c = ((x - all.min()) / binSize).array().floor().cast<int>();
+    return c.cwiseMax(Vec3i::Zero()).cwiseMin(bins - Vec3i::Ones());
+  };
+  const auto binIndex = [&](int x, int y, int z) { return std::size_t(x + bins.x() * (y + bins.y() * z)); };
+  const auto forBins = [&](const Eigen::AlignedBox3d& box, const auto& f) {
+    const Vec3i lo = binOf(box.min()), hi = binOf(box.max());
+    for (int z = lo.z(); z <= hi.z(); ++z)
+      for (int y = lo.y(); y <= hi.y(); ++y)
+        for (int x = lo.x(); x <= hi.x(); ++x) f(binIndex(x, y, z));
+  };
+  std::vector<std::uint32_t> binStart(std::size_t(bins.prod()) + 1, 0), binBodies;
+  for (const Near& nb : bodies) forBins(nb.box, [&](std::size_t c) { ++binStart[c + 1]; });
+  for (std::size_t c = 1; c < binStart.size(); ++c) binStart[c] += binStart[c - 1];
+  binBodies.resize(binStart.back());
+  std::vector<std::uint32_t> fill(binStart.begin(), binStart.end() - 1);
+  for (std::size_t n = 0; n < bodies.size(); ++n) forBins(bodies[n].box, [&](std::size_t c) { binBodies[fill[c]++] = std::uint32_t(n); });
+  forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
+    std::vector<std::uint32_t> nearPath;
+    for (std::size_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(loose_[k]);
+      if (invMassP_[i] == 0.0f) continue;
+      const bool fluid = phase::has(parts_.phase[i], phase::kFluid);
+      Eigen::AlignedBox3d reach(at(parts_.x, parts_.y, parts_.z, i));
+      reach.extend(at(px_, py_, pz_, i));
+      reach.min().array() -= spacing;  // a stop lies within a spacing of the path
+      reach.max().array() += spacing;
+      const std::uint32_t* first = nullptr;
+      const std::uint32_t* last = nullptr;
+      if (binOf(reach.min()) == binOf(reach.max())) {  // most paths: one bin's list as it is
+        const std::size_t c = binIndex(binOf(reach.min()).x(), binOf(reach.min()).y(), binOf(reach.min()).z());
+        first = binBodies.data() + binStart[c], last = binBodies.data() + binStart[c + 1];
+      } else {
+        nearPath.clear();
+        forBins(reach, [&](std::size_t c) { nearPath.insert(nearPath.end(), &binBodies[binStart[c]], &binBodies[binStart[c + 1]]); });
+        std::sort(nearPath.begin(), nearPath.end());
+        nearPath.erase(std::unique(nearPath.begin(), nearPath.end()), nearPath.end());
+        first = nearPath.data(), last = nearPath.data() + nearPath.size();
+      }
+      const Vec3 from = at(parts_.x, parts_.y, parts_.z, i);
+      for (const std::uint32_t* n = first; n != last; ++n) {
+        const Near& nb = bodies[*n];
+        const Vec3 to = at(px_, py_, pz_, i);
+        Eigen::AlignedBox3d path(from);
+        path.extend(to);
+        if (!path.intersects(nb.box) || contactSkip_[i] == std::int32_t(nb.body)) continue;
+        const RestCells& rc = restCells_[nb.body];
+        // Cell units: the rest offset less cell (0, 0, 0)'s centre, over the spacing, plus a half.
+        const Vec3 a = (nb.toStart * (from - nb.cStart) - rc.origin) * inv + Vec3::Constant(0.5);
+        const Vec3 b = (nb.toEnd * (to - nb.cEnd) - rc.origin) * inv + Vec3::Constant(0.5);
+        const CellEntry e = firstTakenCell(a, b - a, [&](const Vec3i& c) { return rc.filled(c); });
+        if (!e.hit) continue;
+        // Out of the entered face by the pair's contact distance beyond the cell (its half
+        // spacing), or by as far as the particle started from it, if nearer.
+        const double touch = (fluid ? 0.75 : 1.0) * (radiusOf(i) + r);
+        const double before = e.t * std::abs(b[e.axis] - a[e.axis]);
+        Vec3 stop = a + e.t * (b - a);
+        stop[e.axis] -= e.dir * std::max(std::min((touch - r) * inv, before), 1e-3);
+        const Vec3 world = nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd;
+        put(px_, py_, pz_, i, world);
+      }
+    }
+  });
+}
+
 // v = (p - x) / h, x = p for dynamic and carried particles. A particle that hit the
 // ground faster than 2 |g| h leaves it at e times its approach speed.
 void PbdWorld::particleUpdate(double h) {
+  looseBodySweep();
   if (colliders_ && colliders_->size() > 0) {
     // Colliders have the last word: the constraint passes after the last contact sweep
     // (clusters, links, density) may have pushed a particle into or through a collider. The
