@@ -901,7 +901,7 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
     }
     case PbdPass::kColliderContact: return surface(contacts_.particleMesh);
     case PbdPass::kParticleUpdate:
-      return heldBytes(groundApproach_, bounceNoted_) + heldBytes(softBounce_) +
+      return heldBytes(groundApproach_, bounceNoted_) + heldBytes(softBounce_) + heldBytes(partnerHits_) +
              heldBytes(particleBounces_, bounceImpulse_);
     case PbdPass::kWriteParticles: return heldBytes(rx_, ry_, rz_);
     default: return 0;

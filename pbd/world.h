@@ -527,27 +527,28 @@ class PbdWorld final : public Solver {
   // which stops the touching layer and lets shape matching average the rest, so they would not
   // bounce; restitution acts on the body instead (Müller 2020 Eq. 34 at the centre of mass, as
   // for rigid bodies). Per body, this substep: the centre-of-mass velocity after predict, and
-  // the contacts with the ground, static or keyframed colliders, fixed bodies and one dynamic
-  // rigid body (the sum of their normals, of the pair's e and of the surface's velocity, and
-  // their count). Sized to
-  // the bodies while some soft body bounces, else empty.
-  // A dynamic rigid body touched is the pair's other side (partner; -2 when several were
-  // touched: the contact stays inelastic), with its contact points and its point velocities
-  // when recorded (before the solve).
+  // the contacts with the ground, static or keyframed colliders, fixed bodies and dynamic rigid
+  // bodies (the sum of their normals, of the pair's e and of the surface's velocity, and their
+  // count). Sized to the bodies while some soft body bounces, else empty.
   struct SoftBounce {
     Vec3 vBefore = Vec3::Zero();
     Vec3 nSum = Vec3::Zero(), vSurface = Vec3::Zero();
     double eSum = 0.0;
     int count = 0;
-    std::int32_t partner = -1;
-    int partnerCount = 0;
-    Vec3 partnerPoints = Vec3::Zero(), partnerVBefore = Vec3::Zero();
-    Vec3 partnerNSum = Vec3::Zero();  // the partner's share of nSum and eSum
-    double partnerESum = 0.0;
     std::int32_t softPartner = -1;  // another soft body touched (-2: several)
     int softCount = 0;
   };
   std::vector<SoftBounce> softBounce_;
+  // The dynamic rigid bodies a bouncing soft body hit this substep (a share of its SoftBounce's
+  // sums and count), one entry per pair in the order first hit: the partner's contact points and
+  // point velocities when recorded (before the solve).
+  struct PartnerHit {
+    std::int32_t soft = -1, body = -1;
+    int count = 0;
+    Vec3 points = Vec3::Zero(), vBefore = Vec3::Zero(), nSum = Vec3::Zero();
+    double eSum = 0.0;
+  };
+  std::vector<PartnerHit> partnerHits_;
   // A contact takes part in a soft body's bounce only while the particle approaches the surface
   // faster than 2 |g| h (relative velocity before the solve, normal towards the particle): a
   // ball sliding on the ground into a wall bounces off the wall alone, the ground it rests on
@@ -586,8 +587,17 @@ class PbdWorld final : public Solver {
   Vec3 centreVelocity(std::size_t b) const;
   Vec3 massMean(std::size_t b, const std::vector<float>& x, const std::vector<float>& y, const std::vector<float>& z) const;
   void softBodyRestitution(double h);
+  // The surfaces a soft body hit this substep, as one contact: the ground, colliders, fixed
+  // bodies and partners held against the blow (sums of their normals, e, count, and surface
+  // velocities before the solve and now).
+  struct SurfaceHits {
+    Vec3 nSum = Vec3::Zero(), before = Vec3::Zero(), after = Vec3::Zero();
+    double eSum = 0.0;
+    int count = 0;
+  };
   template <class Kick>
-  void bounceOffPartnerAndSurfaces(std::size_t b, double mass, double slow, Kick&& kick);
+  void bounceOffPartners(std::size_t b, double mass, double slow, const SurfaceHits& surfaces,
+                         const std::vector<const PartnerHit*>& partners, Kick&& kick);
   bool particleLevel_ = false;  // the arrays above (px_ .. groundApproach_) exist: some body is particle-level
   void ensureParticleLevel();
   bool pinnedAt(std::size_t k) const { return particleLevel_ && pinned_[k]; }

@@ -529,9 +529,11 @@ void PbdWorld::predict(double h) {
   for (std::size_t b = 0; b < members_.size() && !bouncy; ++b) bouncy = bouncySoft(b);
   if (!bouncy) {
     std::vector<SoftBounce>().swap(softBounce_);
+    std::vector<PartnerHit>().swap(partnerHits_);
     return;
   }
   softBounce_.assign(members_.size(), SoftBounce{});
+  partnerHits_.clear();
   for (std::size_t b = 0; b < members_.size(); ++b)
     if (dynamicSoft(b)) softBounce_[b].vBefore = centreVelocity(b);  // a bouncy one's partner too
 }
@@ -555,64 +557,88 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
   return massMean(b, parts_.vx, parts_.vy, parts_.vz);
 }
 
-// A soft body that hit a free dynamic partner and other surfaces (the ground, colliders, fixed
-// or held bodies) in one substep: two contacts solved together (softBodyRestitution). The
-// surfaces' contacts make one along their mean normal nS (their mean e and velocity), the
-// partner's one along nP at their mean point. Impulses jS, jP >= 0 on the body (jP's opposite on
-// the partner, through its generalized inverse mass wP there) so that each contact the body
-// approached faster than `slow` leaves at e times its approach speed, unless the other impulse
-// already separates it faster (a linear complementarity problem in two unknowns, solved by trying
-// its four cases):
-//   jS / m + jP a / m = dS,   jS a / m + jP (1 / m + wP) = dP,   a = nS . nP,
-// dS and dP the normal velocity each contact still lacks. Momentum is kept along whatever the
-// surfaces do not push (the partner takes -jP nP).
+// A soft body that hit free dynamic rigid partners, and maybe surfaces too, in one substep
+// (softBodyRestitution): the surfaces make one contact along their mean normal (their mean e and
+// velocity), each partner one along its own mean normal at its mean contact point. Impulses
+// j_c >= 0 on the body (each partner taking -j_c n_c through its generalized inverse mass w_c
+// there) so that each contact the body approached faster than `slow` leaves at e_c times its
+// approach, unless the others already separate it faster: the linear complementarity problem
+//   A j - d >= 0,  j >= 0,  j_c (A j - d)_c = 0,   A_cd = n_c . n_d / m + [c = d] w_c,
+// d_c the normal velocity contact c still lacks. A is positive definite (every free partner has
+// w_c > 0 and the surfaces are one row), so the problem has one solution, found by trying its
+// active sets from all contacts down (at most 2^8: a body that hit more than 7 free bodies at
+// once stays inelastic). Momentum is kept along whatever the surfaces do not push.
 template <class Kick>
-void PbdWorld::bounceOffPartnerAndSurfaces(std::size_t b, double mass, double slow, Kick&& kick) {
+void PbdWorld::bounceOffPartners(std::size_t b, double mass, double slow, const SurfaceHits& surfaces,
+                                 const std::vector<const PartnerHit*>& partners, Kick&& kick) {
+  constexpr std::size_t kMaxContacts = 8;
   const SoftBounce& sb = softBounce_[b];
-  const int cS = sb.count - sb.partnerCount, cP = sb.partnerCount;
-  const Vec3 sumS = sb.nSum - sb.partnerNSum;
-  if (cS <= 0 || cP <= 0 || !(sumS.norm() > 1e-9) || !(sb.partnerNSum.norm() > 1e-9)) return;
-  const Vec3 nS = sumS.normalized(), nP = sb.partnerNSum.normalized();
-  const double eS = (sb.eSum - sb.partnerESum) / cS, eP = sb.partnerESum / cP;
-  const Vec3 vS = sb.vSurface / cS;  // the surfaces' mean velocity (a keyframed collider's), before and now
-  const auto r = std::size_t(sb.partner);
-  Motion& mo = motion_[r];
-  const Vec3 point = sb.partnerPoints / cP;
-  const Vec3 vPBefore = sb.partnerVBefore / cP, vPNow = mo.v + mo.w.cross(point - mo.c);
   const Vec3 vb = centreVelocity(b);
-  const double uS = (sb.vBefore - vS).dot(nS), uP = (sb.vBefore - vPBefore).dot(nP);
-  const bool onS = uS < -slow, onP = uP < -slow;
-  const double dS = onS ? -eS * uS - (vb - vS).dot(nS) : 0.0;
-  const double dP = onP ? -eP * uP - (vb - vPNow).dot(nP) : 0.0;
-  const RigidPose pose{mo.c, mo.q, invMass_[r], invInertiaRest_[r]};
-  const double wP = generalizedInverseMass(pose, point, nP), im = 1.0 / mass, a = nS.dot(nP);
-  // Both approaching: the four cases of the complementarity problem, the first that holds; one
-  // approaching: that contact alone.
-  double jS = 0.0, jP = 0.0;
-  if (onS && onP) {
-    const auto holds = [&](double s, double q) {
-      const double restS = dS - (s * im + q * a * im), restP = dP - (s * a * im + q * (im + wP));
-      const double tol = 1e-9 * (std::abs(dS) + std::abs(dP));
-      return s >= 0.0 && q >= 0.0 && (s > 0.0 ? std::abs(restS) <= tol : restS <= tol) &&
-             (q > 0.0 ? std::abs(restP) <= tol : restP <= tol);
-    };
-    const double det = im * (im + wP) - a * a * im * im;
-    if (det > 1e-9 * im * (im + wP)) jS = (dS * (im + wP) - dP * a * im) / det, jP = (dP * im - dS * a * im) / det;
-    if (!holds(jS, jP)) jS = std::max(dS * mass, 0.0), jP = 0.0;
-    if (!holds(jS, jP)) jS = 0.0, jP = std::max(dP / (im + wP), 0.0);
-    if (!holds(jS, jP)) jS = jP = 0.0;
-  } else if (onS) {
-    jS = std::max(dS * mass, 0.0);
-  } else if (onP) {
-    jP = std::max(dP / (im + wP), 0.0);
+  struct Row {
+    Vec3 n, point;
+    double d, w;
+    const PartnerHit* hit;
+  };
+  std::vector<Row> rows;
+  if (surfaces.count > 0 && surfaces.nSum.norm() > 1e-9) {
+    const Vec3 n = surfaces.nSum.normalized();
+    const double u = (sb.vBefore - surfaces.before / surfaces.count).dot(n);
+    const double e = surfaces.eSum / surfaces.count;
+    if (u < -slow) rows.push_back({n, Vec3::Zero(), -e * u - (vb - surfaces.after / surfaces.count).dot(n), 0.0, nullptr});
   }
-  if (jS == 0.0 && jP == 0.0) return;
-  if (jP > 0.0) {
+  for (const PartnerHit* ph : partners) {
+    if (!(ph->nSum.norm() > 1e-9)) continue;
+    const Vec3 n = ph->nSum.normalized(), point = ph->points / ph->count;
+    const Motion& mo = motion_[std::size_t(ph->body)];
+    const double u = (sb.vBefore - ph->vBefore / ph->count).dot(n);
+    if (!(u < -slow)) continue;
+    const double d = -(ph->eSum / ph->count) * u - (vb - (mo.v + mo.w.cross(point - mo.c))).dot(n);
+    const RigidPose pose{mo.c, mo.q, invMass_[std::size_t(ph->body)], invInertiaRest_[std::size_t(ph->body)]};
+    rows.push_back({n, point, d, generalizedInverseMass(pose, point, n), ph});
+  }
+  const std::size_t k = rows.size();
+  if (k == 0 || k > kMaxContacts) return;
+  Eigen::MatrixXd A(k, k);
+  Eigen::VectorXd d(k);
+  for (std::size_t c = 0; c < k; ++c) {
+    d[Eigen::Index(c)] = rows[c].d;
+    for (std::size_t o = 0; o < k; ++o)
+      A(Eigen::Index(c), Eigen::Index(o)) = rows[c].n.dot(rows[o].n) / mass + (c == o ? rows[c].w : 0.0);
+  }
+  const double tol = 1e-9 * d.cwiseAbs().sum();
+  Eigen::VectorXd j = Eigen::VectorXd::Zero(Eigen::Index(k));
+  for (std::uint32_t mask = (1u << k) - 1;; --mask) {
+    std::vector<Eigen::Index> on;
+    for (std::size_t c = 0; c < k; ++c)
+      if (mask & (1u << c)) on.push_back(Eigen::Index(c));
+    Eigen::VectorXd trial = Eigen::VectorXd::Zero(Eigen::Index(k));
+    if (!on.empty()) {
+      const Eigen::VectorXd js = A(on, on).ldlt().solve(d(on));
+      for (std::size_t q = 0; q < on.size(); ++q) trial[on[q]] = js[Eigen::Index(q)];
+    }
+    const Eigen::VectorXd rest = d - A * trial;  // what each contact still lacks
+    bool holds = true;
+    for (Eigen::Index c = 0; c < Eigen::Index(k) && holds; ++c)
+      holds = (mask & (1u << c)) ? trial[c] >= 0.0 && std::abs(rest[c]) <= tol : rest[c] <= tol;
+    if (holds) {
+      j = trial;
+      break;
+    }
+    if (mask == 0) return;  // no active set holds (round-off): inelastic
+  }
+  Vec3 dv = Vec3::Zero();
+  for (std::size_t c = 0; c < k; ++c) {
+    const double jc = j[Eigen::Index(c)];
+    if (!(jc > 0.0)) continue;
+    dv += (jc / mass) * rows[c].n;
+    if (!rows[c].hit) continue;
+    const auto r = std::size_t(rows[c].hit->body);
+    Motion& mo = motion_[r];
     const Mat3 R = mo.q.toRotationMatrix();
-    mo.v -= (jP * invMass_[r]) * nP;
-    mo.w -= R * invInertiaRest_[r] * R.transpose() * (point - mo.c).cross(jP * nP);
+    mo.v -= (jc * invMass_[r]) * rows[c].n;
+    mo.w -= R * invInertiaRest_[r] * R.transpose() * (rows[c].point - mo.c).cross(jc * rows[c].n);
   }
-  kick(b, (jS * nS + jP * nP) * im);
+  if (dv.squaredNorm() > 0.0) kick(b, dv);
 }
 
 // Soft bodies' restitution (SoftBounce above): a body that hit something this substep (its
@@ -620,12 +646,12 @@ void PbdWorld::bounceOffPartnerAndSurfaces(std::size_t b, double mass, double sl
 // at e times its centre's approach speed along the mean normal of those contacts, relative to
 // the surface: every particle gets the same velocity change, so the body's shape is untouched.
 // e: the pair's mean with a body, the body's own against the ground and colliders (which have
-// none). A dynamic rigid body or another soft body shares the bounce when it is all the body hit
-// (one partner, nothing else), taking the opposite impulse (momentum is kept); a rigid partner
-// the ground, a fixed body or a stack on either holds against the blow (heldAgainst) is a fixed surface instead, also
-// when the body hit it and something else at once; a body that hit a free dynamic rigid partner
-// and other surfaces at once bounces off both together (bounceOffPartnerAndSurfaces); one that hit
-// two free dynamic partners at once stays inelastic. Serial over bodies: deterministic.
+// none). Another soft body shares the bounce when it is all the body hit, taking the opposite
+// impulse (momentum is kept); a rigid partner the ground, a fixed body or a stack on either holds
+// against the blow (heldAgainst) is a fixed surface, also when the body hit it and something else
+// at once; free dynamic rigid partners, one or several, with surfaces or without, each take the
+// opposite of their own contact's impulse, all solved together (bounceOffPartners). Serial over
+// bodies: deterministic.
 void PbdWorld::softBodyRestitution(double h) {
   if (softBounce_.empty()) return;
   const double slow = 2.0 * params_.gravity.norm() * h;
@@ -675,49 +701,33 @@ void PbdWorld::softBodyRestitution(double h) {
       continue;
     }
     if (!bouncySoft(b)) continue;
-    // A dynamic partner held against the blow (heldAgainst: by the ground, a fixed body or a
-    // stack standing on one) is a surface like a fixed one: it takes no impulse, and it may be
-    // hit together with others.
-    const bool held = sb.partnerCount > 0 && sb.partner >= 0 && heldAgainst(std::size_t(sb.partner), -n);
-    const bool pair = sb.partnerCount > 0 && !held;
-    if (pair && sb.partner < 0) continue;  // two dynamic partners at once: inelastic
-    if (pair && sb.partnerCount != sb.count) {
-      bounceOffPartnerAndSurfaces(b, massOf(b), slow, kick);
+    // The surfaces: the ground, colliders, fixed bodies, and partners held against their blow
+    // (heldAgainst: by the ground, a fixed body or a stack standing on one), which take no impulse
+    // and may be hit together with others; free partners take the opposite of theirs.
+    SurfaceHits surfaces{sb.nSum, sb.vSurface, sb.vSurface, sb.eSum, sb.count};
+    std::vector<const PartnerHit*> free;
+    for (const PartnerHit& ph : partnerHits_) {
+      if (ph.soft != std::int32_t(b)) continue;
+      const auto r = std::size_t(ph.body);
+      const Vec3 blow = ph.nSum.norm() > 1e-9 ? Vec3(ph.nSum.normalized()) : n;
+      if (heldAgainst(r, -blow)) {
+        const Motion& mo = motion_[r];
+        surfaces.before += ph.vBefore;
+        surfaces.after += double(ph.count) * (mo.v + mo.w.cross(ph.points / ph.count - mo.c));
+        continue;
+      }
+      free.push_back(&ph);
+      surfaces.nSum -= ph.nSum, surfaces.eSum -= ph.eSum, surfaces.count -= ph.count;
+    }
+    if (!free.empty()) {
+      bounceOffPartners(b, massOf(b), slow, surfaces, free, kick);
       continue;
     }
-    Vec3 before = sb.vSurface / sb.count, after = before;
-    Vec3 point = Vec3::Zero();
-    if (sb.partnerCount > 0 && sb.partner >= 0) {
-      const Motion& mo = motion_[std::size_t(sb.partner)];
-      point = sb.partnerPoints / sb.partnerCount;
-      const Vec3 now = mo.v + mo.w.cross(point - mo.c);
-      if (sb.partnerCount == sb.count) {
-        before = sb.partnerVBefore / sb.partnerCount;
-        after = now;
-      } else {  // a held partner and other surfaces: the mean over all the contacts
-        before = (sb.vSurface + sb.partnerVBefore) / sb.count;
-        after = (sb.vSurface + double(sb.partnerCount) * now) / sb.count;
-      }
-    }
+    const Vec3 before = surfaces.before / surfaces.count, after = surfaces.after / surfaces.count;
     const double u = (sb.vBefore - before).dot(n);
     if (u >= -slow) continue;
-    double dv = -e * u - (centreVelocity(b) - after).dot(n);
-    if (dv <= 0.0) continue;
-    if (pair) {
-      // Through both sides' inverse masses (the body's whole mass; the partner's generalized
-      // inverse mass at the mean contact point), as bodyRestitution does for two rigid bodies.
-      const auto r = std::size_t(sb.partner);
-      Motion& mo = motion_[r];
-      const double mass = massOf(b);
-      const RigidPose pose{mo.c, mo.q, invMass_[r], invInertiaRest_[r]};
-      const double wr = generalizedInverseMass(pose, point, n);
-      const double impulse = dv / (1.0 / mass + wr);
-      const Mat3 R = mo.q.toRotationMatrix();
-      mo.v -= (impulse * invMass_[r]) * n;
-      mo.w -= R * invInertiaRest_[r] * R.transpose() * (point - mo.c).cross(impulse * n);
-      dv = impulse / mass;
-    }
-    kick(b, dv * n);
+    const double dv = -e * u - (centreVelocity(b) - after).dot(n);
+    if (dv > 0.0) kick(b, dv * n);
   }
 }
 
@@ -927,12 +937,14 @@ void PbdWorld::particleContact() {
         sb.eSum += 0.5 * (restitution_[bi] + restitution_[bj]);
         ++sb.count;
         if (mode_[bj] == BodyMode::kDynamic) {
-          sb.partner = sb.partner == -1 || sb.partner == std::int32_t(bj) ? std::int32_t(bj) : -2;
-          ++sb.partnerCount;
-          sb.partnerPoints += pj;
-          sb.partnerVBefore += otherVelocity();
-          sb.partnerNSum += n;
-          sb.partnerESum += 0.5 * (restitution_[bi] + restitution_[bj]);
+          const auto same = [&](const PartnerHit& ph) { return ph.soft == std::int32_t(bi) && ph.body == std::int32_t(bj); };
+          auto hit = std::find_if(partnerHits_.begin(), partnerHits_.end(), same);
+          if (hit == partnerHits_.end()) hit = partnerHits_.insert(hit, PartnerHit{std::int32_t(bi), std::int32_t(bj)});
+          ++hit->count;
+          hit->points += pj;
+          hit->vBefore += otherVelocity();
+          hit->nSum += n;
+          hit->eSum += 0.5 * (restitution_[bi] + restitution_[bj]);
         }
       }
     }
