@@ -2410,13 +2410,18 @@ void PbdWorld::bodyRestitution(double slow) {
   }
 }
 
+void PbdWorld::velocitiesFromPoses(std::size_t b, double h) {
+  Motion& mo = motion_[b];
+  mo.v = (mo.c - mo.cPrev) / h;
+  mo.w = rotationVector(mo.q * mo.qPrev.conjugate()) / h;
+}
+
 void PbdWorld::update(double h) {
   for (std::size_t b = 0; b < members_.size(); ++b) {
     Motion& mo = motion_[b];
     if (!isRigid(b)) continue;
     if (moving(b)) {
-      mo.v = (mo.c - mo.cPrev) / h;
-      mo.w = rotationVector(mo.q * mo.qPrev.conjugate()) / h;
+      velocitiesFromPoses(b, h);
     } else if (mode_[b] == BodyMode::kKinematic) {
       mo.v = (mo.c - mo.cPrev) / h;
       mo.w = Vec3::Zero();

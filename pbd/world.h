@@ -387,8 +387,11 @@ class PbdWorld final : public Solver {
   void refreshRestCells(std::size_t b);
   // A particle-level particle whose move of the substep, relative to a rigid body, enters a
   // cell that body fills stops outside that cell's face (continuous collision against sketched
-  // solids: water thrown at a wall one particle thick, faster than contacts can catch).
-  void looseBodySweep();
+  // solids: water thrown at a wall one particle thick, faster than contacts can catch); a
+  // dynamic body takes its share of the stop. h: the substep (s).
+  void looseBodySweep(double h);
+  // A rigid body's velocities from its pose now and at the substep's start (update()).
+  void velocitiesFromPoses(std::size_t b, double h);
   // Per body.
   std::vector<std::vector<std::int32_t>> members_;  // particle ids, ascending
   std::vector<Motion> motion_;

@@ -1183,10 +1183,13 @@ void PbdWorld::refreshRestCells(std::size_t b) {
 // a taken cell stops outside the face it entered by (at the pair's contact distance, or less if
 // it started nearer), so nothing passes through a wall however thin it is or however fast it
 // comes: contacts are found at the predicted positions within a spacing and a half, and the
-// density or cluster passes after the last contact sweep may push a particle on. One-way: a
-// dynamic body does not feel the stop (the contacts before it gave it the push of every
-// particle they caught). Each particle alone, in parallel: deterministic.
-void PbdWorld::looseBodySweep() {
+// density or cluster passes after the last contact sweep may push a particle on. A dynamic body
+// takes its share of each stop as a contact does (the correction split by the two inverse masses,
+// the body's generalized one at the stop point, and the body's velocities made anew from its
+// moved pose), so momentum is kept: water thrown at a free plate pushes it. The stops are found
+// for each particle alone, in parallel, against the poses the substep ended with; the shares are
+// then applied serially in particle order: deterministic.
+void PbdWorld::looseBodySweep(double h) {
   struct Near {
     std::size_t body;
     Eigen::AlignedBox3d box;  // world, over the substep
@@ -1247,8 +1250,16 @@ void PbdWorld::looseBodySweep() {
   binBodies.resize(binStart.back());
   std::vector<std::uint32_t> fill(binStart.begin(), binStart.end() - 1);
   for (std::size_t n = 0; n < bodies.size(); ++n) forBins(bodies[n].box, [&](std::size_t c) { binBodies[fill[c]++] = std::uint32_t(n); });
+  // The stops against dynamic bodies, per unit of the loop: the particle, the body (bodies[near]),
+  // where it stopped and the correction it took there.
+  struct Stop {
+    std::size_t particle, near;
+    Vec3 point, correction;
+  };
+  std::vector<std::vector<Stop>> stops((loose_.size() + kChunk - 1) / kChunk);
   forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
     std::vector<std::uint32_t> nearPath;
+    std::vector<Stop>& unitStops = stops[lo / kChunk];
     for (std::size_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(loose_[k]);
       if (invMassP_[i] == 0.0f) continue;
@@ -1290,15 +1301,38 @@ void PbdWorld::looseBodySweep() {
         stop[e.axis] -= e.dir * std::max(std::min((touch - r) * inv, before), 1e-3);
         const Vec3 world = nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd;
         put(px_, py_, pz_, i, world);
+        if (mode_[nb.body] == BodyMode::kDynamic) unitStops.push_back({i, *n, world, world - to});
       }
     }
   });
+  // The dynamic bodies' shares: the particle gives back w_b / (w_i + w_b) of its correction and
+  // the body moves that much the other way at the stop point (a sleeper woken first).
+  std::vector<std::size_t> moved;
+  for (const std::vector<Stop>& unit : stops)
+    for (const Stop& st : unit) {
+      const double d = st.correction.norm();
+      if (!(d > 0.0)) continue;
+      const std::size_t b = bodies[st.near].body;
+      if (asleep(int(b))) touchedByLoose(b);
+      const Vec3 n = st.correction / d;
+      Motion& mo = motion_[b];
+      RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
+      const double wi = invMassP_[st.particle], wb = generalizedInverseMass(pose, st.point, n);
+      const double lambda = d / (wi + wb);
+      put(px_, py_, pz_, st.particle, at(px_, py_, pz_, st.particle) - (wb * lambda) * n);
+      applyPointCorrection(pose, st.point, -n, wb * lambda);
+      mo.c = pose.c, mo.q = pose.q;
+      moved.push_back(b);
+    }
+  std::sort(moved.begin(), moved.end());
+  moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
+  for (const std::size_t b : moved) velocitiesFromPoses(b, h);  // as update() made them
 }
 
 // v = (p - x) / h, x = p for dynamic and carried particles. A particle that hit the
 // ground faster than 2 |g| h leaves it at e times its approach speed.
 void PbdWorld::particleUpdate(double h) {
-  looseBodySweep();
+  looseBodySweep(h);
   if (colliders_ && colliders_->size() > 0) {
     // Colliders have the last word: the constraint passes after the last contact sweep
     // (clusters, links, density) may have pushed a particle into or through a collider. The
