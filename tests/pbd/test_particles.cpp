@@ -676,6 +676,18 @@ TEST(Soft, ASoftBallSlidingIntoAWallOrABoxBounces) {
   }
 }
 
+namespace {
+
+// A stiff jelly (5e5 Pa) and wood, both of e = 0.8 and without friction: the corner tests below.
+std::vector<Material> bouncyJellyAndWood() {
+  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("wood", MaterialKind::kRigid)};
+  mats[0].elastic.youngs = 5e5;
+  for (Material& m : mats) m.restitution = 0.8, m.staticFriction = m.dynamicFriction = 0.0;
+  return mats;
+}
+
+}  // namespace
+
 // A soft ball hitting a free dynamic body and a fixed one in the same substep bounces off both
 // (zero gravity, no friction, e = 0.8 everywhere): thrown at (1, -1, 0) m/s into the corner between
 // a fixed floor slab (normal +y) and a free box floating beside it (normal -x, its centre at the
@@ -686,9 +698,7 @@ TEST(Soft, ASoftBallSlidingIntoAWallOrABoxBounces) {
 // the ball left the floor at 0.32 m/s and the box at 0.49 m/s (its clusters' own rebound alone).
 TEST(Soft, ASoftBallHittingAFreeBoxAndTheFloorAtOnceBouncesOffBoth) {
   ParticleArrays p;
-  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("wood", MaterialKind::kRigid)};
-  mats[0].elastic.youngs = 5e5;
-  for (Material& m : mats) m.restitution = 0.8, m.staticFriction = m.dynamicFriction = 0.0;
+  const std::vector<Material> mats = bouncyJellyAndWood();
   // Floor: top layer at y = 0.33; box: left face at x = 0.10, y 0.35..0.41 (centre 0.38), clear
   // of the floor by a spacing. The ball (radius 4 spacings) touches both with its centre at
   // (0.05, 0.38); it starts 4.9 cm back along both axes (5 cm would reach both exactly at the end
@@ -718,9 +728,7 @@ TEST(Soft, ASoftBallHittingAFreeBoxAndTheFloorAtOnceBouncesOffBoth) {
 // (its clusters' own rebound alone).
 TEST(Soft, ASoftBallHittingTwoFreeBodiesAtOnceBouncesOffBoth) {
   ParticleArrays p;
-  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("wood", MaterialKind::kRigid)};
-  mats[0].elastic.youngs = 5e5;
-  for (Material& m : mats) m.restitution = 0.8, m.staticFriction = m.dynamicFriction = 0.0;
+  const std::vector<Material> mats = bouncyJellyAndWood();
   // As above, with the slab's centre (x 0.05, z 0) under the ball's contact point.
   BodyRange slab = addBox(p, Vec3(-0.15, 0.30, -0.1), 41, 4, 21, 1, 1);
   BodyRange box = addBox(p, Vec3(0.10, 0.35, -0.06), 6, 7, 13, 2, 1);
@@ -747,9 +755,7 @@ TEST(Soft, ASoftBallHittingTwoFreeBodiesAtOnceBouncesOffBoth) {
 // Before, inelastic: boxes 0.52, slab 0.42 m/s against 0.84 and 0.04.
 TEST(Soft, ASoftSlabHittingTwoFreeBoxesSideBySideBouncesOffBoth) {
   ParticleArrays p;
-  std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("wood", MaterialKind::kRigid)};
-  mats[0].elastic.youngs = 5e5;
-  for (Material& m : mats) m.restitution = 0.8, m.staticFriction = m.dynamicFriction = 0.0;
+  const std::vector<Material> mats = bouncyJellyAndWood();
   BodyRange slab = addBox(p, Vec3(0.0, 0.29, -0.125), 4, 11, 26, 0, 0);  // y 0.29..0.39, z -0.125..0.125
   BodyRange boxA = addBox(p, Vec3(0.07, 0.30, 0.005), 6, 9, 12, 1, 1);    // y 0.30..0.38, z 0.005..0.115
   BodyRange boxB = addBox(p, Vec3(0.07, 0.30, -0.115), 6, 9, 12, 2, 1);   // z -0.115..-0.005
