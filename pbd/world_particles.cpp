@@ -566,8 +566,8 @@ Vec3 PbdWorld::centreVelocity(std::size_t b) const {
 //   A j - d >= 0,  j >= 0,  j_c (A j - d)_c = 0,   A_cd = n_c . n_d / m + [c = d] w_c,
 // d_c the normal velocity contact c still lacks. A is positive definite (every free partner has
 // w_c > 0 and the surfaces are one row), so the problem has one solution, found by trying its
-// active sets from all contacts down (at most 2^8: a body that hit more than 7 free bodies at
-// once stays inelastic). Momentum is kept along whatever the surfaces do not push.
+// active sets from all contacts down (at most 2^8: a body with more than 8 contacts approaching
+// at once, the surfaces counting as one, stays inelastic). Momentum is kept along whatever the surfaces do not push.
 template <class Kick>
 void PbdWorld::bounceOffPartners(std::size_t b, double mass, double slow, const SurfaceHits& surfaces,
                                  const std::vector<const PartnerHit*>& partners, Kick&& kick) {
@@ -1200,13 +1200,17 @@ void PbdWorld::looseBodySweep(double h) {
   std::vector<char> active(members_.size(), 0);
   for (std::int32_t b : active_) active[std::size_t(b)] = 1;
   Eigen::AlignedBox3d all;
+  // A particle not finite at either end is left to the guard (it names it after the step).
+  const auto finiteMove = [&](std::size_t k) {
+    return at(parts_.x, parts_.y, parts_.z, k).allFinite() && at(px_, py_, pz_, k).allFinite();
+  };
   for (std::int32_t i : loose_) {
     const auto k = std::size_t(i);
-    if (invMassP_[k] == 0.0f) continue;
+    if (invMassP_[k] == 0.0f || !finiteMove(k)) continue;
     all.extend(Vec3(parts_.x[k], parts_.y[k], parts_.z[k]));
     all.extend(Vec3(px_[k], py_[k], pz_[k]));
   }
-  if (all.isEmpty()) return;
+  if (all.isEmpty() || !all.sizes().allFinite()) return;
   std::vector<Near> bodies;
   for (std::size_t b = 0; b < members_.size(); ++b) {
     if (!isRigid(b) || mode_[b] == BodyMode::kEmpty || members_[b].empty()) continue;
@@ -1262,7 +1266,7 @@ void PbdWorld::looseBodySweep(double h) {
     std::vector<Stop>& unitStops = stops[lo / kChunk];
     for (std::size_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(loose_[k]);
-      if (invMassP_[i] == 0.0f) continue;
+      if (invMassP_[i] == 0.0f || !finiteMove(i)) continue;
       const bool fluid = phase::has(parts_.phase[i], phase::kFluid);
       Eigen::AlignedBox3d reach(at(parts_.x, parts_.y, parts_.z, i));
       reach.extend(at(px_, py_, pz_, i));
@@ -1280,7 +1284,11 @@ void PbdWorld::looseBodySweep(double h) {
         nearPath.erase(std::unique(nearPath.begin(), nearPath.end()), nearPath.end());
         first = nearPath.data(), last = nearPath.data() + nearPath.size();
       }
-      const Vec3 from = at(parts_.x, parts_.y, parts_.z, i);
+      const Vec3 from = at(parts_.x, parts_.y, parts_.z, i), predicted = at(px_, py_, pz_, i);
+      // Each body is tried against the path as the bodies before it left it, so a stop at one
+      // body found further along than another's is replaced by that one: the particle stops
+      // once, at the last body it was stopped by, and only that body takes a share.
+      std::size_t stoppedBy = bodies.size();
       for (const std::uint32_t* n = first; n != last; ++n) {
         const Near& nb = bodies[*n];
         const Vec3 to = at(px_, py_, pz_, i);
@@ -1291,29 +1299,52 @@ void PbdWorld::looseBodySweep(double h) {
         // Cell units: the rest offset less cell (0, 0, 0)'s centre, over the spacing, plus a half.
         const Vec3 a = (nb.toStart * (from - nb.cStart) - rc.origin) * inv + Vec3::Constant(0.5);
         const Vec3 b = (nb.toEnd * (to - nb.cEnd) - rc.origin) * inv + Vec3::Constant(0.5);
-        const CellEntry e = firstTakenCell(a, b - a, [&](const Vec3i& c) { return rc.filled(c); });
+        // The walk over the part of the path within the body's cells grown by one (slabs).
+        double t0 = 0.0, t1 = 1.0;
+        for (int ax = 0; ax < 3 && t0 <= t1; ++ax) {
+          const double below = rc.lo[ax] - 1.0, above = rc.lo[ax] + rc.size[ax] + 1.0, da = b[ax] - a[ax];
+          if (da == 0.0) {
+            if (a[ax] < below || a[ax] > above) t1 = -1.0;
+            continue;
+          }
+          const double u = (below - a[ax]) / da, v = (above - a[ax]) / da;
+          t0 = std::max(t0, std::min(u, v)), t1 = std::min(t1, std::max(u, v));
+        }
+        if (!(t0 <= t1)) continue;
+        const Vec3 a0 = a + t0 * (b - a);
+        const CellEntry e = firstTakenCell(a0, (t1 - t0) * (b - a), [&](const Vec3i& c) { return rc.filled(c); });
         if (!e.hit) continue;
+        const double t = t0 + e.t * (t1 - t0);
         // Out of the entered face by the pair's contact distance beyond the cell (its half
-        // spacing), or by as far as the particle started from it, if nearer.
+        // spacing), or by as far as the particle started from it if nearer, and by at most half
+        // a cell (the cell the walk left is empty; one further back along the axis, beside a
+        // thick strand's path, may not be).
         const double touch = (fluid ? 0.75 : 1.0) * (radiusOf(i) + r);
-        const double before = e.t * std::abs(b[e.axis] - a[e.axis]);
-        Vec3 stop = a + e.t * (b - a);
-        stop[e.axis] -= e.dir * std::max(std::min((touch - r) * inv, before), 1e-3);
-        const Vec3 world = nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd;
-        put(px_, py_, pz_, i, world);
-        if (mode_[nb.body] == BodyMode::kDynamic) unitStops.push_back({i, *n, world, world - to});
+        const double before = t * std::abs(b[e.axis] - a[e.axis]);
+        Vec3 stop = a + t * (b - a);
+        stop[e.axis] -= e.dir * std::max(std::min({(touch - r) * inv, before, 0.5}), 1e-3);
+        put(px_, py_, pz_, i, nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd);
+        stoppedBy = *n;
+      }
+      if (stoppedBy < bodies.size() && mode_[bodies[stoppedBy].body] == BodyMode::kDynamic) {
+        const Vec3 p = at(px_, py_, pz_, i);
+        unitStops.push_back({i, stoppedBy, p, p - predicted});
       }
     }
   });
   // The dynamic bodies' shares: the particle gives back w_b / (w_i + w_b) of its correction and
-  // the body moves that much the other way at the stop point (a sleeper woken first).
+  // the body moves that much the other way at the stop point. Along the correction, not a face
+  // normal: the stop also took the rest of the particle's move along the face (as friction
+  // would), and the body takes that too. The bodies' moves here are not swept again: the stops
+  // hold to first order in them (a light body turned by an off-centre hit may bring a cell to
+  // within its move of a stopped particle).
   std::vector<std::size_t> moved;
   for (const std::vector<Stop>& unit : stops)
     for (const Stop& st : unit) {
       const double d = st.correction.norm();
       if (!(d > 0.0)) continue;
       const std::size_t b = bodies[st.near].body;
-      if (asleep(int(b))) touchedByLoose(b);
+      if (!looseTouch_[b]) touchedByLoose(b);  // marked as a contact marks it (a sleeper woken)
       const Vec3 n = st.correction / d;
       Motion& mo = motion_[b];
       RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
