@@ -23,7 +23,7 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"predict", Cadence::kPerSubstep, "soft, rope, cloth and fluid particles: v += g h, p = x + v h (Macklin 2014 Alg. 1)"},
     {"kinematic", Cadence::kPerSubstep, "held or carried bodies follow their brush path"},
     {"find_contacts", Cadence::kPerSubstep, "per dynamic rigid body near the ground: its particles within a margin of it"},
-    {"find_neighbors", Cadence::kPerSubstep, "particle pairs within reach (one NeighborGrid per substep), reused by every iteration"},
+    {"find_neighbors", Cadence::kPerSubstep, "predicted moves that cross a rigid body stop at its face; particle pairs within reach (one NeighborGrid per substep), reused by every iteration"},
     {"find_colliders", Cadence::kPerSubstep, "mesh colliders: swept spheres stop fast particles and bodies, then contacts within reach (Bullet BVH)"},
     {"fluid_neighbors", Cadence::kPerSubstep, "fluids: the PBF neighbour structure over fluid particles and the solids in range"},
     {"particle_contact", Cadence::kPerIteration, "particle pairs and the ground: projection and Coulomb friction (Macklin 2014 §6)"},

@@ -388,8 +388,9 @@ class PbdWorld final : public Solver {
   // A particle-level particle whose move of the substep, relative to a rigid body, enters a
   // cell that body fills stops outside that cell's face (continuous collision against sketched
   // solids: water thrown at a wall one particle thick, faster than contacts can catch); a
-  // dynamic body takes its share of the stop. h: the substep (s).
-  void looseBodySweep(double h);
+  // dynamic body takes its share of the stop. h: the substep (s); a particle and body whose moves
+  // add up to less than minMove (m) are not tried.
+  void looseBodySweep(double h, double minMove);
   // A rigid body's velocities from its pose now and at the substep's start (update()).
   void velocitiesFromPoses(std::size_t b, double h);
   // Per body.

@@ -755,6 +755,12 @@ double PbdWorld::largestContactRadius() const {
 }
 
 void PbdWorld::findNeighbors() {
+  // Predicted moves that would cross a rigid body stop at its face first (the body taking its
+  // share), so the pairs are found where the particles can be: a pair found past a thin sheet
+  // pushed a body hidden behind it that the water never reached.
+  // Only moves (relative to the body) over half a spacing: a shorter one cannot carry a particle
+  // past a sheet, and its contacts are the contact pass's.
+  looseBodySweep(params_.dt / params_.substeps, params_.particleRadius);
   ParticlePairContacts& pairs = contacts_.particlePair;
   pairs.clear();
   if (fluid_)  // particleContact reads rigid bodies' face normals for fluid pairs
@@ -1189,13 +1195,14 @@ void PbdWorld::refreshRestCells(std::size_t b) {
 // moved pose), so momentum is kept: water thrown at a free plate pushes it. The stops are found
 // for each particle alone, in parallel, against the poses the substep ended with; the shares are
 // then applied serially in particle order: deterministic.
-void PbdWorld::looseBodySweep(double h) {
+void PbdWorld::looseBodySweep(double h, double minMove) {
   struct Near {
     std::size_t body;
     Eigen::AlignedBox3d box;  // world, over the substep
     Mat3 toStart, toEnd;      // world -> rest frame at the substep's start and end poses
     Vec3 cStart, cEnd;
     Mat3 fromEnd;
+    double travel;  // m, the farthest any point of the body moved over the substep
   };
   std::vector<char> active(members_.size(), 0);
   for (std::int32_t b : active_) active[std::size_t(b)] = 1;
@@ -1228,9 +1235,12 @@ void PbdWorld::looseBodySweep(double h) {
     if (!box.intersects(all)) continue;
     if (restCells_[b].stale) refreshRestCells(b);
     if (!restCells_[b].onLattice) continue;
-    bodies.push_back({b, box, Rs.transpose(), Re.transpose(), cs, mo.c, Re});
+    const double turn = moved ? 2.0 * std::acos(std::min(1.0, std::abs(mo.q.dot(mo.qPrev)))) : 0.0;
+    bodies.push_back({b, box, Rs.transpose(), Re.transpose(), cs, mo.c, Re, (mo.c - cs).norm() + turn * reach_[b]});
   }
   if (bodies.empty()) return;
+  double mostTravel = 0.0;
+  for (const Near& nb : bodies) mostTravel = std::max(mostTravel, nb.travel);
   const double r = params_.particleRadius, spacing = 2.0 * r, inv = 1.0 / spacing;
   // The bodies binned by their boxes in a coarse grid over the paths' box (cells of 8 spacings,
   // or more for at most 32 a side), so a pool beside a pile of boxes tries each particle against
@@ -1267,6 +1277,9 @@ void PbdWorld::looseBodySweep(double h) {
     for (std::size_t k = lo; k < hi; ++k) {
       const auto i = std::size_t(loose_[k]);
       if (invMassP_[i] == 0.0f || !finiteMove(i)) continue;
+      const Vec3 from = at(parts_.x, parts_.y, parts_.z, i), predicted = at(px_, py_, pz_, i);
+      const double move = (predicted - from).norm();
+      if (move + mostTravel < minMove) continue;
       const bool fluid = phase::has(parts_.phase[i], phase::kFluid);
       Eigen::AlignedBox3d reach(at(parts_.x, parts_.y, parts_.z, i));
       reach.extend(at(px_, py_, pz_, i));
@@ -1284,13 +1297,13 @@ void PbdWorld::looseBodySweep(double h) {
         nearPath.erase(std::unique(nearPath.begin(), nearPath.end()), nearPath.end());
         first = nearPath.data(), last = nearPath.data() + nearPath.size();
       }
-      const Vec3 from = at(parts_.x, parts_.y, parts_.z, i), predicted = at(px_, py_, pz_, i);
       // Each body is tried against the path as the bodies before it left it, so a stop at one
       // body found further along than another's is replaced by that one: the particle stops
       // once, at the last body it was stopped by, and only that body takes a share.
       std::size_t stoppedBy = bodies.size();
       for (const std::uint32_t* n = first; n != last; ++n) {
         const Near& nb = bodies[*n];
+        if (move + nb.travel < minMove) continue;
         const Vec3 to = at(px_, py_, pz_, i);
         Eigen::AlignedBox3d path(from);
         path.extend(to);
@@ -1363,7 +1376,7 @@ void PbdWorld::looseBodySweep(double h) {
 // v = (p - x) / h, x = p for dynamic and carried particles. A particle that hit the
 // ground faster than 2 |g| h leaves it at e times its approach speed.
 void PbdWorld::particleUpdate(double h) {
-  looseBodySweep(h);
+  looseBodySweep(h, 0.0);
   if (colliders_ && colliders_->size() > 0) {
     // Colliders have the last word: the constraint passes after the last contact sweep
     // (clusters, links, density) may have pushed a particle into or through a collider. The
