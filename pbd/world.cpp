@@ -874,7 +874,11 @@ std::size_t PbdWorld::passBytes(PbdPass pass) const {
                        bp.normalImpulse);
     case PbdPass::kBodyContact: return heldBytes(pp.a, pp.b, pp.first, pp.count, pp.pa, pp.pb);
     case PbdPass::kRestitution: return heldBytes(pairHits_, bodyTouches_);
-    case PbdPass::kFindNeighbors: return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j);
+    case PbdPass::kFindNeighbors: {  // the pairs, and the rigid bodies' rest cells the sweeps walk
+      std::size_t cells = 0;
+      for (const RestCells& rc : restCells_) cells += rc.bits.capacity() * sizeof(std::uint64_t);
+      return heldBytes(contacts_.particlePair.i, contacts_.particlePair.j) + cells;
+    }
     case PbdPass::kParticleContact: return surface(contacts_.particlePlane);
     case PbdPass::kFluidNeighbors: return fluid_ ? fluid_->neighborBytes() : 0;
     case PbdPass::kDensity: return (fluid_ ? fluid_->solverBytes() : 0) + heldBytes(fluidIds_, fx_, fy_, fz_, fw_, frho_, fdx_, fdy_, fdz_, fflag_, fsample_);
