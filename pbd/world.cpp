@@ -117,6 +117,7 @@ PbdWorld::PbdWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
   rz_.assign(n, 0.0f);
   design_.assign(n, 0);
   surfaceNormal_.assign(n, Eigen::Vector3f::Zero());
+  sheetFace_.assign(n, 0);
   const double spacing = 2.0 * params_.particleRadius;
   for (std::size_t i = 0; i < n; ++i) {
     const auto m = static_cast<std::size_t>(parts_.material[i]);
@@ -273,11 +274,12 @@ void PbdWorld::refreshMassProperties(std::size_t b) {
 // surfaceNormal_ for a rigid body's particles from its rest lattice: the direction of the one
 // face neighbour a particle lacks. Edges and corners (two or more) keep none: there the line of
 // centres is the body's rounded surface, and a face's normal would push water resting beside
-// the edge off it.
+// the edge off it. A one-particle sheet's particle lacks two opposite neighbours: it keeps that
+// axis with sheetFace_ set, and the contact takes the side the fluid comes from.
 void PbdWorld::refreshSurfaceNormals(std::size_t b) {
   normalsStale_[b] = 0;
   const auto& mem = members_[b];
-  for (std::int32_t i : mem) surfaceNormal_[std::size_t(i)].setZero();
+  for (std::int32_t i : mem) surfaceNormal_[std::size_t(i)].setZero(), sheetFace_[std::size_t(i)] = 0;
   if (!isRigid(b) || mem.empty() || mode_[b] == BodyMode::kEmpty) return;
   const std::vector<Vec3i> cells = restCells(b);
   Vec3i lo = cells.front(), hi = cells.front();
@@ -299,10 +301,12 @@ void PbdWorld::refreshSurfaceNormals(std::size_t b) {
   const Vec3i faces[6] = {Vec3i(1, 0, 0), Vec3i(-1, 0, 0), Vec3i(0, 1, 0), Vec3i(0, -1, 0), Vec3i(0, 0, 1), Vec3i(0, 0, -1)};
   for (std::size_t k = 0; k < cells.size(); ++k) {
     int missing = 0;
-    Vec3i face = Vec3i::Zero();
+    Vec3i face = Vec3i::Zero(), other = Vec3i::Zero();
     for (const Vec3i& f : faces)
-      if (!has(cells[k] + f)) ++missing, face = f;
-    if (missing == 1) surfaceNormal_[std::size_t(mem[k])] = face.cast<float>();
+      if (!has(cells[k] + f)) ++missing, other = face, face = f;
+    const bool sheet = missing == 2 && other == -face;
+    if (missing == 1 || sheet) surfaceNormal_[std::size_t(mem[k])] = face.cast<float>();
+    sheetFace_[std::size_t(mem[k])] = sheet;
   }
 }
 
@@ -346,6 +350,7 @@ int PbdWorld::addBody(const ParticleArrays& p, const BodyRange& shape, bool kine
     rz_.push_back(0.0f);
     design_.push_back(0);
     surfaceNormal_.emplace_back(Eigen::Vector3f::Zero());
+    sheetFace_.push_back(0);
     if (particleLevel_) {
       px_.push_back(p.x[i]), py_.push_back(p.y[i]), pz_.push_back(p.z[i]);
       invMassP_.push_back(0.0f);
@@ -503,6 +508,7 @@ std::vector<int> PbdWorld::removeParticles(const std::vector<std::int32_t>& ids)
     parts_.phase[k] = phase::make(-1, phase::kRemoved | phase::kPrescribed);
     parts_.vx[k] = parts_.vy[k] = parts_.vz[k] = 0.0f;
     surfaceNormal_[k].setZero();
+    sheetFace_[k] = 0;
     if (b >= 0 && std::find(changed.begin(), changed.end(), b) == changed.end()) changed.push_back(b);
   }
   std::sort(changed.begin(), changed.end());

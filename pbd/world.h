@@ -369,6 +369,7 @@ class PbdWorld final : public Solver {
   // before contacts are found, only in a world with fluid (they cost a third of a 681k-particle
   // box's run, which has none).
   std::vector<Eigen::Vector3f> surfaceNormal_;
+  std::vector<char> sheetFace_;  // per particle: surfaceNormal_ is a one-particle sheet's axis (two-sided)
   std::vector<char> normalsStale_;  // per body
   void refreshSurfaceNormals(std::size_t b);
   // Per rigid body: which cells of its rest lattice (one spacing, centred on its particles) it
