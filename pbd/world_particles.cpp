@@ -1372,26 +1372,38 @@ void PbdWorld::looseBodySweep(double h, double minMove) {
       }
     }
   });
-  // The dynamic bodies' shares: the particle gives back w_b / (w_i + w_b) of its correction and
-  // the body moves that much the other way at the stop point. Along the correction, not a face
-  // normal: the stop also took the rest of the particle's move along the face (as friction
-  // would), and the body takes that too. The bodies' moves here are not swept again: the stops
-  // hold to first order in them (a light body turned by an off-centre hit may bring a cell to
-  // within its move of a stopped particle).
+  // The dynamic bodies' shares, one stop after another (Gauss-Seidel, as the contacts): the
+  // stop point rides with the body as the shares before it moved it, the correction still needed
+  // along the stop's direction is what is left of it, and that is split by the inverse masses:
+  // the particle keeps w_i / (w_i + w_b) of it and the body moves the rest the other way at the
+  // stop point. Along the correction, not a face normal: the stop also took the rest of the
+  // particle's move along the face (as friction would), and the body takes that too. Split
+  // against the pose the stops were found at, every stop on a light body added its whole share:
+  // a 6^3 jelly thrown at 6 m/s at the corner of a plate a fifth its mass (2 substeps) threw the
+  // plate off at 38 m/s and 290 rad/s, and the guard stopped the energy growth. The bodies' moves
+  // here are not swept again: the stops hold to first order in them (a light body turned by an
+  // off-centre hit may bring a cell to within its move of a stopped particle).
   std::vector<std::size_t> moved;
   for (const std::vector<Stop>& unit : stops)
     for (const Stop& st : unit) {
       const double d = st.correction.norm();
       if (!(d > 0.0)) continue;
-      const std::size_t b = bodies[st.near].body;
+      const Near& nb = bodies[st.near];
+      const std::size_t b = nb.body;
       if (!looseTouch_[b]) touchedByLoose(b);  // marked as a contact marks it (a sleeper woken)
-      const Vec3 n = st.correction / d;
+      const Vec3 n = st.correction / d, predicted = st.point - st.correction;
       Motion& mo = motion_[b];
+      const Vec3 stopNow = mo.q * (nb.toEnd * (st.point - nb.cEnd)) + mo.c;
+      const double left = (stopNow - predicted).dot(n);
+      if (!(left > 0.0)) {  // the body has moved out of the particle's way
+        put(px_, py_, pz_, st.particle, predicted);
+        continue;
+      }
       RigidPose pose{mo.c, mo.q, invMass_[b], invInertiaRest_[b]};
-      const double wi = invMassP_[st.particle], wb = generalizedInverseMass(pose, st.point, n);
-      const double lambda = d / (wi + wb);
-      put(px_, py_, pz_, st.particle, at(px_, py_, pz_, st.particle) - (wb * lambda) * n);
-      applyPointCorrection(pose, st.point, -n, wb * lambda);
+      const double wi = invMassP_[st.particle], wb = generalizedInverseMass(pose, stopNow, n);
+      const double lambda = left / (wi + wb);
+      put(px_, py_, pz_, st.particle, predicted + (wi * lambda) * n);
+      applyPointCorrection(pose, stopNow, -n, wb * lambda);
       mo.c = pose.c, mo.q = pose.q;
       moved.push_back(b);
     }
