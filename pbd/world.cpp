@@ -395,6 +395,9 @@ void PbdWorld::setMode(int body, BodyMode mode) {
   if (!isRigid(b) && (mode == BodyMode::kFixed || mode == BodyMode::kKinematic)) holdShape(b);
   Motion& mo = motion_[b];
   mo.kinStart = mo.kinTarget = mo.c;
+  // No motion yet in its new mode: the contacts take a body's start pose from these (a body
+  // made fixed kept its last moving substep's, and a sheet's side was judged from it).
+  mo.cPrev = mo.c, mo.qPrev = mo.q;
   if (mode == BodyMode::kFixed) mo.v = mo.w = Vec3::Zero();
   if (mode == BodyMode::kKinematic) mo.w = Vec3::Zero();  // carried bodies keep their rotation
 }

@@ -903,10 +903,10 @@ void PbdWorld::particleContact() {
     // on): held reach off the surface layer along the body's normal there now (surfaceNormal_).
     // It meets the face as a plane: the pair acts wherever i lies over j's tile of the face
     // (within half a diagonal of the lattice, 0.71 spacings, of j's normal line), not only
-    // within reach of j's centre. Gated by that sphere, the face was an egg crate: fluid sank to
-    // a quarter spacing above it in the hollows between its particles, where no pair reached
-    // it, and was pushed back up to reach whenever its flow over the face brought it within
-    // reach of one, a push that v = (p - x) / h turned into speed away from the face. A blob
+    // within reach of j's centre. Gated by that sphere, the face was an egg crate: in the
+    // hollows between its particles, where no pair reached, fluid sank to the cells' faces (half
+    // a spacing above the face's centres, where the sweep holds it), and was pushed back up to
+    // reach whenever its flow over the face brought it within reach of one, a push that v = (p - x) / h turned into speed away from the face. A blob
     // thrown at a slab left it again at 28 % of its speed (16 substeps; 7 % at 4), and water
     // resting in a cup kept moving at 4 cm/s. One that started behind the face meets j as a
     // sphere of radius reach.
@@ -951,8 +951,11 @@ void PbdWorld::particleContact() {
     if (!(pen > 0.0)) continue;
     RigidPose pose;
     if (rigidJ) pose = RigidPose{mj->c, mj->q, invMass_[bj], invInertiaRest_[bj]};
+    // Where a rigid side takes its share: off a face, the face's point under i (up to 0.71
+    // spacings from j's centre), else j's centre.
+    const Vec3 touchAt = onFace ? Vec3(pj + (d - d.dot(n) * n)) : pj;
     const double wi = invMassP_[i];
-    const double wj = rigidJ ? (mode_[bj] == BodyMode::kDynamic ? generalizedInverseMass(pose, pj, n) : 0.0)
+    const double wj = rigidJ ? (mode_[bj] == BodyMode::kDynamic ? generalizedInverseMass(pose, touchAt, n) : 0.0)
                              : double(invMassP_[j]);
     if (wi + wj <= 0.0) continue;
     const double lambda = pen / (wi + wj);
@@ -1018,12 +1021,12 @@ void PbdWorld::particleContact() {
     put(px_, py_, pz_, i, newI);
     if (rigidJ) {
       if (wj > 0.0) {
-        applyPointCorrection(pose, pj, -n, wj * lambda);
+        applyPointCorrection(pose, touchAt, -n, wj * lambda);
         const double ft = f.norm();
         if (ft > 0.0) {
           const Vec3 t = f / ft;
-          const double wt = generalizedInverseMass(pose, pj, t);
-          applyPointCorrection(pose, pj, t, ft * wt / (wi + wt));
+          const double wt = generalizedInverseMass(pose, touchAt, t);
+          applyPointCorrection(pose, touchAt, t, ft * wt / (wi + wt));
         }
         mj->c = pose.c, mj->q = pose.q;
       }
@@ -1326,65 +1329,71 @@ void PbdWorld::looseBodySweep(double h, double minMove) {
       }
       // Each body is tried against the path as the bodies before it left it, so a stop at one
       // body found further along than another's is replaced by that one: the particle stops
-      // once, at the last body it was stopped by, and only that body takes a share.
+      // once, at the last body it was stopped by, and only that body takes a share. A stop that
+      // slid (below) ends off the path the bodies before it were tried against, so they are all
+      // tried once more against the path to where it slid, stopping it without a slide.
       std::size_t stoppedBy = bodies.size();
-      for (const std::uint32_t* n = first; n != last; ++n) {
-        const Near& nb = bodies[*n];
-        if (move + nb.travel < minMove) continue;
-        const Vec3 to = at(px_, py_, pz_, i);
-        Eigen::AlignedBox3d path(from);
-        path.extend(to);
-        if (!path.intersects(nb.box) || contactSkip_[i] == std::int32_t(nb.body)) continue;
-        const RestCells& rc = restCells_[nb.body];
-        // Cell units: the rest offset less cell (0, 0, 0)'s centre, over the spacing, plus a half.
-        const Vec3 a = (nb.toStart * (from - nb.cStart) - rc.origin) * inv + Vec3::Constant(0.5);
-        const Vec3 b = (nb.toEnd * (to - nb.cEnd) - rc.origin) * inv + Vec3::Constant(0.5);
-        // The walk over the part of the path within the body's cells grown by one (slabs).
-        double t0 = 0.0, t1 = 1.0;
-        for (int ax = 0; ax < 3 && t0 <= t1; ++ax) {
-          const double below = rc.lo[ax] - 1.0, above = rc.lo[ax] + rc.size[ax] + 1.0, da = b[ax] - a[ax];
-          if (da == 0.0) {
-            if (a[ax] < below || a[ax] > above) t1 = -1.0;
-            continue;
+      bool slid = false;
+      for (int pass = 0; pass < 2 && (pass == 0 || slid); ++pass) {
+        for (const std::uint32_t* n = first; n != last; ++n) {
+          const Near& nb = bodies[*n];
+          if (move + nb.travel < minMove) continue;
+          const Vec3 to = at(px_, py_, pz_, i);
+          Eigen::AlignedBox3d path(from);
+          path.extend(to);
+          if (!path.intersects(nb.box) || contactSkip_[i] == std::int32_t(nb.body)) continue;
+          const RestCells& rc = restCells_[nb.body];
+          // Cell units: the rest offset less cell (0, 0, 0)'s centre, over the spacing, plus a half.
+          const Vec3 a = (nb.toStart * (from - nb.cStart) - rc.origin) * inv + Vec3::Constant(0.5);
+          const Vec3 b = (nb.toEnd * (to - nb.cEnd) - rc.origin) * inv + Vec3::Constant(0.5);
+          // The walk over the part of the path within the body's cells grown by one (slabs).
+          double t0 = 0.0, t1 = 1.0;
+          for (int ax = 0; ax < 3 && t0 <= t1; ++ax) {
+            const double below = rc.lo[ax] - 1.0, above = rc.lo[ax] + rc.size[ax] + 1.0, da = b[ax] - a[ax];
+            if (da == 0.0) {
+              if (a[ax] < below || a[ax] > above) t1 = -1.0;
+              continue;
+            }
+            const double u = (below - a[ax]) / da, v = (above - a[ax]) / da;
+            t0 = std::max(t0, std::min(u, v)), t1 = std::min(t1, std::max(u, v));
           }
-          const double u = (below - a[ax]) / da, v = (above - a[ax]) / da;
-          t0 = std::max(t0, std::min(u, v)), t1 = std::min(t1, std::max(u, v));
+          if (!(t0 <= t1)) continue;
+          const Vec3 a0 = a + t0 * (b - a);
+          const auto filled = [&](const Vec3i& c) { return rc.filled(c); };
+          const CellEntry e = firstTakenCell(a0, (t1 - t0) * (b - a), filled);
+          if (!e.hit) continue;
+          const double t = t0 + e.t * (t1 - t0);
+          // Out of the entered face by the pair's contact distance beyond the cell (its half
+          // spacing), or by as far as the particle started from it if nearer, and by at most half
+          // a cell (the cell the walk left is empty; one further back along the axis, beside a
+          // thick strand's path, may not be).
+          const double touch = (fluid ? kFluidReach : 1.0) * (radiusOf(i) + r);
+          const auto back = [&](double before) { return std::max(std::min({(touch - r) * inv, before, 0.5}), 1e-3); };
+          Vec3 stop = a + t * (b - a);
+          stop[e.axis] -= e.dir * back(t * std::abs(b[e.axis] - a[e.axis]));
+          // Then on along the face by what is left of the move across it, less Coulomb friction
+          // against the part of the move the face stopped (as a contact would), up to a second
+          // face it may meet there. Stopped on its path, a particle lost its move along the face
+          // too: frictionless water thrown at 6 m/s and 45 degrees at a sheet (2 substeps) kept
+          // 19 % of its speed along it, where off the ground it keeps all of it.
+          Vec3 slide = (1.0 - t) * (b - a);
+          const double across = std::abs(slide[e.axis]);
+          slide[e.axis] = 0.0;
+          double mus = 0.0, muk = 0.0;
+          Material mb;
+          mb.staticFriction = staticFriction_[nb.body], mb.dynamicFriction = dynamicFriction_[nb.body];
+          mb.frictionRule = frictionRule_[nb.body];
+          pairFriction(materials_[std::size_t(parts_.material[i])], mb, mus, muk);
+          slide -= frictionCorrection(slide, across, mus, muk);
+          if (pass == 0 && slide.squaredNorm() > 0.0) {
+            const CellEntry f = firstTakenCell(stop, slide, filled);
+            stop += f.t * slide;
+            if (f.hit) stop[f.axis] -= f.dir * back(f.t * std::abs(slide[f.axis]));
+            slid = true;
+          }
+          put(px_, py_, pz_, i, nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd);
+          stoppedBy = *n;
         }
-        if (!(t0 <= t1)) continue;
-        const Vec3 a0 = a + t0 * (b - a);
-        const auto filled = [&](const Vec3i& c) { return rc.filled(c); };
-        const CellEntry e = firstTakenCell(a0, (t1 - t0) * (b - a), filled);
-        if (!e.hit) continue;
-        const double t = t0 + e.t * (t1 - t0);
-        // Out of the entered face by the pair's contact distance beyond the cell (its half
-        // spacing), or by as far as the particle started from it if nearer, and by at most half
-        // a cell (the cell the walk left is empty; one further back along the axis, beside a
-        // thick strand's path, may not be).
-        const double touch = (fluid ? kFluidReach : 1.0) * (radiusOf(i) + r);
-        const auto back = [&](double before) { return std::max(std::min({(touch - r) * inv, before, 0.5}), 1e-3); };
-        Vec3 stop = a + t * (b - a);
-        stop[e.axis] -= e.dir * back(t * std::abs(b[e.axis] - a[e.axis]));
-        // Then on along the face by what is left of the move across it, less Coulomb friction
-        // against the part of the move the face stopped (as a contact would), up to a second
-        // face it may meet there. Stopped on its path, a particle lost its move along the face
-        // too: frictionless water thrown at 6 m/s and 45 degrees at a sheet (2 substeps) kept
-        // 19 % of its speed along it, where off the ground it keeps all of it.
-        Vec3 slide = (1.0 - t) * (b - a);
-        const double across = std::abs(slide[e.axis]);
-        slide[e.axis] = 0.0;
-        double mus = 0.0, muk = 0.0;
-        Material mb;
-        mb.staticFriction = staticFriction_[nb.body], mb.dynamicFriction = dynamicFriction_[nb.body];
-        mb.frictionRule = frictionRule_[nb.body];
-        pairFriction(materials_[std::size_t(parts_.material[i])], mb, mus, muk);
-        slide -= frictionCorrection(slide, across, mus, muk);
-        if (slide.squaredNorm() > 0.0) {
-          const CellEntry f = firstTakenCell(stop, slide, filled);
-          stop += f.t * slide;
-          if (f.hit) stop[f.axis] -= f.dir * back(f.t * std::abs(slide[f.axis]));
-        }
-        put(px_, py_, pz_, i, nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd);
-        stoppedBy = *n;
       }
       if (stoppedBy < bodies.size() && mode_[bodies[stoppedBy].body] == BodyMode::kDynamic) {
         const Vec3 p = at(px_, py_, pz_, i);
