@@ -1130,8 +1130,8 @@ TEST(Fluid, AtRestInATankKeepsItsDensity) {
 // 1.37 %); carrying 0.6 of the multipliers brings it under (0.59 %) with nothing faster than
 // the same 0.1 m/s (the fastest particle over the 30 steps after 4.5 s, a noisy statistic of
 // the packing's settling: measured 0.034 at 2 s before the tank's one-particle walls met fluid
-// as planes (particleContact), 0.185 at 2 s since, when its packing still rearranges, and
-// 0.02-0.05 in every 30-step window after 4 s).
+// as planes (particleContact), 0.185 at 2 s since, when its packing still rearranges, cold as
+// well as warm (0.109 cold), and 0.02-0.05 in every 30-step window after 4 s).
 // The carry follows the particles' ids, so 1 and 2 threads stay bit-identical.
 TEST(Fluid, AWarmStartHoldsATankAtFewerSubsteps) {
   const auto run = [](double warm, int threads, std::uint64_t* hash) {
