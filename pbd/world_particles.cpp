@@ -1391,7 +1391,12 @@ void PbdWorld::looseBodySweep(double h, double minMove) {
             if (f.hit) stop[f.axis] -= f.dir * back(f.t * std::abs(slide[f.axis]));
             slid = true;
           }
-          put(px_, py_, pz_, i, nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd);
+          // Never below the ground: a body coming down on a particle (a stone sinking through
+          // water to the floor) carried the stop with it into the ground, past the contacts'
+          // ground, and the guard stopped the honey example at frame 6.
+          Vec3 world = nb.fromEnd * ((stop - Vec3::Constant(0.5)) * spacing + rc.origin) + nb.cEnd;
+          world.y() = std::max(world.y(), params_.groundY + radiusOf(i));
+          put(px_, py_, pz_, i, world);
           stoppedBy = *n;
         }
       }
