@@ -98,6 +98,18 @@ Vec3 momentum(const PbdWorld& w) {
   return m;
 }
 
+// The kinetic energy of every body's particles (a rigid body's carry its rigid motion) (J).
+double kineticEnergy(const PbdWorld& w) {
+  double k = 0.0;
+  const ParticleArrays& q = w.particles();
+  for (int b = 0; b < w.bodyCount(); ++b)
+    for (std::int32_t i : w.bodyParticles(b)) {
+      const auto n = std::size_t(i);
+      k += 0.5 * double(q.mass[n]) * Vec3(q.vx[n], q.vy[n], q.vz[n]).squaredNorm();
+    }
+  return k;
+}
+
 }  // namespace
 
 // A rope hanging from a fixed beam carries a bob 22.6x its mass; released at 0.1 rad it
@@ -613,16 +625,6 @@ TEST(Cloth, AFallingClothBouncesOffTheGroundABodyAndAMeshFloor) {
 // (Gauss-Seidel sweeps): applied once each in turn, the first left against a box the others had
 // not pushed yet, and the cloth separated at 0.845 m/s for e = 0.8 (energy would grow at e = 1).
 TEST(Cloth, AClothAndADynamicBodySeparateAtETimesTheirApproachSpeed) {
-  const auto energy = [](const PbdWorld& w) {
-    double k = 0.0;
-    const ParticleArrays& q = w.particles();
-    for (int b = 0; b < w.bodyCount(); ++b)
-      for (std::int32_t i : w.bodyParticles(b)) {
-        const auto n = std::size_t(i);
-        k += 0.5 * double(q.mass[n]) * Vec3(q.vx[n], q.vy[n], q.vz[n]).squaredNorm();
-      }
-    return k;
-  };
   for (double e : {0.8, 1.0}) {
     ParticleArrays p;
     std::vector<Material> mats = {makeKind("cloth", MaterialKind::kCloth), makeKind("box", MaterialKind::kRigid)};
@@ -633,15 +635,15 @@ TEST(Cloth, AClothAndADynamicBodySeparateAtETimesTheirApproachSpeed) {
     sheet.init.velocity = Vec3(0.0, -1.0, 0.0);
     PbdWorld w(p, {sheet, box}, mats, params(8, 4, Vec3::Zero()));
     const Vec3 m0 = momentum(w);
-    const double k0 = energy(w);
+    const double k0 = kineticEnergy(w);
     for (int s = 0; s < 20; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
     const double separation = w.velocity(0).y() - w.velocity(1).y();
     std::printf("cloth on a dynamic box, e %.1f: separation speed %.4f m/s (closed form %.1f), energy %.4f of before\n",
-                e, separation, e, energy(w) / k0);
+                e, separation, e, kineticEnergy(w) / k0);
     EXPECT_LT(w.velocity(1).y(), -0.05) << "the box was pushed";
     EXPECT_NEAR(separation, e, 0.03 * e);
     EXPECT_LT((momentum(w) - m0).norm(), 2e-3 * m0.norm());
-    EXPECT_LT(energy(w), 1.001 * k0) << "e " << e;
+    EXPECT_LT(kineticEnergy(w), 1.001 * k0) << "e " << e;
   }
 }
 
@@ -1614,16 +1616,6 @@ TEST(Sweep, WaterThrownObliquelyAtASheetSlidesAlongIt) {
 // energy 3.9 -> 30.6 J) and the guard stopped it; shared one after another against the moved
 // plate, it turns at 44 rad/s, as at 4 and 8 substeps (47 and 58 rad/s).
 TEST(Sweep, AJellyAndWaterThrownAtALightPlatesCornerMakeNoEnergy) {
-  const auto energy = [](const PbdWorld& w) {
-    double e = 0.0;
-    const ParticleArrays& q = w.particles();
-    for (int b = 0; b < w.bodyCount(); ++b)
-      for (std::int32_t i : w.bodyParticles(b)) {
-        const auto k = std::size_t(i);
-        e += 0.5 * double(q.mass[k]) * (q.vx[k] * q.vx[k] + q.vy[k] * q.vy[k] + q.vz[k] * q.vz[k]);
-      }
-    return e;
-  };
   for (const MaterialKind kind : {MaterialKind::kSoft, MaterialKind::kFluid}) {
     ParticleArrays p;
     std::vector<Material> mats = {makeKind("plate", MaterialKind::kRigid, 100.0), makeKind("thrown", kind)};
@@ -1631,10 +1623,10 @@ TEST(Sweep, AJellyAndWaterThrownAtALightPlatesCornerMakeNoEnergy) {
     BodyRange thrown = addBox(p, Vec3(0.1, 2.33, 0.1), 6, 6, 6, 1, 1);
     thrown.init.velocity = Vec3(0.0, -6.0, 0.0);
     PbdWorld w(p, {plate, thrown}, mats, params(2, 4, Vec3::Zero()));
-    const double e0 = energy(w);
+    const double e0 = kineticEnergy(w);
     const Vec3 m0 = momentum(w);
     for (int s = 0; s < 20; ++s) ASSERT_TRUE(w.step()) << toString(kind) << ": " << w.guard().message();
-    const double e1 = energy(w);
+    const double e1 = kineticEnergy(w);
     const Vec3 m1 = momentum(w);
     std::printf("%s at a light plate's corner: kinetic energy %.3f -> %.3f J, momentum y %.5f -> %.5f, plate %.1f rad/s\n",
                 toString(kind), e0, e1, m0.y(), m1.y(), w.angularVelocity(0).norm());
