@@ -906,10 +906,10 @@ void PbdWorld::particleContact() {
     // within reach of j's centre. Gated by that sphere, the face was an egg crate: in the
     // hollows between its particles, where no pair reached, fluid sank to the cells' faces (half
     // a spacing above the face's centres, where the sweep holds it), and was pushed back up to
-    // reach whenever its flow over the face brought it within reach of one, a push that v = (p - x) / h turned into speed away from the face. A blob
-    // thrown at a slab left it again at 28 % of its speed (16 substeps; 7 % at 4), and water
-    // resting in a cup kept moving at 4 cm/s. One that started behind the face meets j as a
-    // sphere of radius reach.
+    // reach whenever its flow over the face brought it within reach of one, a push that
+    // v = (p - x) / h turned into speed away from the face. A blob thrown at a slab left it
+    // again at 28 % of its speed (16 substeps; 7 % at 4), and water resting in a cup kept moving
+    // at 4 cm/s. One that started behind the face meets j as a sphere of radius reach.
     Vec3 face = Vec3::Zero();  // in the body's rest frame
     if (faceNear) {
       face = surfaceNormal_[j].cast<double>();
@@ -1376,15 +1376,18 @@ void PbdWorld::looseBodySweep(double h, double minMove) {
           // face it may meet there. Stopped on its path, a particle lost its move along the face
           // too: frictionless water thrown at 6 m/s and 45 degrees at a sheet (2 substeps) kept
           // 19 % of its speed along it, where off the ground it keeps all of it.
+          // (The body's friction is its members' mean, as at body level.)
           Vec3 slide = (1.0 - t) * (b - a);
           const double across = std::abs(slide[e.axis]);
           slide[e.axis] = 0.0;
-          double mus = 0.0, muk = 0.0;
-          Material mb;
-          mb.staticFriction = staticFriction_[nb.body], mb.dynamicFriction = dynamicFriction_[nb.body];
-          mb.frictionRule = frictionRule_[nb.body];
-          pairFriction(materials_[std::size_t(parts_.material[i])], mb, mus, muk);
-          slide -= frictionCorrection(slide, across, mus, muk);
+          if (pass == 0) {
+            double mus = 0.0, muk = 0.0;
+            Material mb;
+            mb.staticFriction = staticFriction_[nb.body], mb.dynamicFriction = dynamicFriction_[nb.body];
+            mb.frictionRule = frictionRule_[nb.body];
+            pairFriction(materials_[std::size_t(parts_.material[i])], mb, mus, muk);
+            slide -= frictionCorrection(slide, across, mus, muk);
+          }
           if (pass == 0 && slide.squaredNorm() > 0.0) {
             const CellEntry f = firstTakenCell(stop, slide, filled);
             stop += f.t * slide;
@@ -1411,12 +1414,12 @@ void PbdWorld::looseBodySweep(double h, double minMove) {
   // along the stop's direction is what is left of it, and that is split by the inverse masses:
   // the particle keeps w_i / (w_i + w_b) of it and the body moves the rest the other way at the
   // stop point. Along the correction, not a face normal: the correction also holds the friction
-  // the slide along the face lost, and the body takes that too. Split
-  // against the pose the stops were found at, every stop on a light body added its whole share:
-  // a 6^3 jelly thrown at 6 m/s at the corner of a plate a fifth its mass (2 substeps) threw the
-  // plate off at 38 m/s and 290 rad/s, and the guard stopped the energy growth. The bodies' moves
-  // here are not swept again: the stops hold to first order in them (a light body turned by an
-  // off-centre hit may bring a cell to within its move of a stopped particle).
+  // the slide along the face lost, and the body takes that too. Split against the pose the stops
+  // were found at, every stop on a light body added its whole share: a 6^3 jelly thrown at
+  // 6 m/s at the corner of a plate a fifth its mass (2 substeps) threw the plate off at 38 m/s
+  // and 290 rad/s, and the guard stopped the energy growth. The bodies' moves here are not swept
+  // again: the stops hold to first order in them (a light body turned by an off-centre hit may
+  // bring a cell to within its move of a stopped particle).
   std::vector<std::size_t> moved;
   for (const std::vector<Stop>& unit : stops)
     for (const Stop& st : unit) {
