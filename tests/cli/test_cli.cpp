@@ -1,15 +1,18 @@
 // End to end: the physketch binary on the bundled scene and on broken input.
 #include <gtest/gtest.h>
+
 #include <sys/wait.h>
 
 #include <png.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -312,6 +315,26 @@ TEST(Cli, TheTwoFluidExampleRuns) {
   const Result r = runCli("run '" + scene + "' -q --frames 9 --out '" + (dir / "run").string() + "'", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(dir / "run" / "frames" / "frame_0008.png"));
+}
+
+// Every bundled example (scenes/*.scene) runs its first 8 frames (0.27 s at 30 fps) with the exit
+// status 0: the guard stops none of them. A change that makes an example stop fails here:
+// scenes/honey.scene stopped at frame 6 for a session while its own test ran 2 frames.
+// scenes/cap.scene (the 688,590-particle cap) is left out: its own tests and the benchmarks
+// run it, and 8 frames of it take minutes under the sanitizers. About 20 s in all here.
+TEST(Cli, EveryExampleRunsItsFirstFrames) {
+  const fs::path dir = freshDir("examples");
+  std::vector<fs::path> scenes;
+  for (const auto& e : fs::directory_iterator(fs::path(PHYSKETCH_SOURCE_DIR) / "scenes"))
+    if (e.path().extension() == ".scene" && e.path().filename() != "cap.scene") scenes.push_back(e.path());
+  std::sort(scenes.begin(), scenes.end());
+  EXPECT_GE(scenes.size(), 10u);
+  for (const fs::path& scene : scenes) {
+    const fs::path out = dir / scene.stem();
+    const Result r = runCli("run '" + scene.string() + "' -q --look splats --frames 8 --out '" + out.string() + "'", dir);
+    EXPECT_EQ(r.code, 0) << scene.filename() << ": " << r.err;
+  }
+  fs::remove_all(dir);
 }
 
 TEST(Cli, AnUnstableRunExitsTwoAndTheReportNamesTheGuardRecord) {
