@@ -223,11 +223,14 @@ void PbdWorld::appendBody(std::vector<std::int32_t> members, const BodyInit& ini
   }
 }
 
+Material PbdWorld::bodyFriction(std::size_t b) const {
+  Material m;
+  m.staticFriction = staticFriction_[b], m.dynamicFriction = dynamicFriction_[b], m.frictionRule = frictionRule_[b];
+  return m;
+}
+
 void PbdWorld::bodyPairFriction(std::size_t a, std::size_t b, double& mus, double& muk) const {
-  Material ma, mb;
-  ma.staticFriction = staticFriction_[a], ma.dynamicFriction = dynamicFriction_[a], ma.frictionRule = frictionRule_[a];
-  mb.staticFriction = staticFriction_[b], mb.dynamicFriction = dynamicFriction_[b], mb.frictionRule = frictionRule_[b];
-  pairFriction(ma, mb, mus, muk);
+  pairFriction(bodyFriction(a), bodyFriction(b), mus, muk);
 }
 
 // Mass, inertia, friction and reach of a body from its members' rest offsets.

@@ -403,7 +403,9 @@ class PbdWorld final : public Solver {
   std::vector<double> staticFriction_, dynamicFriction_;  // mass-weighted means over the body's materials
   // The body's Material::FrictionRule when all its materials share one (a tool's), else kMean.
   std::vector<Material::FrictionRule> frictionRule_;
-  // The pair's coefficients at body level (pairFriction on the bodies' means and rules).
+  // A material holding only body b's friction (its members' means and rule), and a pair's
+  // coefficients at body level (pairFriction on two of them).
+  Material bodyFriction(std::size_t b) const;
   void bodyPairFriction(std::size_t a, std::size_t b, double& mus, double& muk) const;
   std::vector<double> restitution_;         // mass-weighted mean over the body's materials
   std::vector<double> reach_;               // m, max |rest offset| + particle radius

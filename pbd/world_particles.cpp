@@ -917,10 +917,10 @@ void PbdWorld::particleContact() {
       if (side < 0.0) face = sheetFace_[j] ? Vec3(-face) : Vec3::Zero();
     }
     const bool onFace = !face.isZero();
+    const Vec3 faceNormal = onFace ? Vec3(mj->q * face) : Vec3::Zero();  // now, in the world
     if (onFace) {
-      const Vec3 normal = mj->q * face;
       const double spacing = 2.0 * params_.particleRadius;
-      if (!((d - d.dot(normal) * normal).squaredNorm() <= 0.5 * spacing * spacing)) continue;
+      if (!((d - d.dot(faceNormal) * faceNormal).squaredNorm() <= 0.5 * spacing * spacing)) continue;
     } else if (!(dist < reach)) {
       continue;
     }
@@ -933,7 +933,7 @@ void PbdWorld::particleContact() {
     Vec3 n;
     double pen;
     if (onFace) {
-      n = mj->q * face;
+      n = faceNormal;
       pen = reach - d.dot(n);
     } else if (s.squaredNorm() >= reach * reach && path.squaredNorm() > 0.0) {
       // |s + t path|^2 = reach^2: qa t^2 + 2 qb t + qc = 0, the smaller root.
@@ -1382,10 +1382,7 @@ void PbdWorld::looseBodySweep(double h, double minMove) {
           slide[e.axis] = 0.0;
           if (pass == 0) {
             double mus = 0.0, muk = 0.0;
-            Material mb;
-            mb.staticFriction = staticFriction_[nb.body], mb.dynamicFriction = dynamicFriction_[nb.body];
-            mb.frictionRule = frictionRule_[nb.body];
-            pairFriction(materials_[std::size_t(parts_.material[i])], mb, mus, muk);
+            pairFriction(materials_[std::size_t(parts_.material[i])], bodyFriction(nb.body), mus, muk);
             slide -= frictionCorrection(slide, across, mus, muk);
           }
           if (pass == 0 && slide.squaredNorm() > 0.0) {
