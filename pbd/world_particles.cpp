@@ -1468,6 +1468,21 @@ void PbdWorld::particleUpdate(double h) {
       }
     });
   }
+  // The ground has the last word too. The constraint passes after the iteration's last contact
+  // sweep (clusters above all) can pull a particle back into it: a stiff soft ball's clusters,
+  // still falling behind its stopped lowest layer, pulled that layer up to 2.6 radii under
+  // the ground at 4 iterations, and the guard stopped the run. Held at its contact height
+  // before its velocity is taken, the particle leaves the substep no faster downwards than the
+  // ground allows.
+  forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t k = lo; k < hi; ++k) {
+      const auto i = std::size_t(loose_[k]);
+      const float floorY = static_cast<float>(params_.groundY + radiusOf(i));
+      if (invMassP_[i] == 0.0f || pinned_[i] || !(py_[i] < floorY)) continue;
+      if (groundApproach_[i] == 0.0f) groundApproach_[i] = std::min(parts_.vy[i], -1e-30f);
+      py_[i] = floorY;
+    }
+  });
   const float invH = static_cast<float>(1.0 / h), hf = static_cast<float>(h);
   const float slow = static_cast<float>(2.0 * params_.gravity.norm() * h);
   forRange(loose_.size(), [&](std::size_t lo, std::size_t hi) {

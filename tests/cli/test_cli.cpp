@@ -357,7 +357,7 @@ TEST(Cli, AnUnstableRunExitsTwoAndTheReportNamesTheGuardRecord) {
   fs::remove_all(dir);
 }
 
-// --guard warn: a recoverable trip (a stiff jelly pressed into the ground: penetration) is logged
+// --guard warn: a recoverable trip (vorticity confinement's energy growth in a spinning blob) is logged
 // and the run goes on to its last frame; the log's first record is the one a stopping run reports
 // (same frame, pass and particle), the frames before it are the stopping run's, and the run is the
 // same for 1 and 2 threads. NaN and inverted elements stop under warn too.
@@ -372,18 +372,18 @@ TEST(Cli, GuardWarnLogsRecoverableTripsAndGoesOn) {
     writeText(dir / (name + ".scene"), text);
     return (dir / (name + ".scene")).string();
   };
-  const std::string soft = shortCopy("stiff_soft", "0.5");
-  Result r = runCli("run '" + soft + "' -q --out '" + (dir / "stop").string() + "'", dir);
+  const std::string spin = shortCopy("vorticity_spin", "0.5");
+  Result r = runCli("run '" + spin + "' -q --out '" + (dir / "stop").string() + "'", dir);
   ASSERT_EQ(r.code, 2) << r.err;
   const auto stop = readJson(dir / "stop" / "report.json");
   const auto& record = stop["guard"];
-  ASSERT_EQ(record["kind"], "penetration");
+  ASSERT_EQ(record["kind"], "energy_growth");
   nlohmann::json warned[2];
   for (int threads : {1, 2}) {
     const fs::path out = dir / ("warn" + std::to_string(threads));
-    r = runCli("run '" + soft + "' -q --guard warn --threads " + std::to_string(threads) + " --out '" + out.string() + "'", dir);
+    r = runCli("run '" + spin + "' -q --guard warn --threads " + std::to_string(threads) + " --out '" + out.string() + "'", dir);
     ASSERT_EQ(r.code, 0) << r.err;
-    EXPECT_NE(r.err.find("warning: frame " + std::to_string(record["frame"].get<int>()) + ": stability guard: penetration"),
+    EXPECT_NE(r.err.find("warning: frame " + std::to_string(record["frame"].get<int>()) + ": stability guard: energy_growth"),
               std::string::npos) << r.err;
     warned[threads - 1] = readJson(out / "report.json");
   }
