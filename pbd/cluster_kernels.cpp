@@ -143,11 +143,10 @@ PHYSKETCH_CLUSTER_INLINE void correctionsLanes(const ClusterView& v, const float
     }
     store(v.lambda, k, v.hi, lamNew);
     for (std::int32_t j = 0; j < kL && k + j < v.hi; ++j) {
-      if (!dyn[j]) continue;  // a fixed member's position is not written (not even + 0)
-      const auto i = std::size_t(v.idx[k + j]);
-      v.x[i] += d[0][j];
-      v.y[i] += d[1][j];
-      v.z[i] += d[2][j];
+      const std::size_t at = std::size_t(k + j - v.lo);
+      v.dx[at] = dyn[j] ? d[0][j] : 0.0f;
+      v.dy[at] = dyn[j] ? d[1][j] : 0.0f;
+      v.dz[at] = dyn[j] ? d[2][j] : 0.0f;
     }
   }
   for (int r = 0; r < 3; ++r) net[r] = laneSum(n[r]);

@@ -19,11 +19,16 @@ struct ClusterView {
   const float* qy = nullptr;
   const float* qz = nullptr;
   float* lambda = nullptr;            // per membership: XPBD multiplier of this substep
-  float* x = nullptr;                 // per particle: predicted position (m); clusterCorrections moves the members'
-  float* y = nullptr;
-  float* z = nullptr;
+  const float* x = nullptr;           // per particle: predicted position (m)
+  const float* y = nullptr;
+  const float* z = nullptr;
   const float* mass = nullptr;        // per particle (kg)
   const float* w = nullptr;           // per particle: inverse mass (1/kg), 0 = not moved (clusterCorrections only)
+  // Per membership from lo (clusterCorrections only): the member's correction dp, 0 for a fixed
+  // member. The caller adds it to the position together with the net-momentum shift.
+  float* dx = nullptr;
+  float* dy = nullptr;
+  float* dz = nullptr;
   std::int32_t lo = 0, hi = 0;
 };
 
@@ -42,11 +47,11 @@ struct ClusterMoments {
 ClusterMoments clusterMoments(const ClusterView& v, const float (&p0)[3], bool avx2);
 
 // Per member k with w > 0: d = (p_k - p0) - (R q_k + o), C = |d|, and where C > 0
-//   dlambda = (-C - alpha lambda_k) / (w + alpha), lambda_k += dlambda, p_k += (w dlambda / C) d
-// (dp_k; 0 elsewhere). Each member is its own particle, so moving one does not change another's
-// d: the corrections are computed from the same positions (Jacobi within the cluster). R
-// row-major, o = centre - p0, alpha = compliance / h^2. Returns in net the sum of m_k dp_k and in
-// mDyn the mass of the members with w > 0.
+//   dlambda = (-C - alpha lambda_k) / (w + alpha), lambda_k += dlambda, dp_k = (w dlambda / C) d
+// (0 elsewhere), written to v.dx, v.dy, v.dz; the positions are not moved. The corrections are
+// computed from the same positions (Jacobi within the cluster). R row-major, o = centre - p0,
+// alpha = compliance / h^2. Returns in net the sum of m_k dp_k and in mDyn the mass of the
+// members with w > 0.
 void clusterCorrections(const ClusterView& v, const float (&p0)[3], const float (&R)[9], const float (&o)[3], float alpha,
                         double (&net)[3], double& mDyn, bool avx2);
 

@@ -323,7 +323,7 @@ class PbdWorld final : public Solver {
   void shockPropagation(const std::vector<char>& touching, Solve&& solve);
   void particleContact();
   void clusterMatch(double h);
-  detail::ClusterView clusterView(std::size_t cluster, float* x, float* y, float* z);
+  detail::ClusterView clusterView(std::size_t cluster, const float* x, const float* y, const float* z);
   detail::ClusterMoments clusterMoments(const detail::ClusterView& v, float (&p0)[3]) const;
   void plasticCreep(std::size_t cluster, double h);
   void distanceConstraints(double h);

@@ -261,11 +261,15 @@ TEST(Cloth, PinnedAtTwoCornersLosesEnergyAtOneIterationPerSubstep) {
 
 // Two soft cubes fly at each other in zero gravity: particle contacts push both sides by
 // equal and opposite impulses, and each cluster's corrections carry no net momentum, so
-// the total momentum is conserved. Tolerance: 2e-3 of the initial momentum: the state is
-// float32, and every position write rounds by up to 3e-8 m at 0.5 m (7e-6 m/s over a 4 ms
-// substep); about 1e5 writes per step (pairs and 14 clusters per particle, 4 iterations)
-// add up, as a random walk over 240 substeps, to about 5e-4 of it (measured 6e-4). A
-// one-sided contact or cluster correction would be of the order of the exchanged momentum.
+// the total momentum is conserved, at every step. Tolerance: 1e-3 of the initial momentum: the
+// state is float32, and every position write rounds by up to 3e-8 m at 0.5 m (7e-6 m/s over a
+// 4 ms substep); about 1e5 writes per step (pairs and 14 clusters per particle, 4 iterations)
+// add up, as a random walk over 240 substeps, to about 5e-4 of it (measured at most 3.7e-4).
+// A one-sided contact or cluster correction would be of the order of the exchanged momentum.
+// Until 2026-11-29 the clusters' net-momentum shift was subtracted from the positions apart
+// from the corrections: a shift under half the float spacing of a position at 0.5 m
+// (3e-8 m) was lost from every member alike, a bias, not a random walk, and the momentum wandered
+// by up to 6.3e-3 of it (it happened to end at 2e-3 when only the last step was checked).
 TEST(Soft, ZeroGravityCollisionConservesMomentum) {
   ParticleArrays p;
   std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft)};
@@ -276,14 +280,17 @@ TEST(Soft, ZeroGravityCollisionConservesMomentum) {
   PbdWorld w(p, {a, b}, mats, params(4, 4, Vec3::Zero()));
   const Vec3 m0 = momentum(w);
   bool touched = false;
+  double worst = 0.0;
   for (int s = 0; s < 60; ++s) {
     ASSERT_TRUE(w.step());
     touched = touched || has(planNames(w), "find_neighbors");
+    worst = std::max(worst, (momentum(w) - m0).norm());
   }
   EXPECT_TRUE(touched);
   // They did collide: the first body no longer moves at 0.5 m/s.
   EXPECT_LT(w.velocity(0).x(), 0.45);
-  EXPECT_LT((momentum(w) - m0).norm(), 2e-3 * m0.norm());
+  std::printf("largest momentum change %.3g of the initial momentum\n", worst / m0.norm());
+  EXPECT_LT(worst, 1e-3 * m0.norm());
 }
 
 // A soft cube spinning at 3 rad/s about a tilted axis in zero gravity turns as a whole: each
