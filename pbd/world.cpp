@@ -26,9 +26,9 @@ const PassSpec kPbdPasses[static_cast<int>(PbdPass::kCount)] = {
     {"find_neighbors", Cadence::kPerSubstep, "predicted moves that cross a rigid body stop at its face; particle pairs within reach (one NeighborGrid per substep), reused by every iteration"},
     {"find_colliders", Cadence::kPerSubstep, "mesh colliders: swept spheres stop fast particles and bodies, then contacts within reach (Bullet BVH)"},
     {"fluid_neighbors", Cadence::kPerSubstep, "fluids: the PBF neighbour structure over fluid particles and the solids in range"},
+    {"cluster_match", Cadence::kPerIteration, "soft bodies: clustered shape matching with XPBD compliance (Müller 2005, Macklin 2016)"},
     {"particle_contact", Cadence::kPerIteration, "particle pairs and the ground: projection and Coulomb friction (Macklin 2014 §6)"},
     {"density", Cadence::kPerIteration, "fluids: PBF density constraint, Jacobi lambda and dp (Macklin & Müller 2013 Eq. 11-13)"},
-    {"cluster_match", Cadence::kPerIteration, "soft bodies: clustered shape matching with XPBD compliance (Müller 2005, Macklin 2016)"},
     {"distance", Cadence::kPerIteration, "rope and cloth: XPBD stretch and bending, attachments to bodies, tethers"},
     {"rigid_contact", Cadence::kPerSubstep, "ground contact and friction at body level, `iterations` sweeps"},
     {"body_contact", Cadence::kPerSubstep, "bodies whose particles touch: two-body corrections and friction, `iterations` sweeps; then the ground lifts out what they pressed into it; then shock propagation, from the ground up"},
@@ -975,13 +975,17 @@ bool PbdWorld::runStep(bool checkEachPass) {
     if (runs(PbdPass::kFluidNeighbors) &&
         !runPass(PbdPass::kFluidNeighbors, s, checkEachPass, [&] { fluidNeighbors(); }))
       return false;
+    // Shape matching before the contacts, so that the contacts have the last word on a soft body
+    // in each iteration: after them, the clusters pulled a soft body resting on a rigid one back
+    // into it, and it rested half a spacing deep, held at the body's face by particle_update's
+    // sweep instead of a spacing off its particles by the contacts.
     for (int it = 0; it < params_.iterations; ++it) {
+      if (runs(PbdPass::kClusterMatch) && !runPass(PbdPass::kClusterMatch, s, checkEachPass, [&] { clusterMatch(h); }))
+        return false;
       if (runs(PbdPass::kParticleContact) &&
           !runPass(PbdPass::kParticleContact, s, checkEachPass, [&] { particleContact(); }))
         return false;
       if (runs(PbdPass::kDensity) && !runPass(PbdPass::kDensity, s, checkEachPass, [&] { density(); })) return false;
-      if (runs(PbdPass::kClusterMatch) && !runPass(PbdPass::kClusterMatch, s, checkEachPass, [&] { clusterMatch(h); }))
-        return false;
       if (runs(PbdPass::kDistance) && !runPass(PbdPass::kDistance, s, checkEachPass, [&] { distanceConstraints(h); }))
         return false;
     }

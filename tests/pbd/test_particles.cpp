@@ -517,6 +517,36 @@ TEST(Soft, AStiffBallOfEveryPresetLandsOnTheGround) {
     }
 }
 
+// A soft body resting on a fixed rigid slab rests on its particles at the contact distance (the
+// oracle: two particle spheres of radius r touch at 2 r; over a hollow between four of a square
+// lattice's particles at sqrt(2) r above their centres). A 6^3 soft cube (E = 5e5 Pa) set down
+// on a 21 x 3 x 21 fixed slab, its lattice over the slab's or half a spacing off it in x and z,
+// at 4 x 4; its lowest particle after 2 s, above the slab's top centres: at least 0.95 and 0.69
+// spacings (1 and 0.707 less a margin for what the load presses in). Measured 1.000 / 0.710.
+// Until the clusters ran before the contacts in each iteration, their last correction pulled
+// the bottom layer back into the slab: 0.690 over the slab's lattice (a third of a spacing into
+// its particles), and a 4 cm ball of E = 5e5 or 5e6 rested on a table's face, half a spacing
+// deep, where particle_update's sweep held it. The half-off case guards the hollows' geometry
+// (the old order also read 0.690 there).
+TEST(Soft, ASoftBodyRestsOnARigidOneAtTheContactDistance) {
+  for (const double off : {0.0, 0.5}) {
+    ParticleArrays p;
+    std::vector<Material> mats = {makeKind("jelly", MaterialKind::kSoft), makeKind("slab", MaterialKind::kRigid)};
+    mats[0].elastic.youngs = 5e5;
+    const double top = 0.1 + 2 * kSpacing;
+    std::vector<BodyRange> bodies{addBox(p, Vec3(0.45 + off * kSpacing, top + 1.5 * kSpacing, 0.45 + off * kSpacing), 6, 6, 6, 0, 0),
+                                  addBox(p, Vec3(0.4, 0.1, 0.4), 21, 3, 21, 1, 1)};
+    bodies[1].init.fixed = true;
+    PbdWorld w(p, bodies, mats, params(4, 4));
+    for (int s = 0; s < 120; ++s) ASSERT_TRUE(w.step()) << w.guard().message();
+    double lowest = 1.0;
+    for (std::int32_t k = 0; k < bodies[0].count; ++k) lowest = std::min(lowest, double(w.particles().y[std::size_t(k)]));
+    const double gap = (lowest - top) / kSpacing;
+    std::printf("lattice %s the slab's: lowest particle %.3f spacings above its top centres\n", off == 0.0 ? "over" : "half off", gap);
+    EXPECT_GE(gap, off == 0.0 ? 0.95 : 0.69) << "offset " << off;
+  }
+}
+
 // The drop scenes of the bounce tests: body 0 (material `falling`, made by `add` with its lowest
 // particle centre 0.2 m above its landing height `floor`) over the ground, a fixed rigid slab
 // 21 x 4 x 21 (material e = slabE) or a static mesh floor at 0.2 m. Returns the top of its first
@@ -2667,9 +2697,13 @@ ThrowEnd throwAtRestingBody(std::int16_t restingMaterial, int side, std::int16_t
 // sleep, where the jelly at rest never moved: the jelly wakes at the start of a step in which the
 // thrown body may reach it (two steps before the blow here), as it lay. Before the blow the runs
 // differ by float round-off only (the unslept jelly's particles drift by 3e-9 m: its cluster
-// corrections and rotations' warm start keep running); the blow amplifies that to 6e-5 m and 4e-5
-// m/s, so the bounds are 5e-4 m and 5e-4 m/s. Not woken, the sleeping jelly is a fixed wall: the
-// thrown body bounces back off it (1.4 m/s the other way; 1.5-2.5 m apart at 2 s).
+// corrections and rotations' warm start keep running). A box's blow amplifies that to 4e-7 m, so
+// its bounds are 5e-4 m and 5e-4 m/s. Two jellies meeting at 6 m/s (1.25 spacings a substep)
+// are chaotic: moving the thrown jelly 1e-7 m sideways in the run without sleep moves where it
+// ends by 2 cm (6 mm before the clusters ran ahead of the contacts), so their bounds are 0.1 m
+// and 0.1 m/s (measured 0.035 m and 0.035 m/s). Not
+// woken, the sleeping jelly is a fixed wall: the thrown body bounces back off it (1.4 m/s the
+// other way; 1.5-2.5 m apart at 2 s).
 TEST(SleepBeside, ABodyThrownAtASleepingJellyWakesItAndBothMoveAsWithoutSleep) {
   for (const bool rigidThrown : {true, false}) {
     const ThrowEnd with = throwAtRestingBody(1, 5, rigidThrown ? 0 : 1, 6.0, 6.0, true);
@@ -2682,8 +2716,9 @@ TEST(SleepBeside, ABodyThrownAtASleepingJellyWakesItAndBothMoveAsWithoutSleep) {
     std::printf("%s: after the blow %.6f m/s with sleep, %.6f without; centres %.3g m apart\n",
                 rigidThrown ? "box" : "jelly", with.velocity[1].x(), without.velocity[1].x(), dc.norm());
     EXPECT_GT(without.velocity[1].x(), -5.4) << "the jelly should slow the thrown body";
-    EXPECT_NEAR(dc.norm(), 0.0, 5e-4);
-    EXPECT_NEAR(dv.norm(), 0.0, 5e-4);
+    const double bound = rigidThrown ? 5e-4 : 0.1;
+    EXPECT_NEAR(dc.norm(), 0.0, bound);
+    EXPECT_NEAR(dv.norm(), 0.0, bound);
   }
 }
 
