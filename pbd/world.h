@@ -35,13 +35,14 @@
 //                      against each other and against rigid bodies' particles
 //     fluid_neighbors  fluids: the PBF kernel's neighbour structure (pbd/fluid.h), fluid
 //                      particles and the solid particles in their range
-//     per iteration:   particle_contact (pairs and ground, Coulomb friction; a rigid body
-//                      takes its share through its generalized inverse mass),
-//                      cluster_match (soft: clustered shape matching), distance (rope and
-//                      cloth stretch and bending, attachments to bodies, tethers)
-//                      and density (PBF: Jacobi lambda and dp; solids in range take their
-//                      share, rigid bodies as an impulse, so a light body floats)
-//     particle_update  v = (p - x) / h, x = p; ground restitution; soft bodies' restitution
+//     per iteration:   cluster_match (soft: clustered shape matching), particle_contact
+//                      (pairs and ground, Coulomb friction; a rigid body takes its share
+//                      through its generalized inverse mass), density (PBF: Jacobi lambda and
+//                      dp; solids in range take their share, rigid bodies as an impulse, so a
+//                      light body floats) and distance (rope and cloth stretch and bending,
+//                      attachments to bodies, tethers)
+//     particle_update  moves across rigid bodies and colliders stopped, the ground's last
+//                      word; v = (p - x) / h, x = p; ground restitution; soft bodies' restitution
 //     fluid_velocity   XSPH viscosity, vorticity confinement, cohesion, the implicit
 //                      viscosity (which drags solids in the fluid too), when set
 //     plasticity       soft materials with plastic_creep > 0: cluster rest shapes creep

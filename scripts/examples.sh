@@ -13,6 +13,7 @@ only=""
 frames=()
 while [ $# -gt 0 ]; do
   case "$1" in
+    --skip|--only|--frames) [ $# -ge 2 ] || { echo "error: $1 needs a value" >&2; exit 1; } ;;&
     --skip) skip+=("$2"); shift 2 ;;
     --only) only="$2"; shift 2 ;;
     --frames) frames=(--frames "$2"); shift 2 ;;
@@ -21,8 +22,10 @@ while [ $# -gt 0 ]; do
     *) build="$1"; shift ;;
   esac
 done
-exe="$build/apps/physketch/physketch"
+exe=$(realpath -m "$build/apps/physketch/physketch")
 [ -x "$exe" ] || { echo "error: $exe not found (make build first)" >&2; exit 1; }
+cd "$(dirname "$0")/.." || exit 1  # the repo root: scenes/ and out/ are relative to it
+mkdir -p out/examples
 failed=0
 ran=0
 for scene in scenes/*.scene; do
@@ -34,7 +37,7 @@ for scene in scenes/*.scene; do
   out="out/examples/$name"
   rm -rf "$out"
   start=$(date +%s.%N)
-  "$exe" run "$scene" -q --out "$out" "${frames[@]}" > "$out.log" 2>&1
+  "$exe" run "$scene" -q --out "$out" ${frames[@]+"${frames[@]}"} > "$out.log" 2>&1
   code=$?
   secs=$(awk -v a="$start" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }')
   status=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1])).get('status','?'))" "$out/report.json" 2>/dev/null || echo "no report")
