@@ -977,8 +977,9 @@ bool PbdWorld::runStep(bool checkEachPass) {
       return false;
     // Shape matching before the contacts, so that the contacts have the last word on a soft body
     // in each iteration: after them, the clusters pulled a soft body resting on a rigid one back
-    // into it, and it rested half a spacing deep, held at the body's face by particle_update's
-    // sweep instead of a spacing off its particles by the contacts.
+    // into it (a stiff cube 0.31 spacings into a slab's particles; a stiff ball down to a
+    // table's face, half a spacing, where particle_update's sweep held it), not a spacing off
+    // the body's particles, where the contacts hold it.
     for (int it = 0; it < params_.iterations; ++it) {
       if (runs(PbdPass::kClusterMatch) && !runPass(PbdPass::kClusterMatch, s, checkEachPass, [&] { clusterMatch(h); }))
         return false;

@@ -2723,9 +2723,9 @@ ThrowEnd throwAtRestingBody(std::int16_t restingMaterial, int side, std::int16_t
 // its bounds are 5e-4 m and 5e-4 m/s. Two jellies meeting at 6 m/s (1.25 spacings a substep)
 // are chaotic: moving the thrown jelly 1e-7 m sideways in the run without sleep moves where it
 // ends by 2 cm (6 mm before the clusters ran ahead of the contacts), so their bounds are 0.1 m
-// and 0.1 m/s (measured 0.035 m and 0.035 m/s). Not
+// and 0.1 m/s (measured 0.035 m and 0.035 m/s), and the momentum of the two is checked too. Not
 // woken, the sleeping jelly is a fixed wall: the thrown body bounces back off it (1.4 m/s the
-// other way; 1.5-2.5 m apart at 2 s).
+// other way; 1.5-2.5 m apart at 2 s; the momentum changes by 1.0-1.2 of itself).
 TEST(SleepBeside, ABodyThrownAtASleepingJellyWakesItAndBothMoveAsWithoutSleep) {
   for (const bool rigidThrown : {true, false}) {
     const ThrowEnd with = throwAtRestingBody(1, 5, rigidThrown ? 0 : 1, 6.0, 6.0, true);
