@@ -6,6 +6,8 @@
 #include <cmath>
 #include <vector>
 
+#include <Eigen/SVD>
+
 #include "core/material.h"
 #include "core/particles.h"
 #include "pbd/world.h"
@@ -16,6 +18,16 @@ inline constexpr double kSpacing = 0.01;  // m: particle diameter 2r
 inline constexpr double kRadius = 0.5 * kSpacing;
 inline constexpr double kDensity = 1000.0;
 inline const double kParticleMass = kDensity * kSpacing * kSpacing * kSpacing;
+
+// The rotation maximizing tr(R^T A) over SO(3), from Eigen's SVD A = U S V^T:
+// R = U diag(1, 1, det(U V^T)) V^T (the sign on the smallest singular value). The tests' oracle
+// for a polar decomposition and for a best rigid fit (A = sum m (x - c)(q - c0)^T).
+inline Mat3 polarRotation(const Mat3& A) {
+  const Eigen::JacobiSVD<Mat3> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 D = Mat3::Identity();
+  D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+  return svd.matrixU() * D * svd.matrixV().transpose();
+}
 
 inline std::vector<Material> rigidMaterial(double friction = 0.5) {
   Material m;

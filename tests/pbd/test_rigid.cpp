@@ -57,15 +57,6 @@ TEST(ShapeMatching, ExtractRotationRecoversPolarFactor) {
   }
 }
 
-// The oracle: the rotation maximizing tr(R^T A) over SO(3), from Eigen's SVD A = U S V^T:
-// R = U diag(1, 1, det(U V^T)) V^T (the sign on the smallest singular value).
-Mat3 polarRotation(const Mat3& A) {
-  const Eigen::JacobiSVD<Mat3> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Mat3 D = Mat3::Identity();
-  D(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
-  return svd.matrixU() * D * svd.matrixV().transpose();
-}
-
 TEST(ShapeMatching, ExtractRotationConvergesWithinItsDefaultIterationsForAnisotropicStretch) {
   // Stretches with singular values 0.1-3 (ratios up to 30, as a squashed jelly cluster),
   // warm-started 0.3 rad off the answer (a cluster's rotation is warm-started from its last
