@@ -23,7 +23,8 @@ namespace physketch {
 // kInverted: a deformation gradient with J = det F <= 0 (MPM); kCfl: a particle moved more than
 // one grid cell in a substep, or the time-step bound needs more substeps than allowed (MPM);
 // kCompression: a fluid's mean compression rho/rho0 - 1 above the bound (PBD fluids: the
-// density constraint no longer holds the fluid incompressible); kEnergyGrowth: a closed system
+// density constraint no longer holds the fluid incompressible), or snow's plastic volume ratio
+// J_p at its lower clamp (MPM: its hardening stops growing there); kEnergyGrowth: a closed system
 // (no body carried, nothing added, removed or thrown since the reference) gained more
 // mechanical energy than it had available (EnergyWatch).
 enum class GuardKind { kNone, kNaN, kExplosion, kPenetration, kInverted, kCfl, kCompression, kEnergyGrowth };

@@ -506,7 +506,7 @@ void MpmWorld::g2p(float h, int substep, bool summarize) {
   }
   if (groundNode_ >= 0 || params_.groundY >= double(lo_[1])) edgeLo[1] = -std::numeric_limits<float>::infinity();
   // The guard's bounds (check and checkParticles), as they compute them.
-  const double vmax = lastSubsteps_ > 0 ? dx_ / (params_.dt / lastSubsteps_) : std::numeric_limits<double>::infinity();
+  const double vmax = lastSubsteps_ > 0 ? dx_ / substepH_ : std::numeric_limits<double>::infinity();
   const float grx = float(params_.gravity.x()), gry = float(params_.gravity.y()), grz = float(params_.gravity.z());
   blockTails_.assign(particleBlocks_.size(), BlockTail{});
   // Block by block, as p2g: the 6^3 nodes a block's particles can reach are copied into a tile

@@ -760,17 +760,25 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
   const bool checkJ = pass == MpmPass::kG2P || pass == MpmPass::kPlasticity || pass == MpmPass::kGuard;
   const bool checkCfl = lastSubsteps_ > 0 && (pass == MpmPass::kG2P || pass == MpmPass::kGuard);
   if (!checkJ && !checkCfl) return r;
-  const double vmax = checkCfl ? dx_ / (params_.dt / lastSubsteps_) : 0.0;
+  const double vmax = checkCfl ? dx_ / substepH_ : 0.0;
   const std::size_t n = parts_.size(), chunks = (n + kChunk - 1) / kChunk;
-  std::vector<std::int64_t> firstJ(chunks, -1), firstCfl(chunks, -1);
+  // Snow whose plastic volume ratio J_p sits at its lower clamp (snowClamp): its hardening is
+  // capped there, so further compression meets no more resistance (the volume is lost, not
+  // resisted). The stretched side's clamp only caps softening (torn snow), which is harmless.
+  std::vector<float> jpFloor(models_.size(), -1.0f);
+  for (std::size_t m = 0; m < models_.size(); ++m)
+    if (models_[m].kind == MaterialKind::kSnow) jpFloor[m] = float(snowJpMin(double(models_[m].xi)));
+  std::vector<std::int64_t> firstJ(chunks, -1), firstCfl(chunks, -1), firstJp(chunks, -1);
   forRange(n, [&](std::size_t lo, std::size_t hi) {
-    std::int64_t j = -1, c = -1;
+    std::int64_t j = -1, c = -1, p = -1;
     for (std::size_t i = lo; i < hi && j < 0; ++i) {
       if (!phase::dynamic(parts_.phase[i])) continue;
       if (checkJ) {
-        const bool fluid = models_[std::size_t(parts_.material[i])].kind == MaterialKind::kFluid;
+        const auto m = std::size_t(parts_.material[i]);
+        const bool fluid = models_[m].kind == MaterialKind::kFluid;
         const float J = fluid ? std::min(plastic_[i], fluidJ_[i]) : F_[i].determinant();
         if (!(J > 0.0f)) j = std::int64_t(i);
+        if (p < 0 && plastic_[i] <= jpFloor[m]) p = std::int64_t(i);
       }
       if (checkCfl && c < 0) {
         const double v2 = double(parts_.vx[i]) * parts_.vx[i] + double(parts_.vy[i]) * parts_.vy[i] +
@@ -780,6 +788,7 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
     }
     firstJ[lo / kChunk] = j;
     firstCfl[lo / kChunk] = c;
+    firstJp[lo / kChunk] = p;
   });
   const auto lowest = [](const std::vector<std::int64_t>& v) {
     for (std::int64_t i : v)
@@ -791,6 +800,13 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
     const bool fluid = models_[std::size_t(parts_.material[k])].kind == MaterialKind::kFluid;
     fill(k, GuardKind::kInverted, fluid ? std::min(plastic_[k], fluidJ_[k]) : F_[k].determinant(), 0.0,
          "The deformation gradient inverted (J <= 0).");
+    return r;
+  }
+  if (const std::int64_t i = lowest(firstJp); i >= 0) {
+    const auto k = std::size_t(i);
+    fill(k, GuardKind::kCompression, plastic_[k], jpFloor[std::size_t(parts_.material[k])],
+         "Snow's plastic volume ratio J_p reached its clamp, where its hardening e^(xi (1 - J_p)) stops at "
+         "e^10 (Stomakhin et al. 2013): compressed further, it gives up volume without resisting.");
     return r;
   }
   std::int64_t cfl = lowest(firstCfl);
@@ -826,7 +842,14 @@ bool MpmWorld::runPass(MpmPass pass, int substep, bool checkNow, F&& f) {
 }
 
 bool MpmWorld::runStep(int substeps, bool checkEachPass) {
-  const float h = float(params_.dt / substeps);
+  // Under `substeps auto`, a snow's hardening and a fluid's compression raise their wave speed
+  // within the step: the bound is taken again after each substep, and where the substep no
+  // longer meets it the rest of the step is cut into more, shorter substeps (the count the
+  // step started with is only the start's bound: snow thrown at the ground at 8 m/s hardened
+  // within one step until it blew up, CFL at 57 m/s).
+  const bool replan = params_.substeps == 0 && boundMayTighten();
+  substepH_ = params_.dt / substeps;
+  float h = float(substepH_);
   const auto runs = [&](MpmPass p) { return bool(work_[std::size_t(p)]); };
   svdCached_ = polarCached_ = false;  // see svdU_, polarQ_
   // The end-of-step guard's checks are summed by the last g2p where nothing moves a particle or
@@ -834,23 +857,62 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
   const bool summarize =
       runs(MpmPass::kGuard) && colliders_.empty() && !runs(MpmPass::kPlasticity) && !runs(MpmPass::kShift);
   summary_.valid = false;
-  for (int s = 0; s < substeps; ++s) {
+  double done = 0.0;  // s of the step behind
+  int left = substeps;
+  for (int s = 0; left > 0; ++s, --left) {
     lastH_ = h;
-    if (!colliders_.empty()) poseColliders(double(steps_) * params_.dt + double(s) * double(h), double(h));
+    if (!colliders_.empty()) poseColliders(double(steps_) * params_.dt + (replan ? done : double(s) * double(h)), double(h));
     if (runs(MpmPass::kP2G) && !runPass(MpmPass::kP2G, s, checkEachPass, [&] { p2g(h); })) return false;
     if (runs(MpmPass::kGridUpdate) && !runPass(MpmPass::kGridUpdate, s, checkEachPass, [&] { gridUpdate(h); }))
       return false;
-    const bool last = s + 1 == substeps;
+    const bool last = left == 1;
     if (runs(MpmPass::kG2P) && !runPass(MpmPass::kG2P, s, checkEachPass, [&] { g2p(h, s, summarize && last); }))
       return false;
     if (runs(MpmPass::kProjection) && !runPass(MpmPass::kProjection, s, checkEachPass, [&] { projection(); }))
       return false;
     if (runs(MpmPass::kPlasticity) && !runPass(MpmPass::kPlasticity, s, checkEachPass, [&] { plasticity(); }))
       return false;
+    done += substepH_;
+    if (!replan || last) continue;
+    const double bound = waveBound().h, rest = params_.dt - done;
+    if (!(substepH_ > bound)) continue;
+    // At most kMaxSubsteps in the step: past that, the next step's start names the material
+    // (tooManySubsteps), and a substep still too long here is the guard's to catch.
+    const double more = std::min(std::ceil(rest / bound - 1e-9), double(std::max(1, kMaxSubsteps - (s + 1))));
+    left = int(more) + 1;  // the loop's decrement leaves `more`
+    substepH_ = rest / more;
+    h = float(substepH_);
+    lastSubsteps_ = s + 1 + int(more);
   }
   if (runs(MpmPass::kShift) && !runPass(MpmPass::kShift, -1, checkEachPass, [&] { shiftFluid(); }))  // once a step: no substep
     return false;
   return true;
+}
+
+// Whether a material's wave speed can change within a step: snow (its hardening) and fluid
+// (its compression); elastic, sand and plasticine keep theirs.
+bool MpmWorld::boundMayTighten() const {
+  for (std::size_t i = 0; i < parts_.size(); ++i) {
+    if (!phase::dynamic(parts_.phase[i])) continue;
+    const MaterialKind k = models_[std::size_t(parts_.material[i])].kind;
+    if (k == MaterialKind::kSnow || k == MaterialKind::kFluid) return true;
+  }
+  return false;
+}
+
+// The guard's record for a step whose bound needs more than kMaxSubsteps substeps, naming the
+// material that sets it.
+GuardRecord MpmWorld::tooManySubsteps() const {
+  const StepBound b = waveBound();
+  GuardRecord r;
+  r.kind = GuardKind::kCfl;
+  r.pass = "guard";
+  r.step = steps_;
+  r.value = params_.dt / kMaxSubsteps;
+  r.bound = b.h;
+  if (b.material >= 0) r.material = materials_[std::size_t(b.material)].name;
+  r.hint = "The time-step bound needs more than 1000 substeps per step: lower 'dt' (or the material's E).";
+  return r;
 }
 
 bool MpmWorld::step() {
@@ -862,14 +924,7 @@ bool MpmWorld::step() {
   const int substeps = substepsForNextStep();
   if (substeps == 0) {
     // `substeps auto` would need more than kMaxSubsteps: name the material that sets the bound.
-    const StepBound b = waveBound();
-    guard_.kind = GuardKind::kCfl;
-    guard_.pass = "guard";
-    guard_.step = steps_;
-    guard_.value = params_.dt / kMaxSubsteps;
-    guard_.bound = b.h;
-    if (b.material >= 0) guard_.material = materials_[std::size_t(b.material)].name;
-    guard_.hint = "The time-step bound needs more than 1000 substeps per step: lower 'dt' (or the material's E).";
+    guard_ = tooManySubsteps();
     return false;
   }
   lastSubsteps_ = substeps;
@@ -936,6 +991,24 @@ bool MpmWorld::step() {
   const auto finish = [&] {
     if (guard_.particle >= 0)
       guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
+    if (guard_.kind == GuardKind::kCompression) {  // snow at its clamp: a material's limit, not the step's
+      guard_.hint += " Fix: lower the material's 'hardening' (xi; the clamp is J_p >= max(1 - 10 / xi, 0.01)) or the load.";
+      return;
+    }
+    // Under `substeps auto` the step already meets its bounds: a fixed-corotated elastic that
+    // inverts there was crushed faster than its waves carry the load away (a gel thrown at the
+    // ground at twice its wave speed inverts at cfl 0.5, 0.25 and 0.1 alike), which a shorter
+    // step does not change but neo-Hookean's pressure, unbounded as J -> 0, or a stiffer E does.
+    if (guard_.kind == GuardKind::kInverted && params_.substeps == 0 && guard_.particle >= 0) {
+      const auto m = std::size_t(parts_.material[std::size_t(guard_.particle)]);
+      if (models_[m].kind == MaterialKind::kElastic && models_[m].elastic == ElasticModel::kCorotated) {
+        const double c = std::sqrt((double(models_[m].lambda) + 2.0 * double(models_[m].mu)) / materials_[m].density);
+        guard_.hint += " Fix: write model=neohookean for material '" + materials_[m].name +
+                       "' (its pressure grows without bound as J -> 0), or raise its E (its wave speed c_p is " + num(c) +
+                       " m/s; what crushed it came faster).";
+        return;
+      }
+    }
     KnobState knobs;
     knobs.substeps = substeps;
     knobs.substepsAuto = params_.substeps == 0;

@@ -163,6 +163,8 @@ class MpmWorld final : public Solver {
   // Substeps the next step runs: the fixed count, or (auto) the fewest meeting the wave and
   // velocity bounds; 0 when auto would need more than kMaxSubsteps.
   int substepsForNextStep() const;
+  bool boundMayTighten() const;
+  GuardRecord tooManySubsteps() const;
   int lastSubsteps() const { return lastSubsteps_; }
   // Warnings about the settings (a fixed substep count above the bound), once, at start.
   const std::vector<std::string>& warnings() const { return warnings_; }
@@ -437,7 +439,8 @@ class MpmWorld final : public Solver {
     EnergySums energy;
   };
   StepSummary summary_;
-  int lastSubsteps_ = 0;
+  int lastSubsteps_ = 0;  // the last step's substeps (more than it started with where runStep cut the rest finer)
+  double substepH_ = 0.0;  // s, the current substep (as double: the CFL bound dx / h)
   bool validate_ = false;
   bool avx2_ = avx2Supported();
   bool fluidInline_ = true;

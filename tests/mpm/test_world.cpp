@@ -1887,3 +1887,95 @@ TEST(MpmWorld, TheParticlesAndTheirAffineFieldsKeepTheAngularMomentum) {
     }
   }
 }
+
+namespace {
+
+// A 12^3 block (h = 1 cm) of material 0 thrown at the ground at `speed` m/s from 2 cm above it.
+MpmWorld thrownBlock(const Material& m, double speed, int substeps) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  BodyInit down;
+  down.velocity = Vec3(0.0, -speed, 0.0);
+  addBox(p, bodies, Vec3(0.44, 0.02, 0.44), 12, 12, 12, h, 0, down);
+  return MpmWorld(p, bodies, {m}, unitDomain(h, substeps));
+}
+
+Material snow(double E, double xi) {
+  Material m = makeMaterial(MaterialKind::kSnow, "pack");
+  m.elastic.youngs = E;
+  m.snow.hardening = xi;
+  return m;
+}
+
+}  // namespace
+
+// Snow compacted by an impact hardens (e^(xi (1 - J_p)), Stomakhin et al. 2013) within one step,
+// and its wave speed with it: `substeps auto` takes the bound again after each substep and cuts
+// the rest of the step finer where it no longer holds. Snow of the default E and xi thrown at
+// the ground at 8 m/s: the impact's steps take more substeps than the bound at their start asks
+// (the oracle: a count fixed at that start bound, the step's old choice, is stopped by the guard
+// as the hardened snow outruns it: cfl, or here an inversion), and the run goes on without a
+// trip for 0.3 s.
+TEST(MpmWorld, SubstepsAutoCutsTheRestOfAStepFinerWhereSnowHardensWithinIt) {
+  const Material pack = snow(1.4e5, 10.0);
+  MpmWorld w = thrownBlock(pack, 8.0, 0);
+  const int atStart = w.substepsForNextStep();
+  int most = 0, grew = 0;
+  while (w.time() < 0.3) {
+    const int planned = w.substepsForNextStep();
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    most = std::max(most, w.lastSubsteps());
+    grew += w.lastSubsteps() > planned;
+  }
+  std::printf("substeps auto: %d at the start, at most %d in a step, %d steps cut finer within\n", atStart, most, grew);
+  EXPECT_GT(grew, 0);
+  EXPECT_GT(most, atStart);
+  MpmWorld fixed = thrownBlock(pack, 8.0, atStart);
+  bool ran = true;
+  while (ran && fixed.time() < 0.3) ran = fixed.step();
+  ASSERT_FALSE(ran) << "snow hardened by its impact ran at the substeps its start needs";
+  const GuardKind k = fixed.guard().kind;
+  EXPECT_TRUE(k == GuardKind::kCfl || k == GuardKind::kInverted) << fixed.guard().message();
+}
+
+// Snow's plastic volume ratio J_p is clamped at max(1 - 10 / xi, 0.01), where its hardening
+// stops at e^10 (snowClamp): snow compacted past it gives up volume without resisting, which the
+// guard names (compression, in the plasticity pass, with the clamp as its bound and the
+// material's hardening as the knob). Soft snow (E = 2e3 Pa) of xi = 30 (clamp 2/3) thrown at
+// 15 m/s reaches it (at 8 m/s its J_p falls to 0.685); of the default xi = 10 (clamp 0.01), thrown
+// the same way, it does not.
+TEST(MpmWorld, TheGuardNamesSnowCompactedToItsClamp) {
+  MpmWorld w = thrownBlock(snow(2e3, 30.0), 15.0, 0);
+  bool ran = true;
+  while (ran && w.time() < 0.3) ran = w.step();
+  ASSERT_FALSE(ran);
+  const GuardRecord& g = w.guard();
+  EXPECT_EQ(g.kind, GuardKind::kCompression) << g.message();
+  EXPECT_EQ(g.pass, "plasticity") << g.message();
+  EXPECT_EQ(g.material, "pack");
+  EXPECT_GE(g.particle, 0);
+  EXPECT_EQ(g.body, 0);
+  EXPECT_EQ(g.stroke, w.particles().stroke[std::size_t(g.particle)]);
+  EXPECT_NEAR(g.bound, 1.0 - 10.0 / 30.0, 1e-6);  // float
+  EXPECT_LE(g.value, g.bound);
+  EXPECT_NE(g.hint.find("'hardening'"), std::string::npos) << g.message();
+  MpmWorld plain = thrownBlock(snow(2e3, 10.0), 15.0, 0);
+  EXPECT_TRUE(runUntil(plain, 0.3));
+}
+
+// A fixed-corotated gel (E = 5e4 Pa, c_p about 8 m/s) thrown at the ground at 15 m/s flattens
+// cells to J <= 0 however short the step (the hard scene mpm_inverted_corotated: cfl 0.5, 0.25
+// and 0.1 all invert), so under `substeps auto` the guard's advice is the model, not the step;
+// neo-Hookean, whose pressure lambda ln J is unbounded as J -> 0, takes the same impact.
+TEST(MpmWorld, AGelCrushedFasterThanItsWavesIsAdvisedTheModelNotTheStep) {
+  MpmWorld w = thrownBlock(elastic(5e4), 15.0, 0);
+  bool ran = true;
+  while (ran && w.time() < 0.1) ran = w.step();
+  ASSERT_FALSE(ran);
+  EXPECT_EQ(w.guard().kind, GuardKind::kInverted) << w.guard().message();
+  EXPECT_NE(w.guard().hint.find("model=neohookean"), std::string::npos) << w.guard().message();
+  EXPECT_EQ(w.guard().hint.find("'cfl'"), std::string::npos) << w.guard().message();
+  MpmWorld neo = thrownBlock(elastic(5e4, ElasticModel::kNeoHookean), 15.0, 0);
+  EXPECT_TRUE(runUntil(neo, 0.1));
+}
