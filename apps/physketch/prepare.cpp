@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <iostream>
+#include <sstream>
 
 #include "core/error.h"
 #include "core/material_table.h"
@@ -104,11 +105,10 @@ std::unique_ptr<Solver> makeMpm(const Prepared& p) {
   const mpm::StepBound b = world->waveBound();
   if (b.material >= 0 && sc.dt / b.h > mpm::MpmWorld::kMaxSubsteps + 1e-9) {
     const Material& m = sc.materials[static_cast<std::size_t>(b.material)];
-    throw InputError(sc.path, m.line, "kind",
-                     "material '" + m.name + "' needs " + std::to_string(long(std::ceil(sc.dt / b.h))) +
-                         " MPM substeps per step of dt = " + std::to_string(sc.dt) + " s (h <= C dx / c_p = " +
-                         std::to_string(b.h) + " s, c_p = " + std::to_string(b.waveSpeed) +
-                         " m/s), more than 1000: lower dt or the material's E");
+    std::ostringstream os;  // %g-style: std::to_string printed the bound 2e-7 s as 0.000000
+    os << "material '" << m.name << "' needs " << long(std::ceil(sc.dt / b.h)) << " MPM substeps per step of dt = " << sc.dt
+       << " s (h <= C dx / c_p = " << b.h << " s, c_p = " << b.waveSpeed << " m/s), more than 1000: lower dt or the material's E";
+    throw InputError(sc.path, m.line, "kind", os.str());
   }
   // The scene's 'substeps' line, or the file alone where it has none (the default of 4 applies).
   const std::string where = sc.path + (sc.substepsLine > 0 ? ":" + std::to_string(sc.substepsLine) : std::string());

@@ -906,3 +906,48 @@ TEST(Cli, ImportTiltWritesAStrokeFileAndASceneThatLintAndRun) {
   EXPECT_FALSE(fs::exists(bad));
   fs::remove_all(dir);
 }
+
+// Under `substeps auto`, a material whose explicit bound h <= 0.5 dx / c_p needs more than 1000
+// substeps per step is the scene's error at load time: exit 1, the material's line, its name and
+// the count, nothing written. The count's oracle: c_p = sqrt((lambda + 2 mu) / rho) from E and
+// nu = 0.3 (lambda + 2 mu = E (1 - nu) / ((1 + nu)(1 - 2 nu))), dx = 2 h with h the sketch's
+// voxel (1 m / 151), dt = 1/60 s. E = 5e9 Pa at rho = 1000 kg/m^3: c_p = 2,594 m/s, 6,530
+// substeps (under 10,000, so that a check off by a factor of 10 fails here).
+TEST(Cli, AnMpmMaterialNeedingMoreThan1000SubstepsIsTheScenesError) {
+  const fs::path dir = freshDir("substeps1000");
+  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box steel 0   0 0.2 0   0.1 0.1 0.1\nplay 0\n");
+  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\nsubsteps auto\n"
+                             "material steel elastic E=5e9 density=1000\noutput report\n");
+  const fs::path out = dir / "out";
+  const Result r = runCli("run '" + (dir / "s.scene").string() + "' --out '" + out.string() + "'", dir);
+  EXPECT_EQ(r.code, 1) << r.err;
+  const double E = 5e9, nu = 0.3, rho = 1000.0, dx = 2.0 / 151.0;
+  const double c = std::sqrt(E * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho);
+  const long n = long(std::ceil((1.0 / 60.0) / (0.5 * dx / c)));
+  EXPECT_NE(r.err.find("s.scene:6:"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("material 'steel' needs " + std::to_string(n) + " MPM substeps"), std::string::npos)
+      << r.err << " (expected " << n << ")";
+  EXPECT_NE(r.err.find("more than 1000"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+  fs::remove_all(dir);
+}
+
+// `physketch plan` of an MPM scene at a real-world scale k prints each scaled value beside the
+// scene's (PhysGen3D §A.4 as docs/formats.md states it: g' = k g; mass held, so density / k^3;
+// stresses / k). k = 0.1: gravity 9.81 -> 0.981 m/s^2, density 1000 -> 1e6 kg/m^3, E 5e5 -> 5e6
+// Pa; a fluid's bulk modulus 2e5 -> 2e6 Pa.
+TEST(Cli, PlanPrintsTheScaledValuesOfAnMpmSceneAtAScale) {
+  const fs::path dir = freshDir("scaleplan");
+  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box gel 0   0 0.2 0   0.1 0.1 0.1\n"
+                               "primitive box water 0.5   0.2 0.2 0   0.1 0.1 0.1\nplay 1\n");
+  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\nscale 0.1\n"
+                             "material gel elastic E=5e5 density=1000\nmaterial water fluid bulk_modulus=2e5\noutput report\n");
+  const std::string outFile = (dir / "plan.txt").string();
+  ASSERT_EQ(std::system((std::string(PHYSKETCH_CLI) + " plan '" + (dir / "s.scene").string() + "' > '" + outFile + "'").c_str()), 0);
+  const std::string text = slurp(outFile);
+  EXPECT_NE(text.find("real-world scale k = 0.1"), std::string::npos) << text;
+  EXPECT_NE(text.find("gravity 9.81 -> 0.981 m/s^2"), std::string::npos) << text;
+  EXPECT_NE(text.find("gel: density 1000 -> 1e+06 kg/m^3, E 500000 -> 5e+06 Pa"), std::string::npos) << text;
+  EXPECT_NE(text.find("bulk modulus 200000 -> 2e+06 Pa"), std::string::npos) << text;
+  fs::remove_all(dir);
+}
