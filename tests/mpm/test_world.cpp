@@ -57,8 +57,8 @@ bool runUntil(MpmWorld& w, double t) {
 
 // Quadratic B-splines: partition of unity, zero first moment (so sum of gradients is 0 and
 // P2G's affine term carries no net momentum), and second moment 1/4 per axis: D_p = dx^2/4,
-// the 4/dx^2 of MLS-MPM's affine matrix (Jiang et al. 2016 §10.1). Over every offset f in
-// [0.5, 1.5) on a fine sweep; float rounding tolerance 1e-6.
+// the 4/dx^2 of MLS-MPM's affine matrix (Jiang et al. 2016 §10.1), and gradients that sum to 0.
+// Over every offset f in [0.5, 1.5) on a fine sweep; float rounding tolerance 1e-6.
 TEST(MpmKernels, BSplineWeightsSumToOneWithZeroFirstMomentAndQuarterSecondMoment) {
   for (int k = 0; k <= 1000; ++k) {
     const float f = 0.5f + 0.999f * float(k) / 1000.0f;
@@ -74,6 +74,20 @@ TEST(MpmKernels, BSplineWeightsSumToOneWithZeroFirstMomentAndQuarterSecondMoment
     EXPECT_NEAR(s0, 1.0, 1e-6) << f;
     EXPECT_NEAR(s1, 0.0, 1e-6) << f;
     EXPECT_NEAR(s2, 0.25, 1e-6) << f;
+    // Their gradients (in 1/dx): central differences of these weights, step 1e-2 of a cell where
+    // it stays within [0.5, 1.5), sum to 0 and match the splines' derivatives w0' = f - 1.5,
+    // w1' = -2 (f - 1), w2' = f - 0.5 (exact for quadratics but for float rounding: 1e-5 / 1e-2).
+    if (f < 0.51f || f > 1.49f) continue;
+    float wp[3], wm[3];
+    detail::bsplineWeights(f + 0.01f, wp);
+    detail::bsplineWeights(f - 0.01f, wm);
+    const double step = double(f + 0.01f) - double(f - 0.01f);
+    double g[3], gs = 0.0;
+    for (int i = 0; i < 3; ++i) gs += g[i] = (double(wp[i]) - double(wm[i])) / step;
+    EXPECT_NEAR(gs, 0.0, 1e-4) << f;
+    EXPECT_NEAR(g[0], double(f) - 1.5, 1e-4) << f;
+    EXPECT_NEAR(g[1], -2.0 * (double(f) - 1.0), 1e-4) << f;
+    EXPECT_NEAR(g[2], double(f) - 0.5, 1e-4) << f;
   }
   // The stencil never leaves a grid of n nodes, wherever the particle is (even outside).
   for (float x : {-5.0f, -0.01f, 0.0f, 0.7f, 63.2f, 64.0f, 1e6f}) {
@@ -147,32 +161,84 @@ TEST(MpmWorld, TransfersConserveMassAndMomentum) {
   EXPECT_EQ(w.atDomainEdge(), 0);
 }
 
-// An elastic block (the soft preset, no damping) set on the ground settles by its self-weight
-// compression and then stays put: under uniaxial stress with free sides the strain at height
-// y is rho g (H - y) / E, so the centre of mass sinks by rho g H^2 / (3 E) = 0.65 mm here.
-// Averaged over 0.5-1 s (it keeps ringing at the elastic wave period 4H/c ~ 0.05 s) the sink
-// must be within 25 % of that (the grid's ground contact is resolved to a fraction of a
-// cell, dx = 2 cm); no drift between the two quarter-seconds (< 0.05 h), no growth of the
-// ringing, nothing NaN or inverted (the guard would stop the run).
-TEST(MpmWorld, AnElasticBlockOnTheGroundSettlesWithoutDrift) {
-  const double h = 0.01, H = 0.1, E = 5e4, rho = 1000.0;
+namespace {
+
+// A column of nx x ny x nz particles (h = 1 cm) of elastic(E) set on the ground, run for 10 s
+// under `substeps auto`. Returns how far its top layer sank (m), averaged over the last second
+// and over the second before, and checks on the way that it does not drift sideways or ring
+// up, and that nothing inverts (the guard would stop the run on a NaN or J <= 0).
+struct Settled {
+  double sinkLast = 0.0, sinkBefore = 0.0, drift = 0.0;
+  double speedSecond = 0.0, speedLast = 0.0;  // largest body speed in 1-2 s and in 9-10 s
+};
+Settled settleColumn(int nx, int ny, int nz, double E) {
+  const double h = 0.01;
   ParticleArrays p;
   std::vector<BodyRange> bodies;
-  addBox(p, bodies, Vec3(0.45, 0.5 * h, 0.45), 10, 10, 10, h, 0);
-  MpmWorld w(p, bodies, {elastic(E)}, unitDomain(h, 0));  // substeps auto
-  const double y0 = comY(w, 0);
-  double sumA = 0, sumB = 0, vmaxA = 0, vmaxB = 0, x0 = w.pose(0).centre.x();
-  for (int s = 0; s < 60; ++s) {
-    ASSERT_TRUE(w.step()) << w.guard().message();
-    if (s >= 30) (s < 45 ? sumA : sumB) += comY(w, 0) / 15.0;
-    if (s >= 30) (s < 45 ? vmaxA : vmaxB) = std::max(s < 45 ? vmaxA : vmaxB, w.velocity(0).norm());
+  addBox(p, bodies, Vec3(0.45, 0.5 * h, 0.45), nx, ny, nz, h, 0);
+  MpmWorld w(p, bodies, {elastic(E)}, unitDomain(h, 0));
+  std::vector<std::int32_t> top;
+  for (std::int32_t i : w.bodyParticles(0))
+    if (p.y[std::size_t(i)] > (double(ny) - 1.0) * h) top.push_back(i);
+  const auto topY = [&] {
+    double s = 0.0;
+    for (std::int32_t i : top) s += w.particles().y[std::size_t(i)];
+    return s / double(top.size());
+  };
+  const double y0 = topY(), x0 = w.pose(0).centre.x();
+  Settled out;
+  for (int s = 0; s < 600; ++s) {
+    if (!w.step()) {
+      ADD_FAILURE() << w.guard().message();
+      return out;
+    }
+    if (s >= 480) (s < 540 ? out.sinkBefore : out.sinkLast) += (y0 - topY()) / 60.0;
+    if (s >= 60 && s < 120) out.speedSecond = std::max(out.speedSecond, w.velocity(0).norm());
+    if (s >= 540) out.speedLast = std::max(out.speedLast, w.velocity(0).norm());
+    out.drift = std::max(out.drift, std::abs(w.pose(0).centre.x() - x0));
   }
-  const double sink = rho * 9.81 * H * H / (3.0 * E);
-  EXPECT_NEAR(y0 - 0.5 * (sumA + sumB), sink, 0.25 * sink);
-  EXPECT_LT(std::abs(sumA - sumB), 0.05 * h);
-  EXPECT_LT(std::abs(w.pose(0).centre.x() - x0), 0.05 * h);
-  EXPECT_LE(vmaxB, 1.1 * vmaxA);
-  for (std::size_t i = 0; i < w.particles().size(); ++i) ASSERT_GT(w.deformation(std::int32_t(i)).determinant(), 0.0f);
+  for (std::size_t i = 0; i < w.particles().size(); ++i) EXPECT_GT(w.deformation(std::int32_t(i)).determinant(), 0.0f);
+  return out;
+}
+
+}  // namespace
+
+// An elastic block (the soft preset, E = 5e4 Pa, no damping) set on the ground settles by its
+// self-weight compression and then stays put for 10 s. Under uniaxial stress with free sides
+// the strain at height y is rho g (H - y) / E, so its top sinks by rho g H^2 / (2 E) = 0.98 mm
+// here (the top layer's centres, 0.95 H up, by 2 z/H - (z/H)^2 = 0.9975 of that). Averaged over
+// the last second the sink must be within 15 % of it (issue 9's tolerance; measured +0.7 %); no
+// drift between the last two seconds (< 0.01 h, measured 1.2e-7 m), none sideways (< 0.01 h,
+// measured 4e-6 m), and no ringing up (the body's speed in the last second no more than in the
+// second).
+TEST(MpmWorld, AnElasticBlockOnTheGroundSettlesBySelfWeightAndStaysPutFor10s) {
+  const double h = 0.01, H = 0.1, E = 5e4, rho = 1000.0;
+  const Settled s = settleColumn(10, 10, 10, E);
+  const double sink = 0.9975 * rho * 9.81 * H * H / (2.0 * E);
+  std::printf("block: top sank %.4e m (%.4f of rho g H^2 / 2E), last two seconds apart %.2e m, drift %.2e m\n",
+              s.sinkLast, s.sinkLast / sink, std::abs(s.sinkLast - s.sinkBefore), s.drift);
+  EXPECT_NEAR(s.sinkLast, sink, 0.15 * sink);
+  EXPECT_LT(std::abs(s.sinkLast - s.sinkBefore), 0.01 * h);
+  EXPECT_LT(s.drift, 0.01 * h);
+  EXPECT_LE(s.speedLast, s.speedSecond);
+}
+
+// An elastic column (6 x 20 x 6 particles, H = 0.2 m) under its own weight compresses by
+// rho g H^2 / (2 E) whatever E is: the sink times E is the same for E = 5e4 and 2e5 Pa, and
+// each sink is within 5 % of the closed form after 10 s (measured -0.4 % and +2.0 %, their
+// products 2.4 % apart; a grid cell is 2 cm, ten times the stiffer column's 1 mm sink).
+TEST(MpmWorld, AnElasticColumnCompressesUnderItsOwnWeightAsOneOverE) {
+  const double H = 0.2, rho = 1000.0;
+  double scaled[2] = {0.0, 0.0};
+  int k = 0;
+  for (const double E : {5e4, 2e5}) {
+    const Settled s = settleColumn(6, 20, 6, E);
+    const double sink = (1.0 - 0.025 * 0.025) * rho * 9.81 * H * H / (2.0 * E);  // top layer 0.975 H up: 2 z/H - (z/H)^2
+    std::printf("column E %.0e: top sank %.4e m (%.4f of rho g H^2 / 2E)\n", E, s.sinkLast, s.sinkLast / sink);
+    EXPECT_NEAR(s.sinkLast, sink, 0.05 * sink) << "E " << E;
+    scaled[k++] = s.sinkLast * E;
+  }
+  EXPECT_NEAR(scaled[1], scaled[0], 0.05 * scaled[0]);
 }
 
 // A water column of width a and height 2a against the x = 0 wall, spanning the domain in z
@@ -509,6 +575,57 @@ TEST(MpmWorld, ReturnMapsLeaveEveryParticleOnOrInsideItsYieldSurface) {
   std::printf("particle-steps on the cone %zu, on the cylinder %zu\n", onCone, onCylinder);
   EXPECT_GT(onCone, 1000u);
   EXPECT_GT(onCylinder, 1000u);
+}
+
+// Sand's hardening (docs/formats.md `hardening`: the friction angle grows with the accumulated
+// plastic strain q, phi = friction_angle + hardening q, capped at 80 degrees): a sand box thrown
+// at the floor with hardening 200 degrees per unit q. After each step every particle's Hencky
+// strain (from F through Eigen's SVD in double) lies on or inside the cone of the angle its q
+// gives now (its last return used a q no larger, so a cone no wider), many lie outside the cone
+// of the base angle (the hardened cones are wider: the hardening acted), and q never decreases.
+// Tolerance 2e-5 in strain, as for the return maps above.
+TEST(MpmWorld, SandsFrictionAngleGrowsWithItsPlasticStrain) {
+  const double h = 0.01;
+  ParticleArrays p;
+  std::vector<BodyRange> bodies;
+  Material grit = makeMaterial(MaterialKind::kSand, "grit");
+  grit.elastic.youngs = 5e4;
+  grit.sand.hardening = 200.0;
+  BodyInit thrown;
+  thrown.velocity = Vec3(0.5, -2.0, 0.2);
+  addBox(p, bodies, Vec3(0.3, 0.04, 0.3), 10, 8, 10, h, 0, thrown);
+  MpmWorld w(p, bodies, {grit}, unitDomain(h, 0));
+  const double E = 5e4, nu = grit.elastic.poisson;
+  const double mu = E / (2.0 * (1.0 + nu)), lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+  const auto alphaOf = [](double deg) {
+    const double sinPhi = std::sin(deg * 3.14159265358979323846 / 180.0);
+    return std::sqrt(2.0 / 3.0) * 2.0 * sinPhi / (3.0 - sinPhi);
+  };
+  const auto dgamma = [&](const Eigen::Vector3d& eps, double alpha) {
+    const Eigen::Vector3d dev = eps - Eigen::Vector3d::Constant(eps.sum() / 3.0);
+    return dev.norm() + (3.0 * lambda + 2.0 * mu) / (2.0 * mu) * eps.sum() * alpha;
+  };
+  constexpr double kTol = 2e-5;
+  std::vector<float> qBefore(p.size(), 0.0f);
+  std::size_t pastBase = 0;
+  double qMost = 0.0;
+  for (int step = 0; step < 12; ++step) {
+    ASSERT_TRUE(w.step()) << w.guard().message();
+    for (std::int32_t i = 0; i < std::int32_t(w.particles().size()); ++i) {
+      const double q = w.plasticScalar(i);
+      ASSERT_GE(q, double(qBefore[std::size_t(i)])) << "particle " << i << " step " << step;
+      qBefore[std::size_t(i)] = float(q);
+      qMost = std::max(qMost, q);
+      const Eigen::Vector3d sigma = Eigen::JacobiSVD<Eigen::Matrix3d>(w.deformation(i).cast<double>()).singularValues();
+      const Eigen::Vector3d eps = sigma.array().log().matrix();
+      const double deg = std::min(80.0, grit.sand.frictionAngleDeg + grit.sand.hardening * q);
+      ASSERT_LE(dgamma(eps, alphaOf(deg)), kTol) << "particle " << i << " outside its hardened cone in step " << step;
+      if (dgamma(eps, alphaOf(grit.sand.frictionAngleDeg)) > 1e-4) ++pastBase;
+    }
+  }
+  std::printf("sand hardening: largest q %.4f (angle %.1f deg); particle-steps outside the base cone %zu\n", qMost,
+              std::min(80.0, grit.sand.frictionAngleDeg + grit.sand.hardening * qMost), pastBase);
+  EXPECT_GT(pastBase, 1000u);
 }
 
 TEST(MpmWorld, ParticlesNeverLeaveTheDomain) {
