@@ -51,6 +51,9 @@ class Solver {
 
   virtual std::int64_t stepCount() const = 0;
   virtual double dt() const = 0;
+  // The substeps the last step took where the solver chooses them per step (MPM's `substeps
+  // auto`); 0 where the scene's count is used as written.
+  virtual int lastSubsteps() const { return 0; }
   double time() const { return double(stepCount()) * dt(); }
   // A hash of the whole state (positions, velocities, poses): equal states, equal hashes.
   virtual std::uint64_t stateHash() const = 0;

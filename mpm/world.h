@@ -165,7 +165,7 @@ class MpmWorld final : public Solver {
   int substepsForNextStep() const;
   bool boundMayTighten() const;
   GuardRecord tooManySubsteps() const;
-  int lastSubsteps() const { return lastSubsteps_; }
+  int lastSubsteps() const override { return params_.substeps == 0 ? lastSubsteps_ : 0; }
   // Warnings about the settings (a fixed substep count above the bound), once, at start.
   const std::vector<std::string>& warnings() const { return warnings_; }
   // Per particle: deformation gradient (row-major 3x3) and the plastic scalar (snow J_p,

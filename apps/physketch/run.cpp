@@ -438,7 +438,12 @@ int runScene(const RunOptions& opt) {
       for (std::size_t i = 0; i < ps.size(); ++i) x0.emplace_back(ps.x[i], ps.y[i], ps.z[i]);
       observeStart(*solver, sk, trajectory);
     }
+    // Under a solver's own substep choice (MPM `substeps auto`): the substeps each frame's steps
+    // took, and the fewest and most of one step.
+    long frameSubsteps = 0, totalSubsteps = 0;
+    int fewestSubsteps = 0, mostSubsteps = 0;
     for (int f = 0; f < frames; ++f) {
+      frameSubsteps = 0;
       if (f > 0) {
         for (int s = 0; s < sc.stepsPerFrame(); ++s) {
           const std::vector<int> reshaped = runtime.beforeStep();
@@ -447,9 +452,15 @@ int runScene(const RunOptions& opt) {
           const bool ok = solver->step();
           stepSeconds += nowSeconds() - t0;
           if (!ok) break;
+          if (const int n = solver->lastSubsteps(); n > 0) {
+            frameSubsteps += n;
+            fewestSubsteps = fewestSubsteps == 0 ? n : std::min(fewestSubsteps, n);
+            mostSubsteps = std::max(mostSubsteps, n);
+          }
         }
         if (solver->guard().tripped()) break;
       }
+      totalSubsteps += frameSubsteps;
       if (measureError) observe(*solver, x0, sc, trajectory);
       if (frameWriter) {
         if (sc.writeFrames) {
@@ -462,6 +473,7 @@ int runScene(const RunOptions& opt) {
       writeExports(opt, p, *solver, frameWriter.get(), runtime.restCells(), out, f);
       exportSeconds += nowSeconds() - tExport;
       poses.push_back({{"frame", f}, {"t", solver->time()}, {"bodies", posesJson(*solver)}});
+      if (mostSubsteps > 0) poses.back()["substeps"] = frameSubsteps;
       ++written;
       progress.frame(f, frames, solver->time());
     }
@@ -497,6 +509,9 @@ int runScene(const RunOptions& opt) {
                      {"substeps_auto", sc.substepsAuto},
                      {"iterations", sc.iterations}, {"steps", solver->stepCount()}, {"simulated_s", solver->time()},
                      {"validate", opt.validate}, {"plan", planJson(solver->plan())}};
+    if (mostSubsteps > 0)
+      rep["solver"]["substeps_taken"] = {{"total", totalSubsteps}, {"fewest_in_a_step", fewestSubsteps},
+                                         {"most_in_a_step", mostSubsteps}};
     rep["passes"] = passesJson(solver->profile(), frameWriter ? &frameWriter->profile() : nullptr, written,
                                solver->planAll());
     rep["frames"] = {{"written", written},

@@ -951,3 +951,31 @@ TEST(Cli, PlanPrintsTheScaledValuesOfAnMpmSceneAtAScale) {
   EXPECT_NE(text.find("bulk modulus 200000 -> 2e+06 Pa"), std::string::npos) << text;
   fs::remove_all(dir);
 }
+
+// Under `substeps auto` report.json says what each frame's steps took (issue 9: the count is
+// picked per step and reported). An elastic block (E = 5e5 Pa, nu = 0.3, rho = 1000) resting on
+// the ground: its wave bound h <= 0.5 dx / c_p sets every step (the velocity bound of a block at
+// rest, 0.5 dx / (|g| dt), is 150x longer), so each step takes N = ceil(dt / h) substeps, with
+// c_p = sqrt((lambda + 2 mu) / rho) and dx = 2 / 151 m computed here: 2N a frame at 30 fps.
+TEST(Cli, SubstepsAutoReportsWhatEachFramesStepsTook) {
+  const fs::path dir = freshDir("substepsreport");
+  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box gel 0   0 0.05 0   0.1 0.1 0.1\nplay 0\n");
+  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\nsubsteps auto\n"
+                             "duration 0.2\nfps 30\nmaterial gel elastic E=5e5 density=1000\noutput report\n");
+  const fs::path out = dir / "out";
+  const Result r = runCli("run '" + (dir / "s.scene").string() + "' -q --out '" + out.string() + "'", dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json rep = readJson(out / "report.json");
+  const double E = 5e5, nu = 0.3, rho = 1000.0, dx = 2.0 / 151.0;
+  const double c = std::sqrt(E * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho);
+  const long n = long(std::ceil((1.0 / 60.0) / (0.5 * dx / c)));
+  const auto& poses = rep.at("poses");
+  ASSERT_EQ(poses.size(), 7u);
+  EXPECT_FALSE(poses[0].contains("substeps"));  // frame 0 runs no step
+  for (std::size_t f = 1; f < poses.size(); ++f) EXPECT_EQ(poses[f].at("substeps").get<long>(), 2 * n) << "frame " << f;
+  const auto& taken = rep.at("solver").at("substeps_taken");
+  EXPECT_EQ(taken.at("total").get<long>(), 12 * n);
+  EXPECT_EQ(taken.at("fewest_in_a_step").get<long>(), n);
+  EXPECT_EQ(taken.at("most_in_a_step").get<long>(), n);
+  fs::remove_all(dir);
+}
