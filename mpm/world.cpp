@@ -1005,12 +1005,17 @@ bool MpmWorld::step() {
         const double c = std::sqrt((double(models_[m].lambda) + 2.0 * double(models_[m].mu)) / materials_[m].density);
         guard_.hint += " Fix: write model=neohookean for material '" + materials_[m].name +
                        "' (its pressure grows without bound as J -> 0), or raise its E (its wave speed c_p is " + num(c) +
-                       " m/s; what crushed it came faster).";
+                       " m/s; what crushed it came faster)";
+        KnobState knobs;
+        knobs.substeps = std::max(substeps, lastSubsteps_);
+        knobs.substepsAuto = true;
+        knobs.cfl = params_.waveCourant;
+        guard_.hint += "; if a speed the step did not foresee did it, " + knobAdvice(guard_, knobs) + ".";
         return;
       }
     }
     KnobState knobs;
-    knobs.substeps = substeps;
+    knobs.substeps = std::max(substeps, lastSubsteps_);  // a step cut finer within (runStep) took more
     knobs.substepsAuto = params_.substeps == 0;
     knobs.cfl = params_.waveCourant;
     guard_.hint += " Fix: " + knobAdvice(guard_, knobs) + ".";
@@ -1322,7 +1327,8 @@ std::vector<std::string> MpmWorld::runNotes() const {
     << "where the wall, not the scene, moves it); first: particle " << firstEdge_.particle << " (stroke " << parts_.stroke[i]
     << ", " << materials_[std::size_t(parts_.material[i])].name << ") at the " << kWall[std::size_t(firstEdge_.wall)]
     << " wall in step " << firstEdge_.step << " (substep " << firstEdge_.substep
-    << "). The walls are the workspace's faces: enlarge 'workspace' if the material should go on.";
+    << ", pass g2p: within 1.5 dx = " << 1.5 * dx_
+    << " m of the wall). The walls are the workspace's faces: enlarge 'workspace' if the material should go on.";
   return {o.str()};
 }
 
