@@ -110,6 +110,11 @@ struct Material {
     double frictionAngleDeg = 30.0;  // internal friction angle, degrees
     double cohesion = 0.0;           // Pa, shifts the yield cone
     double hardening = 0.0;          // degrees per unit plastic strain q: angle = frictionAngleDeg + hardening*q
+    // hardening_law=klar: Klár et al. 2016's law (§7.3) instead, angle = h0 + (h1 q - h3) e^(-h2 q)
+    // (h0, h1, h3 in degrees), their values by default: 25 degrees at q = 0, rising to 48 at
+    // q = 6.1 and settling to h0.
+    bool klar = false;
+    double h0 = 35.0, h1 = 9.0, h2 = 0.2, h3 = 10.0;
   } sand;
 
   // snow: Stomakhin et al. 2013.

@@ -77,6 +77,11 @@ std::vector<ParamSpec> buildTable() {
   t.push_back(number("sand", "friction_angle", "deg", 30, closed(0, 80), M, PHYSKETCH_FIELD(sand.frictionAngleDeg)));
   t.push_back(number("sand", "cohesion", "Pa", 0, closed(0, 1e9), M, PHYSKETCH_FIELD(sand.cohesion)));
   t.push_back(number("sand", "hardening", "deg", 0, closed(0, 90), M, PHYSKETCH_FIELD(sand.hardening)));
+  t.push_back(choice("sand", "hardening_law", "linear|klar", true, M));
+  t.push_back(number("sand", "h0", "deg", 35, closed(0, 80), M, PHYSKETCH_FIELD(sand.h0)));
+  t.push_back(number("sand", "h1", "deg", 9, closed(0, 90), M, PHYSKETCH_FIELD(sand.h1)));
+  t.push_back(number("sand", "h2", "-", 0.2, closed(0, 100), M, PHYSKETCH_FIELD(sand.h2)));
+  t.push_back(number("sand", "h3", "deg", 10, closed(0, 80), M, PHYSKETCH_FIELD(sand.h3)));
   // snow (mpm only): Stomakhin et al. 2013, Table 1 reference values.
   t.push_back(number("snow", "density", "kg/m^3", 400, openLo(0, 1e5), M, PHYSKETCH_FIELD(density)));
   t.push_back(number("snow", "E", "Pa", 1.4e5, openLo(0, 1e12), M, PHYSKETCH_FIELD(elastic.youngs)));
@@ -121,6 +126,7 @@ std::string num(double v) {
 void setChoice(Material& m, const std::string& key, int index) {
   if (key == "model") m.elastic.model = static_cast<ElasticModel>(index);
   else if (key == "look") m.look = static_cast<Material::Look>(index);
+  else if (key == "hardening_law") m.sand.klar = index == 1;
   else if (key == "preset") {
     m.elastic.preset = static_cast<StiffnessPreset>(index);
     m.elastic.youngs = presetYoungsModulus(m.elastic.preset);
@@ -185,6 +191,20 @@ void checkCombinations(const RecordFile& file, int line, Material& m) {
   if (compliance && (E || preset))
     throw InputError(file.path, line, "compliance",
                      std::string("give either compliance= or ") + (E ? "E=" : "preset=") + ", not both");
+  // Sand's friction angle comes from one law: friction_angle (+ hardening), or Klár's h0..h3.
+  if (m.sand.klar) {
+    for (const char* k : {"friction_angle", "hardening"})
+      if (m.wasGiven(k))
+        throw InputError(file.path, line, k,
+                         std::string("hardening_law=klar sets the friction angle from h0..h3 (h0 + (h1 q - h3) e^(-h2 q)); "
+                                     "give ") + k + "= or hardening_law=klar, not both");
+    if (m.sand.h0 - m.sand.h3 < 0.0)
+      throw InputError(file.path, line, "h3", "h0 - h3, the angle at q = 0, must be >= 0 (got " + num(m.sand.h0 - m.sand.h3) + ")");
+  } else {
+    for (const char* k : {"h0", "h1", "h2", "h3"})
+      if (m.wasGiven(k))
+        throw InputError(file.path, line, k, std::string(k) + " is a parameter of Klár's hardening law: write hardening_law=klar");
+  }
   if (!m.wasGiven("dynamic_friction")) m.dynamicFriction = m.staticFriction;
   if (m.dynamicFriction > m.staticFriction)
     throw InputError(file.path, line, "dynamic_friction",

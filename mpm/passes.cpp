@@ -787,7 +787,11 @@ void MpmWorld::plasticity() {
       projected[k] = false;
       if (m.kind == MaterialKind::kSand) {
         float alpha = m.alpha;
-        if (m.hardeningDeg > 0.0f) {
+        if (m.klar) {  // Klár et al. 2016 §7.3, kept within [0, 80] degrees as the linear law is
+          const float q = plastic_[i];
+          const float deg = std::clamp(m.h0 + (m.h1 * q - m.h3) * std::exp(-m.h2 * q), 0.0f, 80.0f);
+          alpha = float(druckerPragerAlpha(double(deg) * kPi / 180.0));
+        } else if (m.hardeningDeg > 0.0f) {
           const float deg = std::min(80.0f, m.frictionDeg + m.hardeningDeg * plastic_[i]);
           alpha = float(druckerPragerAlpha(double(deg) * kPi / 180.0));
         }

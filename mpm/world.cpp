@@ -125,6 +125,8 @@ MpmWorld::MpmWorld(ParticleArrays particles, const std::vector<BodyRange>& bodie
     mm.ownFriction = r.frictionRule == Material::FrictionRule::kOwn;
     mm.frictionDeg = float(r.sand.frictionAngleDeg);
     mm.hardeningDeg = float(r.sand.hardening);
+    mm.klar = r.sand.klar;
+    mm.h0 = float(r.sand.h0), mm.h1 = float(r.sand.h1), mm.h2 = float(r.sand.h2), mm.h3 = float(r.sand.h3);
     mm.alpha = float(druckerPragerAlpha(r.sand.frictionAngleDeg * kPi / 180.0));
     mm.shift = float(cohesionStrain(r.sand.cohesion, l.mu, l.lambda));
     mm.thetaC = float(r.snow.thetaC);

@@ -203,6 +203,8 @@ class MpmWorld final : public Solver {
     float mus = 0.0f, muk = 0.0f;      // static and dynamic friction against walls and ground
     float alpha = 0.0f, shift = 0.0f;  // sand: Drucker-Prager alpha and cohesion strain
     float frictionDeg = 0.0f, hardeningDeg = 0.0f;
+    bool klar = false;                 // sand: Klár et al. 2016's hardening law, angle h0 + (h1 q - h3) e^(-h2 q)
+    float h0 = 0.0f, h1 = 0.0f, h2 = 0.0f, h3 = 0.0f;  // degrees, but h2 (per unit q)
     float thetaC = 0.0f, thetaS = 0.0f, xi = 0.0f;  // snow
     float yield = 0.0f;                // plasticine: tau_Y
     float bulk = 0.0f, gamma = 7.0f, viscosity = 0.0f;  // fluid

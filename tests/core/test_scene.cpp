@@ -225,6 +225,11 @@ TEST(Material, EveryBadParameterNamesItsField) {
            {"material a soft cluster_radius=2 cluster_spacing=4", "cluster_spacing"},
            {"material a snow theta_c=0", "theta_c"},
            {"material a sand friction_angle=85", "friction_angle"},
+           {"material a sand h0=30", "h0"},  // Klár's law's, without hardening_law=klar
+           {"material a sand hardening_law=klar friction_angle=30", "friction_angle"},
+           {"material a sand hardening_law=klar hardening=5", "hardening"},
+           {"material a sand hardening_law=klar h0=5 h3=10", "h3"},  // 5 - 10 degrees at q = 0
+           {"material a sand hardening_law=drucker", "hardening_law"},
            {"material a fluid gamma=0.5", "gamma"},
            {"material a jelly", "kind"},
            {"material fixed rigid", "name"},
