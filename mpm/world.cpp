@@ -807,8 +807,8 @@ GuardRecord MpmWorld::check(MpmPass pass) const {
   if (const std::int64_t i = lowest(firstJp); i >= 0) {
     const auto k = std::size_t(i);
     fill(k, GuardKind::kCompression, plastic_[k], jpFloor[std::size_t(parts_.material[k])],
-         "Snow's plastic volume ratio J_p reached its clamp, where its hardening e^(xi (1 - J_p)) stops at "
-         "e^10 (Stomakhin et al. 2013): compressed further, it gives up volume without resisting.");
+         "Snow's plastic volume ratio J_p reached its clamp, where its hardening e^(xi (1 - J_p)) stops "
+         "growing (Stomakhin et al. 2013): compressed further, it gives up volume without resisting.");
     return r;
   }
   std::int64_t cfl = lowest(firstCfl);
@@ -850,6 +850,7 @@ bool MpmWorld::runStep(int substeps, bool checkEachPass) {
   // step started with is only the start's bound: snow thrown at the ground at 8 m/s hardened
   // within one step until it blew up, CFL at 57 m/s).
   const bool replan = params_.substeps == 0 && boundMayTighten();
+  lastSubsteps_ = substeps;  // a replay starts over
   substepH_ = params_.dt / substeps;
   float h = float(substepH_);
   const auto runs = [&](MpmPass p) { return bool(work_[std::size_t(p)]); };
@@ -994,7 +995,12 @@ bool MpmWorld::step() {
     if (guard_.particle >= 0)
       guard_.material = materials_[std::size_t(parts_.material[std::size_t(guard_.particle)])].name;
     if (guard_.kind == GuardKind::kCompression) {  // snow at its clamp: a material's limit, not the step's
-      guard_.hint += " Fix: lower the material's 'hardening' (xi; the clamp is J_p >= max(1 - 10 / xi, 0.01)) or the load.";
+      const auto m = std::size_t(parts_.material[std::size_t(guard_.particle)]);
+      const double xi = double(models_[m].xi);
+      guard_.hint += " Here the factor stops at e^" + num(xi * (1.0 - guard_.bound)) +
+                     (xi * (1.0 - 0.01) < 10.0 ? std::string(" (the clamp's floor 0.01 holds at this xi)") : std::string()) +
+                     ". Fix: a lighter load or impact, or a stiffer snow (E); above xi = 10.1 a lower 'hardening' also "
+                     "lowers the clamp (J_p >= max(1 - 10 / xi, 0.01)).";
       return;
     }
     // Under `substeps auto` the step already meets its bounds: a fixed-corotated elastic that
@@ -1003,7 +1009,8 @@ bool MpmWorld::step() {
     // step does not change but neo-Hookean's pressure, unbounded as J -> 0, or a stiffer E does.
     if (guard_.kind == GuardKind::kInverted && params_.substeps == 0 && guard_.particle >= 0) {
       const auto m = std::size_t(parts_.material[std::size_t(guard_.particle)]);
-      if (models_[m].kind == MaterialKind::kElastic && models_[m].elastic == ElasticModel::kCorotated) {
+      // Written as elastic: a rigid material runs as one too, but takes neither model= nor E=.
+      if (materials_[m].kind == MaterialKind::kElastic && models_[m].elastic == ElasticModel::kCorotated) {
         const double c = std::sqrt((double(models_[m].lambda) + 2.0 * double(models_[m].mu)) / materials_[m].density);
         guard_.hint += " Fix: write model=neohookean for material '" + materials_[m].name +
                        "' (its pressure grows without bound as J -> 0), or raise its E (its wave speed c_p is " + num(c) +

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -57,8 +58,8 @@ bool runUntil(MpmWorld& w, double t) {
 
 // Quadratic B-splines: partition of unity, zero first moment (so sum of gradients is 0 and
 // P2G's affine term carries no net momentum), and second moment 1/4 per axis: D_p = dx^2/4,
-// the 4/dx^2 of MLS-MPM's affine matrix (Jiang et al. 2016 §10.1), and gradients that sum to 0.
-// Over every offset f in [0.5, 1.5) on a fine sweep; float rounding tolerance 1e-6.
+// the 4/dx^2 of MLS-MPM's affine matrix (Jiang et al. 2016 §10.1). Over every offset f in
+// [0.5, 1.5) on a fine sweep; float rounding tolerance 1e-6.
 TEST(MpmKernels, BSplineWeightsSumToOneWithZeroFirstMomentAndQuarterSecondMoment) {
   for (int k = 0; k <= 1000; ++k) {
     const float f = 0.5f + 0.999f * float(k) / 1000.0f;
@@ -74,20 +75,6 @@ TEST(MpmKernels, BSplineWeightsSumToOneWithZeroFirstMomentAndQuarterSecondMoment
     EXPECT_NEAR(s0, 1.0, 1e-6) << f;
     EXPECT_NEAR(s1, 0.0, 1e-6) << f;
     EXPECT_NEAR(s2, 0.25, 1e-6) << f;
-    // Their gradients (in 1/dx): central differences of these weights, step 1e-2 of a cell where
-    // it stays within [0.5, 1.5), sum to 0 and match the splines' derivatives w0' = f - 1.5,
-    // w1' = -2 (f - 1), w2' = f - 0.5 (exact for quadratics but for float rounding: 1e-5 / 1e-2).
-    if (f < 0.51f || f > 1.49f) continue;
-    float wp[3], wm[3];
-    detail::bsplineWeights(f + 0.01f, wp);
-    detail::bsplineWeights(f - 0.01f, wm);
-    const double step = double(f + 0.01f) - double(f - 0.01f);
-    double g[3], gs = 0.0;
-    for (int i = 0; i < 3; ++i) gs += g[i] = (double(wp[i]) - double(wm[i])) / step;
-    EXPECT_NEAR(gs, 0.0, 1e-4) << f;
-    EXPECT_NEAR(g[0], double(f) - 1.5, 1e-4) << f;
-    EXPECT_NEAR(g[1], -2.0 * (double(f) - 1.0), 1e-4) << f;
-    EXPECT_NEAR(g[2], double(f) - 0.5, 1e-4) << f;
   }
   // The stencil never leaves a grid of n nodes, wherever the particle is (even outside).
   for (float x : {-5.0f, -0.01f, 0.0f, 0.7f, 63.2f, 64.0f, 1e6f}) {
@@ -573,7 +560,7 @@ TEST(MpmWorld, ReturnMapsLeaveEveryParticleOnOrInsideItsYieldSurface) {
     }
   }
   std::printf("particle-steps on the cone %zu, on the cylinder %zu\n", onCone, onCylinder);
-  EXPECT_GT(onCone, 300u);
+  EXPECT_GT(onCone, 1000u);
   EXPECT_GT(onCylinder, 1000u);
 }
 
@@ -670,7 +657,8 @@ TEST(MpmWorld, SandUnderKlarsLawFollowsItsFrictionAngle) {
       ASSERT_GE(q, q0);
       qBefore[std::size_t(i)] = q;
       double widest = std::max(law(q0), law(q));
-      if (q0 < 6.1 && q > 6.1) widest = std::max(widest, law((h1 / h2 + h3) / h1));  // the law's peak
+      const double qPeak = (h1 / h2 + h3) / h1;  // 6.11: the law's peak
+      if (q0 < qPeak && q > qPeak) widest = std::max(widest, law(qPeak));
       const Eigen::Vector3d sigma = Eigen::JacobiSVD<Eigen::Matrix3d>(w.deformation(i).cast<double>()).singularValues();
       const Eigen::Vector3d eps = sigma.array().log().matrix();
       ASSERT_LE(dgamma(eps, alphaOf(widest)), kTol) << "particle " << i << " (q " << q << ") outside its cone in step " << step;
@@ -678,7 +666,7 @@ TEST(MpmWorld, SandUnderKlarsLawFollowsItsFrictionAngle) {
       past35 += dgamma(eps, alphaOf(35.0)) > 1e-4;
       // At yield on the cone of the angle the law gives at q (its angle read back from the
       // strain: alpha = |dev| / (-k tr eps), where tr eps is clearly negative), to 0.5 degree:
-      // a law of another shape (h2 doubled: 1.8-4 degrees narrower past q = 2) does not reach it.
+      // a law of another shape (h2 doubled: 1.8 degrees narrower at q = 2, more beyond) does not reach it.
       const double tr = eps.sum();
       if (q > 2.0 && tr < -5e-4) {
         const double a = (eps - Eigen::Vector3d::Constant(tr / 3.0)).norm() / (-(3.0 * lambda + 2.0 * mu) / (2.0 * mu) * tr);
@@ -692,7 +680,7 @@ TEST(MpmWorld, SandUnderKlarsLawFollowsItsFrictionAngle) {
               past25, past35, onCone);
   EXPECT_GT(past25, 1000u);
   EXPECT_GT(past35, 100u);
-  EXPECT_GT(onCone, 300u);
+  EXPECT_GT(onCone, 1000u);
 }
 
 TEST(MpmWorld, ParticlesNeverLeaveTheDomain) {
@@ -2126,12 +2114,15 @@ TEST(MpmWorld, SubstepsAutoCutsTheRestOfAStepFinerWhereSnowHardensWithinIt) {
   MpmWorld w = thrownBlock(pack, 8.0, 0);
   const int atStart = w.substepsForNextStep();
   int most = 0, grew = 0;
-  while (w.time() < 0.3) {
-    const int planned = w.substepsForNextStep();
-    ASSERT_TRUE(w.step()) << w.guard().message();
-    most = std::max(most, w.lastSubsteps());
-    grew += w.lastSubsteps() > planned;
-  }
+  tbb::task_arena two(2);
+  two.execute([&] {
+    while (w.time() < 0.3) {
+      const int planned = w.substepsForNextStep();
+      ASSERT_TRUE(w.step()) << w.guard().message();
+      most = std::max(most, w.lastSubsteps());
+      grew += w.lastSubsteps() > planned;
+    }
+  });
   std::printf("substeps auto: %d at the start, at most %d in a step, %d steps cut finer within\n", atStart, most, grew);
   EXPECT_GT(grew, 0);
   EXPECT_GT(most, atStart);
@@ -2153,8 +2144,7 @@ TEST(MpmWorld, SubstepsAutoCutsTheRestOfAStepFinerWhereSnowHardensWithinIt) {
 // stops at e^10 (snowClamp): snow compacted past it gives up volume without resisting, which the
 // guard names (compression, in the plasticity pass, with the clamp as its bound and the
 // material's hardening as the knob). Soft snow (E = 2e3 Pa) of xi = 30 (clamp 2/3) thrown at
-// 15 m/s reaches it (at 8 m/s its J_p falls to 0.685); of the default xi = 10 (clamp 0.01), thrown
-// the same way, it does not.
+// 15 m/s reaches it; thrown at 8 m/s its J_p falls only to 0.685, and the guard keeps quiet.
 TEST(MpmWorld, TheGuardNamesSnowCompactedToItsClamp) {
   MpmWorld w = thrownBlock(snow(2e3, 30.0), 15.0, 0);
   bool ran = true;
@@ -2170,8 +2160,9 @@ TEST(MpmWorld, TheGuardNamesSnowCompactedToItsClamp) {
   EXPECT_NEAR(g.bound, 1.0 - 10.0 / 30.0, 1e-6);  // float
   EXPECT_LE(g.value, g.bound);
   EXPECT_NE(g.hint.find("'hardening'"), std::string::npos) << g.message();
-  MpmWorld plain = thrownBlock(snow(2e3, 10.0), 15.0, 0);
-  EXPECT_TRUE(runUntil(plain, 0.3));
+  // The same snow thrown at 8 m/s stays above the clamp (J_p 0.685 at least): no trip.
+  MpmWorld slower = thrownBlock(snow(2e3, 30.0), 8.0, 0);
+  EXPECT_TRUE(runUntil(slower, 0.3));
 }
 
 // A fixed-corotated gel (E = 5e4 Pa, c_p about 8 m/s) thrown at the ground at 15 m/s flattens
@@ -2187,6 +2178,7 @@ TEST(MpmWorld, AGelCrushedFasterThanItsWavesIsAdvisedTheModelNotTheStep) {
   // The model first; the step's knob only as the fallback for a speed the step did not foresee.
   const std::string& hint = w.guard().hint;
   ASSERT_NE(hint.find("model=neohookean"), std::string::npos) << w.guard().message();
+  ASSERT_NE(hint.find("'cfl'"), std::string::npos) << w.guard().message();
   EXPECT_LT(hint.find("model=neohookean"), hint.find("'cfl'")) << w.guard().message();
   MpmWorld neo = thrownBlock(elastic(5e4, ElasticModel::kNeoHookean), 15.0, 0);
   EXPECT_TRUE(runUntil(neo, 0.1));
