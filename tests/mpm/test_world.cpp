@@ -564,6 +564,43 @@ TEST(MpmWorld, ReturnMapsLeaveEveryParticleOnOrInsideItsYieldSurface) {
   EXPECT_GT(onCylinder, 1000u);
 }
 
+namespace {
+
+// A 10 x 8 x 10 sand box (h = 1 cm, E = 5e4 Pa) thrown at the floor, as the return-map tests
+// throw theirs, and the Drucker-Prager cone it is judged by: Klár et al. 2016's alpha of an
+// angle and delta-gamma of a Hencky strain (<= 0: on or inside the cone).
+struct ThrownSand {
+  MpmWorld world;
+  double mu, lambda;
+  explicit ThrownSand(const Material& grit) : world(make(grit)) {
+    const double E = grit.elastic.youngs, nu = grit.elastic.poisson;
+    mu = E / (2.0 * (1.0 + nu)), lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+  }
+  static MpmWorld make(const Material& grit) {
+    ParticleArrays p;
+    std::vector<BodyRange> bodies;
+    BodyInit thrown;
+    thrown.velocity = Vec3(0.5, -2.0, 0.2);
+    addBox(p, bodies, Vec3(0.3, 0.04, 0.3), 10, 8, 10, 0.01, 0, thrown);
+    return MpmWorld(p, bodies, {grit}, unitDomain(0.01, 0));
+  }
+  static double alphaOf(double deg) {
+    const double sinPhi = std::sin(deg * 3.14159265358979323846 / 180.0);
+    return std::sqrt(2.0 / 3.0) * 2.0 * sinPhi / (3.0 - sinPhi);
+  }
+  double dgamma(const Eigen::Vector3d& eps, double alpha) const {
+    const Eigen::Vector3d dev = eps - Eigen::Vector3d::Constant(eps.sum() / 3.0);
+    return dev.norm() + (3.0 * lambda + 2.0 * mu) / (2.0 * mu) * eps.sum() * alpha;
+  }
+  // Particle i's Hencky strain, from F through Eigen's SVD in double.
+  Eigen::Vector3d strain(std::int32_t i) const {
+    const Eigen::Vector3d s = Eigen::JacobiSVD<Eigen::Matrix3d>(world.deformation(i).cast<double>()).singularValues();
+    return s.array().log().matrix();
+  }
+};
+
+}  // namespace
+
 // Sand's hardening (docs/formats.md `hardening`: the friction angle grows with the accumulated
 // plastic strain q, phi = friction_angle + hardening q, capped at 80 degrees): a sand box thrown
 // at the floor with hardening 200 degrees per unit q. After each step every particle's Hencky
@@ -572,28 +609,13 @@ TEST(MpmWorld, ReturnMapsLeaveEveryParticleOnOrInsideItsYieldSurface) {
 // of the base angle (the hardened cones are wider: the hardening acted), and q never decreases.
 // Tolerance 2e-5 in strain, as for the return maps above.
 TEST(MpmWorld, SandsFrictionAngleGrowsWithItsPlasticStrain) {
-  const double h = 0.01;
-  ParticleArrays p;
-  std::vector<BodyRange> bodies;
   Material grit = makeMaterial(MaterialKind::kSand, "grit");
   grit.elastic.youngs = 5e4;
   grit.sand.hardening = 200.0;
-  BodyInit thrown;
-  thrown.velocity = Vec3(0.5, -2.0, 0.2);
-  addBox(p, bodies, Vec3(0.3, 0.04, 0.3), 10, 8, 10, h, 0, thrown);
-  MpmWorld w(p, bodies, {grit}, unitDomain(h, 0));
-  const double E = 5e4, nu = grit.elastic.poisson;
-  const double mu = E / (2.0 * (1.0 + nu)), lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
-  const auto alphaOf = [](double deg) {
-    const double sinPhi = std::sin(deg * 3.14159265358979323846 / 180.0);
-    return std::sqrt(2.0 / 3.0) * 2.0 * sinPhi / (3.0 - sinPhi);
-  };
-  const auto dgamma = [&](const Eigen::Vector3d& eps, double alpha) {
-    const Eigen::Vector3d dev = eps - Eigen::Vector3d::Constant(eps.sum() / 3.0);
-    return dev.norm() + (3.0 * lambda + 2.0 * mu) / (2.0 * mu) * eps.sum() * alpha;
-  };
+  ThrownSand sand(grit);
+  MpmWorld& w = sand.world;
   constexpr double kTol = 2e-5;
-  std::vector<float> qBefore(p.size(), 0.0f);
+  std::vector<float> qBefore(w.particles().size(), 0.0f);
   std::size_t pastBase = 0;
   double qMost = 0.0;
   for (int step = 0; step < 12; ++step) {
@@ -603,11 +625,10 @@ TEST(MpmWorld, SandsFrictionAngleGrowsWithItsPlasticStrain) {
       ASSERT_GE(q, double(qBefore[std::size_t(i)])) << "particle " << i << " step " << step;
       qBefore[std::size_t(i)] = float(q);
       qMost = std::max(qMost, q);
-      const Eigen::Vector3d sigma = Eigen::JacobiSVD<Eigen::Matrix3d>(w.deformation(i).cast<double>()).singularValues();
-      const Eigen::Vector3d eps = sigma.array().log().matrix();
+      const Eigen::Vector3d eps = sand.strain(i);
       const double deg = std::min(80.0, grit.sand.frictionAngleDeg + grit.sand.hardening * q);
-      ASSERT_LE(dgamma(eps, alphaOf(deg)), kTol) << "particle " << i << " outside its hardened cone in step " << step;
-      if (dgamma(eps, alphaOf(grit.sand.frictionAngleDeg)) > 1e-4) ++pastBase;
+      ASSERT_LE(sand.dgamma(eps, ThrownSand::alphaOf(deg)), kTol) << "particle " << i << " outside its hardened cone in step " << step;
+      if (sand.dgamma(eps, ThrownSand::alphaOf(grit.sand.frictionAngleDeg)) > 1e-4) ++pastBase;
     }
   }
   std::printf("sand hardening: largest q %.4f (angle %.1f deg); particle-steps outside the base cone %zu\n", qMost,
@@ -625,30 +646,18 @@ TEST(MpmWorld, SandsFrictionAngleGrowsWithItsPlasticStrain) {
 // law's 30 degrees, the first steps' particles would lie outside the law's 25-degree cone; with
 // h2 doubled none sits on the law's cone (3,012 particle-steps do).
 TEST(MpmWorld, SandUnderKlarsLawFollowsItsFrictionAngle) {
-  const double h = 0.01;
-  ParticleArrays p;
-  std::vector<BodyRange> bodies;
   Material grit = makeMaterial(MaterialKind::kSand, "grit");
   grit.elastic.youngs = 5e4;
   grit.sand.klar = true;
-  BodyInit thrown;
-  thrown.velocity = Vec3(0.5, -2.0, 0.2);
-  addBox(p, bodies, Vec3(0.3, 0.04, 0.3), 10, 8, 10, h, 0, thrown);
-  MpmWorld w(p, bodies, {grit}, unitDomain(h, 0));
-  const double E = 5e4, nu = grit.elastic.poisson;
-  const double mu = E / (2.0 * (1.0 + nu)), lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+  ThrownSand sand(grit);
+  MpmWorld& w = sand.world;
+  const double mu = sand.mu, lambda = sand.lambda;
   const double h0 = 35.0, h1 = 9.0, h2 = 0.2, h3 = 10.0;  // Klár et al. 2016's values, in degrees
   const auto law = [&](double q) { return std::clamp(h0 + (h1 * q - h3) * std::exp(-h2 * q), 0.0, 80.0); };
-  const auto alphaOf = [](double deg) {
-    const double sinPhi = std::sin(deg * 3.14159265358979323846 / 180.0);
-    return std::sqrt(2.0 / 3.0) * 2.0 * sinPhi / (3.0 - sinPhi);
-  };
-  const auto dgamma = [&](const Eigen::Vector3d& eps, double alpha) {
-    const Eigen::Vector3d dev = eps - Eigen::Vector3d::Constant(eps.sum() / 3.0);
-    return dev.norm() + (3.0 * lambda + 2.0 * mu) / (2.0 * mu) * eps.sum() * alpha;
-  };
+  const auto alphaOf = ThrownSand::alphaOf;
+  const auto dgamma = [&](const Eigen::Vector3d& eps, double alpha) { return sand.dgamma(eps, alpha); };
   constexpr double kTol = 2e-5;
-  std::vector<double> qBefore(p.size(), 0.0);
+  std::vector<double> qBefore(w.particles().size(), 0.0);
   std::size_t past25 = 0, past35 = 0, onCone = 0;
   for (int step = 0; step < 12; ++step) {
     ASSERT_TRUE(w.step()) << w.guard().message();
@@ -659,8 +668,7 @@ TEST(MpmWorld, SandUnderKlarsLawFollowsItsFrictionAngle) {
       double widest = std::max(law(q0), law(q));
       const double qPeak = (h1 / h2 + h3) / h1;  // 6.11: the law's peak
       if (q0 < qPeak && q > qPeak) widest = std::max(widest, law(qPeak));
-      const Eigen::Vector3d sigma = Eigen::JacobiSVD<Eigen::Matrix3d>(w.deformation(i).cast<double>()).singularValues();
-      const Eigen::Vector3d eps = sigma.array().log().matrix();
+      const Eigen::Vector3d eps = sand.strain(i);
       ASSERT_LE(dgamma(eps, alphaOf(widest)), kTol) << "particle " << i << " (q " << q << ") outside its cone in step " << step;
       past25 += dgamma(eps, alphaOf(25.0)) > 1e-4;
       past35 += dgamma(eps, alphaOf(35.0)) > 1e-4;
