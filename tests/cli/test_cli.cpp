@@ -907,6 +907,26 @@ TEST(Cli, ImportTiltWritesAStrokeFileAndASceneThatLintAndRun) {
   fs::remove_all(dir);
 }
 
+namespace {
+
+// An MPM scene in dir: s.strokes with `strokes`, s.scene with the solver and workspace lines and
+// then `records`.
+void writeMpmScene(const fs::path& dir, const std::string& strokes, const std::string& records) {
+  writeText(dir / "s.strokes", "physketch-strokes 1\n" + strokes);
+  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\n" + records);
+}
+
+// The substeps per 1/60 s step the elastic wave bound h <= 0.5 dx / c_p asks of a material of
+// Young's modulus E, nu = 0.3 and density rho, on the sketch's grid (dx = 2 h, h = 1 m / 151):
+// c_p = sqrt((lambda + 2 mu) / rho), lambda + 2 mu = E (1 - nu) / ((1 + nu)(1 - 2 nu)).
+long elasticSubsteps(double E, double rho) {
+  const double nu = 0.3, dx = 2.0 / 151.0;
+  const double c = std::sqrt(E * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho);
+  return long(std::ceil((1.0 / 60.0) / (0.5 * dx / c)));
+}
+
+}  // namespace
+
 // Under `substeps auto`, a material whose explicit bound h <= 0.5 dx / c_p needs more than 1000
 // substeps per step is the scene's error at load time: exit 1, the material's line, its name and
 // the count, nothing written. The count's oracle: c_p = sqrt((lambda + 2 mu) / rho) from E and
@@ -915,15 +935,12 @@ TEST(Cli, ImportTiltWritesAStrokeFileAndASceneThatLintAndRun) {
 // substeps (under 10,000, so that a check off by a factor of 10 fails here).
 TEST(Cli, AnMpmMaterialNeedingMoreThan1000SubstepsIsTheScenesError) {
   const fs::path dir = freshDir("substeps1000");
-  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box steel 0   0 0.2 0   0.1 0.1 0.1\nplay 0\n");
-  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\nsubsteps auto\n"
-                             "material steel elastic E=5e9 density=1000\noutput report\n");
+  writeMpmScene(dir, "primitive box steel 0   0 0.2 0   0.1 0.1 0.1\nplay 0\n",
+                "substeps auto\nmaterial steel elastic E=5e9 density=1000\noutput report\n");
   const fs::path out = dir / "out";
   const Result r = runCli("run '" + (dir / "s.scene").string() + "' --out '" + out.string() + "'", dir);
   EXPECT_EQ(r.code, 1) << r.err;
-  const double E = 5e9, nu = 0.3, rho = 1000.0, dx = 2.0 / 151.0;
-  const double c = std::sqrt(E * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho);
-  const long n = long(std::ceil((1.0 / 60.0) / (0.5 * dx / c)));
+  const long n = elasticSubsteps(5e9, 1000.0);
   EXPECT_NE(r.err.find("s.scene:6:"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("material 'steel' needs " + std::to_string(n) + " MPM substeps"), std::string::npos)
       << r.err << " (expected " << n << ")";
@@ -938,10 +955,8 @@ TEST(Cli, AnMpmMaterialNeedingMoreThan1000SubstepsIsTheScenesError) {
 // Pa; a fluid's bulk modulus 2e5 -> 2e6 Pa.
 TEST(Cli, PlanPrintsTheScaledValuesOfAnMpmSceneAtAScale) {
   const fs::path dir = freshDir("scaleplan");
-  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box gel 0   0 0.2 0   0.1 0.1 0.1\n"
-                               "primitive box water 0.5   0.2 0.2 0   0.1 0.1 0.1\nplay 1\n");
-  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\nscale 0.1\n"
-                             "material gel elastic E=5e5 density=1000\nmaterial water fluid bulk_modulus=2e5\noutput report\n");
+  writeMpmScene(dir, "primitive box gel 0   0 0.2 0   0.1 0.1 0.1\nprimitive box water 0.5   0.2 0.2 0   0.1 0.1 0.1\nplay 1\n",
+                "scale 0.1\nmaterial gel elastic E=5e5 density=1000\nmaterial water fluid bulk_modulus=2e5\noutput report\n");
   const std::string outFile = (dir / "plan.txt").string();
   ASSERT_EQ(std::system((std::string(PHYSKETCH_CLI) + " plan '" + (dir / "s.scene").string() + "' > '" + outFile + "'").c_str()), 0);
   const std::string text = slurp(outFile);
@@ -959,16 +974,13 @@ TEST(Cli, PlanPrintsTheScaledValuesOfAnMpmSceneAtAScale) {
 // c_p = sqrt((lambda + 2 mu) / rho) and dx = 2 / 151 m computed here: 2N a frame at 30 fps.
 TEST(Cli, SubstepsAutoReportsWhatEachFramesStepsTook) {
   const fs::path dir = freshDir("substepsreport");
-  writeText(dir / "s.strokes", "physketch-strokes 1\nprimitive box gel 0   0 0.05 0   0.1 0.1 0.1\nplay 0\n");
-  writeText(dir / "s.scene", "physketch-scene 1\nstrokes s.strokes\nworkspace 0 0.5 0  1.0\nsolver mpm\nsubsteps auto\n"
-                             "duration 0.2\nfps 30\nmaterial gel elastic E=5e5 density=1000\noutput report\n");
+  writeMpmScene(dir, "primitive box gel 0   0 0.05 0   0.1 0.1 0.1\nplay 0\n",
+                "substeps auto\nduration 0.2\nfps 30\nmaterial gel elastic E=5e5 density=1000\noutput report\n");
   const fs::path out = dir / "out";
   const Result r = runCli("run '" + (dir / "s.scene").string() + "' -q --out '" + out.string() + "'", dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const nlohmann::json rep = readJson(out / "report.json");
-  const double E = 5e5, nu = 0.3, rho = 1000.0, dx = 2.0 / 151.0;
-  const double c = std::sqrt(E * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho);
-  const long n = long(std::ceil((1.0 / 60.0) / (0.5 * dx / c)));
+  const long n = elasticSubsteps(5e5, 1000.0);
   const auto& poses = rep.at("poses");
   ASSERT_EQ(poses.size(), 7u);
   EXPECT_FALSE(poses[0].contains("substeps"));  // frame 0 runs no step
